@@ -1,1 +1,16 @@
+//! herdfit: learn how animal groups move from video and replay that behaviour anywhere.
+//!
+//! The pipeline (see `ARCHITECTURE.md`): clip fields → fit → parameter set → simulate/author.
+//! This crate holds the differentiable herd model ([`sim`]), its parameters ([`params`]), the
+//! gradient checks ([`train::gradcheck`]) and the command-line interface ([`cli`]).
 
+pub mod backend;
+pub mod bench;
+pub mod cli;
+pub mod error;
+pub mod io;
+pub mod params;
+pub mod sim;
+pub mod train;
+
+pub use error::{Error, Result};

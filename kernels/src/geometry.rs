@@ -61,7 +61,7 @@ pub fn segment_segment_dist2(p1: P2, p2: P2, q1: P2, q2: P2) -> f64 {
 
 /// A body capsule: the segment `centre ± half_length · heading` swept by a disc of `radius`
 /// (DESIGN §4.1).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Capsule {
     pub half_length: f64,
     pub radius: f64,
@@ -96,14 +96,23 @@ mod tests {
 
     #[test]
     fn point_segment_distance_cases() {
-        assert_eq!(point_segment_dist2([0.0, 1.0], [-1.0, 0.0], [1.0, 0.0]), 1.0);
-        assert_eq!(point_segment_dist2([3.0, 0.0], [-1.0, 0.0], [1.0, 0.0]), 4.0);
+        assert_eq!(
+            point_segment_dist2([0.0, 1.0], [-1.0, 0.0], [1.0, 0.0]),
+            1.0
+        );
+        assert_eq!(
+            point_segment_dist2([3.0, 0.0], [-1.0, 0.0], [1.0, 0.0]),
+            4.0
+        );
         assert_eq!(point_segment_dist2([2.0, 2.0], [0.0, 0.0], [0.0, 0.0]), 8.0);
     }
 
     #[test]
     fn segment_distance_crossing_parallel_and_apart() {
-        assert_eq!(segment_segment_dist2([-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]), 0.0);
+        assert_eq!(
+            segment_segment_dist2([-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]),
+            0.0
+        );
         let d = segment_segment_dist2([0.0, 0.0], [1.0, 0.0], [0.0, 0.5], [1.0, 0.5]);
         assert!((d - 0.25).abs() < 1e-15);
         let d = segment_segment_dist2([0.0, 0.0], [1.0, 0.0], [2.0, 1.0], [3.0, 1.0]);
@@ -112,7 +121,10 @@ mod tests {
 
     #[test]
     fn capsule_blocks_only_when_touching() {
-        let cap = Capsule { half_length: 0.3, radius: 0.2 };
+        let cap = Capsule {
+            half_length: 0.3,
+            radius: 0.2,
+        };
         // Body across the line of sight.
         assert!(cap.blocks([0.0, 0.0], [4.0, 0.0], [2.0, 0.1], [0.0, 1.0]));
         // Body parallel to the line of sight, 0.25 to the side: radius 0.2 misses it.

@@ -10,4 +10,6 @@ pub mod perception;
 
 pub use geometry::{Capsule, P2};
 pub use obstacles::ObstacleMap;
-pub use perception::{perceive, Perception, PerceptionConfig};
+pub use perception::{
+    branch_of, perceive, Perception, PerceptionConfig, BRANCH_BEHIND, BRANCH_RIGHT,
+};

@@ -109,7 +109,8 @@ impl ObstacleMap {
         let s = self.cell_size;
         let r2 = radius * radius;
         let lo = |v: f64, o: f64| (((v - radius - o) / s).floor() as i64).max(0);
-        let hi = |v: f64, o: f64, n: usize| (((v + radius - o) / s).floor() as i64).min(n as i64 - 1);
+        let hi =
+            |v: f64, o: f64, n: usize| (((v + radius - o) / s).floor() as i64).min(n as i64 - 1);
         for iy in lo(p[1], self.origin[1])..=hi(p[1], self.origin[1], self.ny) {
             for ix in lo(p[0], self.origin[0])..=hi(p[0], self.origin[0], self.nx) {
                 if !self.is_blocked(ix, iy) {

@@ -26,7 +26,7 @@ pub struct PerceptionConfig {
 }
 
 /// Padded per-agent lists, row-major `[n, k]`.
-#[derive(Clone, Debug, PartialEq, Default)]
+#[derive(Clone, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Perception {
     pub n: usize,
     /// Width of the neighbour lists (≥ 1).
@@ -35,16 +35,36 @@ pub struct Perception {
     pub neighbours: Vec<u32>,
     /// 1 for a real neighbour, 0 for padding `[n, k]`.
     pub neighbour_mask: Vec<u8>,
+    /// Branch of the bearing of each pair `[n, k]` (see [`branch_of`]); 0 on padding.
+    pub neighbour_branch: Vec<u8>,
     /// Width of the obstacle lists (≥ 1).
     pub ko: usize,
     /// Obstacle points `[n, ko]`; padded entries hold the agent's own position.
     pub obstacle_points: Vec<P2>,
     /// 1 for a real obstacle point, 0 for padding `[n, ko]`.
     pub obstacle_mask: Vec<u8>,
+    /// Branch of the bearing of each obstacle point `[n, ko]`; 0 on padding.
+    pub obstacle_branch: Vec<u8>,
     /// Visible neighbours within the front cone (before truncation to `k`).
     pub front_count: Vec<u32>,
     /// Agents (self included) within the perception radius per unit area, agents/BL².
     pub density: Vec<f64>,
+}
+
+/// Bit 0 of a branch code: the offset lies to the right of the heading (cross product < 0).
+pub const BRANCH_RIGHT: u8 = 1;
+/// Bit 1 of a branch code: the offset lies behind the agent (dot product < 0).
+pub const BRANCH_BEHIND: u8 = 2;
+
+/// The branch of the unsigned bearing φ ∈ [0, π] between heading `h` and offset `d`: which side
+/// (sign of h × d) and whether behind (h · d < 0). With the branch fixed, φ has a smooth
+/// continuation through φ = 0 and φ = π (where |atan2| has kinks), so replayed runs are smooth in
+/// the parameters, like every other recorded decision.
+#[inline]
+pub fn branch_of(h: P2, d: P2) -> u8 {
+    let cross = h[0] * d[1] - h[1] * d[0];
+    let dot = h[0] * d[0] + h[1] * d[1];
+    (if cross < 0.0 { BRANCH_RIGHT } else { 0 }) | (if dot < 0.0 { BRANCH_BEHIND } else { 0 })
 }
 
 struct AgentView {
@@ -87,9 +107,11 @@ pub fn perceive(
         k,
         neighbours: Vec::with_capacity(n * k),
         neighbour_mask: Vec::with_capacity(n * k),
+        neighbour_branch: Vec::with_capacity(n * k),
         ko,
         obstacle_points: Vec::with_capacity(n * ko),
         obstacle_mask: Vec::with_capacity(n * ko),
+        obstacle_branch: Vec::with_capacity(n * ko),
         front_count: Vec::with_capacity(n),
         density: Vec::with_capacity(n),
     };
@@ -100,10 +122,14 @@ pub fn perceive(
                 Some(&j) => {
                     out.neighbours.push(j);
                     out.neighbour_mask.push(1);
+                    let (p, q) = (positions[i], positions[j as usize]);
+                    out.neighbour_branch
+                        .push(branch_of(headings[i], [q[0] - p[0], q[1] - p[1]]));
                 }
                 None => {
                     out.neighbours.push(i as u32);
                     out.neighbour_mask.push(0);
+                    out.neighbour_branch.push(0);
                 }
             }
         }
@@ -112,10 +138,14 @@ pub fn perceive(
                 Some(&q) => {
                     out.obstacle_points.push(q);
                     out.obstacle_mask.push(1);
+                    let p = positions[i];
+                    out.obstacle_branch
+                        .push(branch_of(headings[i], [q[0] - p[0], q[1] - p[1]]));
                 }
                 None => {
                     out.obstacle_points.push(positions[i]);
                     out.obstacle_mask.push(0);
+                    out.obstacle_branch.push(0);
                 }
             }
         }
@@ -149,9 +179,10 @@ fn view_of(
     cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     let in_range = cand.len() as u32 + 1;
     let blocked_by_closer = |target: P2, d2: f64| -> bool {
-        cand.iter()
-            .take_while(|c| c.0 < d2)
-            .any(|&(_, k)| cfg.capsule.blocks(p, target, pos[k as usize], head[k as usize]))
+        cand.iter().take_while(|c| c.0 < d2).any(|&(_, k)| {
+            cfg.capsule
+                .blocks(p, target, pos[k as usize], head[k as usize])
+        })
     };
     let mut neighbours = Vec::with_capacity(cand.len().min(cfg.max_neighbours));
     let mut front = 0u32;
@@ -282,7 +313,11 @@ mod tests {
                 let (pos, head, map) = scene(seed, 300);
                 let c = cfg(occ);
                 let got = perceive(&pos, &head, Some(&map), &c);
-                assert_eq!(lists(&got), brute(&pos, &head, &map, &c), "seed {seed} occ {occ}");
+                assert_eq!(
+                    lists(&got),
+                    brute(&pos, &head, &map, &c),
+                    "seed {seed} occ {occ}"
+                );
                 assert_eq!(got.neighbours.len(), got.n * got.k);
             }
         }

@@ -1,0 +1,346 @@
+//! The `herdfit` command line: one verb per pipeline arrow (DESIGN §1). Commands parse their flags,
+//! call the library and turn its typed errors into one-line messages (in `main.rs`).
+
+use crate::backend::{cpu_device, Precision};
+use crate::bench::run_bench;
+use crate::error::{Error, Result};
+use crate::io::{
+    check_writable, push_traj_frame, read_init_csv, write_atomic, AtomicFile, TRAJ_HEADER,
+};
+use crate::params::Params;
+use crate::sim::{
+    random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, Recording, World,
+};
+use crate::train::gradcheck::{default_scenario, gradcheck, record, Scenario};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::SeedableRng;
+use std::path::PathBuf;
+
+/// Learn how animal groups move from video and replay that behaviour anywhere.
+#[derive(Parser, Debug)]
+#[command(name = "herdfit", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Simulate a herd with a parameter set and write its trajectories (CSV).
+    Simulate(SimulateArgs),
+    /// Check the autodiff gradient of an unrolled run against finite differences.
+    Gradcheck(GradcheckArgs),
+    /// Time simulation and forward+backward steps on the standard random herd.
+    Bench(BenchArgs),
+}
+
+/// Where the initial herd comes from.
+#[derive(Args, Debug, Clone)]
+#[group(required = false, multiple = false)]
+pub struct HerdSource {
+    /// Initial state: CSV with columns id,x,y,vx,vy (BL, BL/s).
+    #[arg(long, value_name = "INIT.csv")]
+    pub init: Option<PathBuf>,
+    /// A built-in random herd of N agents (one per 2 BL², heading +x ± 20°) instead of --init.
+    #[arg(long, value_name = "N")]
+    pub agents: Option<usize>,
+}
+
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Parameter set (herdfit.params/1 JSON); the built-in default set when omitted.
+    #[arg(long, value_name = "P.json")]
+    pub params: Option<PathBuf>,
+    #[command(flatten)]
+    pub herd: HerdSource,
+    /// Number of steps (frames after frame 0).
+    #[arg(long, value_name = "T")]
+    pub steps: usize,
+    /// Frames per second; Δt = 1 / fps.
+    #[arg(long, value_name = "F", default_value_t = 25.0)]
+    pub fps: f64,
+    /// Speed noise v_σ (BL/s) of eq. 6, overriding the parameter set's speed.std; 0 makes the run
+    /// deterministic.
+    #[arg(long, value_name = "S")]
+    pub speed_noise: Option<f64>,
+    /// Uniform guidance direction DX,DY for leaders; without it leaders act as followers.
+    #[arg(long, value_name = "DX,DY", value_parser = parse_pair)]
+    pub guidance: Option<(f64, f64)>,
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Write the run's perception, roles and noise to this file (JSON).
+    #[arg(long, value_name = "REC.json")]
+    pub record: Option<PathBuf>,
+    /// Replay the perception, roles and noise of a recorded run instead of computing them.
+    #[arg(long, value_name = "REC.json", conflicts_with = "record")]
+    pub replay: Option<PathBuf>,
+    /// Output trajectories: frame,time,id,x,y,vx,vy,role.
+    #[arg(long, value_name = "TRAJ.csv")]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct GradcheckArgs {
+    /// Parameter set; the built-in default set when omitted.
+    #[arg(long, value_name = "P.json")]
+    pub params: Option<PathBuf>,
+    #[command(flatten)]
+    pub herd: HerdSource,
+    /// Unrolled steps.
+    #[arg(long, value_name = "T", default_value_t = 10)]
+    pub steps: usize,
+    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    pub precision: Precision,
+    /// Step h of the 4-point central difference (default 1e-4 in f64, 1e-2 in f32).
+    #[arg(long, value_name = "H")]
+    pub fd_step: Option<f64>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Save the decisions used (to replay them in another precision).
+    #[arg(long, value_name = "REC.json")]
+    pub record: Option<PathBuf>,
+    /// Use these recorded decisions instead of recording new ones.
+    #[arg(long, value_name = "REC.json", conflicts_with = "record")]
+    pub replay: Option<PathBuf>,
+    /// Output report (JSON).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[arg(long, value_name = "N", default_value_t = 1500)]
+    pub agents: usize,
+    #[arg(long, value_name = "T", default_value_t = 20)]
+    pub steps: usize,
+    /// Skip the forward + backward measurement.
+    #[arg(long)]
+    pub sim_only: bool,
+    /// Forward + backward repetitions (median reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeats: usize,
+    /// Output report (JSON).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: PathBuf,
+}
+
+fn parse_pair(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("expected DX,DY, got '{s}'"))?;
+    let a: f64 = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{a}' is not a number"))?;
+    let b: f64 = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{b}' is not a number"))?;
+    if !(a.is_finite() && b.is_finite()) || (a == 0.0 && b == 0.0) {
+        return Err("the direction must be finite and non-zero".into());
+    }
+    Ok((a, b))
+}
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len);
+    if let Ok(style) =
+        ProgressStyle::with_template("{msg:12} [{elapsed_precise}] {wide_bar} {pos}/{len} ({eta})")
+    {
+        pb.set_style(style);
+    }
+    pb.set_message(what.to_string());
+    pb
+}
+
+fn load_params(path: &Option<PathBuf>) -> Result<Params> {
+    match path {
+        Some(p) => Params::load(p),
+        None => Ok(Params::default()),
+    }
+}
+
+fn initial_herd(
+    src: &HerdSource,
+    params: &Params,
+    world: &World,
+    seed: u64,
+) -> Result<Vec<crate::io::AgentRow>> {
+    match (&src.init, src.agents) {
+        (Some(p), _) => read_init_csv(p),
+        (None, Some(n)) => random_herd(&HerdSpec::standard(n), &params.speed, world, seed),
+        (None, None) => Err(Error::invalid(
+            "give the initial herd: --init INIT.csv or --agents N",
+        )),
+    }
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Simulate(a) => simulate(a),
+        Command::Gradcheck(a) => gradcheck_cmd(a),
+        Command::Bench(a) => bench_cmd(a),
+    }
+}
+
+fn simulate(a: SimulateArgs) -> Result<()> {
+    if a.steps == 0 {
+        return Err(Error::invalid("--steps must be ≥ 1"));
+    }
+    if !(a.fps.is_finite() && a.fps > 0.0) {
+        return Err(Error::invalid(format!("--fps {} must be > 0", a.fps)));
+    }
+    let mut params = load_params(&a.params)?;
+    if let Some(s) = a.speed_noise {
+        if !(s.is_finite() && s >= 0.0) {
+            return Err(Error::invalid(format!("--speed-noise {s} must be ≥ 0")));
+        }
+        params.speed.std = s;
+    }
+    let world = World {
+        obstacles: None,
+        guidance: a
+            .guidance
+            .map_or(Guidance::None, |(x, y)| Guidance::Uniform([x, y])),
+    };
+    let rows = initial_herd(&a.herd, &params, &world, a.seed)?;
+    let replay = a.replay.as_deref().map(Recording::load).transpose()?;
+    check_writable(&a.out)?;
+    if let Some(r) = &a.record {
+        check_writable(r)?;
+    }
+    let device = cpu_device(a.precision)?;
+    let model = Model {
+        params,
+        world,
+        dt: 1.0 / a.fps,
+    };
+    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+    let theta = theta_tensor(&model.params.to_vec(), &device);
+    let state = HerdState::from_rows(&rows, &device);
+    let mut out = AtomicFile::create(&a.out)?;
+    let mut text = String::with_capacity(64 * rows.len());
+    text.push_str(TRAJ_HEADER);
+    text.push('\n');
+    let mut prev = rows;
+    let mut rec = a.record.as_ref().map(|_| Recording::new(ids.len()));
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(a.seed ^ 0x5eed_0f_5eed);
+    let pb = progress_bar(a.steps as u64, "simulate");
+    let decide = match &replay {
+        Some(r) => Decide::Replay(r),
+        None => Decide::Live {
+            rng: &mut rng,
+            record: rec.as_mut(),
+        },
+    };
+    let end = model.rollout(&theta, state, a.steps, decide, |t, dec, next| {
+        push_traj_frame(&mut text, t, t as f64 * model.dt, &prev, &dec.leader);
+        out.write_str(&text)?;
+        text.clear();
+        prev = next.rows(&ids)?;
+        pb.inc(1);
+        Ok(())
+    })?;
+    pb.finish_and_clear();
+    // Roles of the last frame: the decision the next step would take.
+    let last_roles = match &replay {
+        Some(r) if r.steps.len() > a.steps => r.steps[a.steps].leader.clone(),
+        _ => {
+            let mut rng2 = rand_chacha::ChaCha8Rng::seed_from_u64(a.seed);
+            model.decide(&end.snapshot()?, &mut rng2).leader
+        }
+    };
+    push_traj_frame(
+        &mut text,
+        a.steps,
+        a.steps as f64 * model.dt,
+        &prev,
+        &last_roles,
+    );
+    out.write_str(&text)?;
+    if let (Some(path), Some(rec)) = (&a.record, &rec) {
+        rec.save(path)?;
+    }
+    out.commit()
+}
+
+fn gradcheck_cmd(a: GradcheckArgs) -> Result<()> {
+    if a.steps == 0 {
+        return Err(Error::invalid("--steps must be ≥ 1"));
+    }
+    let params = load_params(&a.params)?;
+    let sc = match (&a.herd.init, a.herd.agents) {
+        (Some(p), _) => {
+            let base = default_scenario(params, 1, a.seed)?;
+            Scenario {
+                init: read_init_csv(p)?,
+                ..base
+            }
+        }
+        (None, n) => default_scenario(params, n.unwrap_or(200), a.seed)?,
+    };
+    check_writable(&a.json)?;
+    let device = cpu_device(a.precision)?;
+    let rec = match &a.replay {
+        Some(p) => Recording::load(p)?,
+        None => record(&sc, a.steps, a.seed, &device)?,
+    };
+    if let Some(p) = &a.record {
+        rec.save(p)?;
+    }
+    let h = a.fd_step.unwrap_or(match a.precision {
+        Precision::F64 => 1e-4,
+        Precision::F32 => 1e-2,
+    });
+    let pb = progress_bar(13, "gradcheck");
+    let report = gradcheck(&sc, a.steps, a.precision, h, &rec, || pb.inc(1))?;
+    pb.finish_and_clear();
+    println!(
+        "gradcheck: {} agents, {} unrolled steps, {:?}, J = {:.6e}, h = {:e}",
+        report.agents, report.steps, report.precision, report.objective, report.fd_step
+    );
+    println!(
+        "{:<20} {:>16} {:>18} {:>10}",
+        "parameter", "autodiff", "finite difference", "rel err"
+    );
+    for r in &report.parameters {
+        println!(
+            "{:<20} {:>16.9e} {:>18.9e} {:>10.2e}",
+            r.name, r.autodiff, r.finite_difference, r.rel_err
+        );
+    }
+    println!("max rel err {:.3e}", report.max_rel_err);
+    let text = serde_json::to_string_pretty(&report)
+        .map_err(|e| Error::Internal(format!("serialising report: {e}")))?;
+    write_atomic(&a.json, format!("{text}\n").as_bytes())
+}
+
+fn bench_cmd(a: BenchArgs) -> Result<()> {
+    if a.agents == 0 {
+        return Err(Error::invalid("the herd is empty: --agents must be ≥ 1"));
+    }
+    check_writable(&a.json)?;
+    let total = a.steps + 1 + if a.sim_only { 0 } else { a.repeats.max(1) };
+    let pb = progress_bar(total as u64, "bench");
+    let r = run_bench(a.agents, a.steps, a.sim_only, a.repeats, || pb.inc(1))?;
+    pb.finish_and_clear();
+    println!(
+        "bench: {} agents, {} steps: simulation {:.3} ms/step{}, peak RSS {:.1} MB (K = {}, {:.1} visible neighbours/agent)",
+        r.agents,
+        r.steps,
+        r.sim_ms_per_step,
+        r.grad_ms_per_step
+            .map_or(String::new(), |g| format!(", forward+backward {g:.3} ms/step")),
+        r.peak_rss_mb,
+        r.k,
+        r.mean_neighbours
+    );
+    let text = serde_json::to_string_pretty(&r)
+        .map_err(|e| Error::Internal(format!("serialising report: {e}")))?;
+    write_atomic(&a.json, format!("{text}\n").as_bytes())
+}
