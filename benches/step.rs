@@ -1,1 +1,102 @@
-fn main() {}
+//! Criterion benchmarks of the hot paths on the standard random herd (one agent per 2 BL²,
+//! occlusion on, f32): the perception kernel, one simulation step, and forward + backward through
+//! T = 10 unrolled steps (reported per iteration; divide by 10 for per-step figures).
+//!
+//! `cargo bench --bench step` (set `HERDFIT_BENCH_LARGE=1` to add the 100,000-agent cases).
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use herdfit::backend::{cpu_device, Precision};
+use herdfit::bench::bench_model;
+use herdfit::sim::{theta_tensor, Decide, HerdState};
+use herdfit::train::gradcheck::objective;
+use herdfit_kernels::perceive;
+use rand::SeedableRng;
+use std::time::Duration;
+
+fn sizes(base: &[usize]) -> Vec<usize> {
+    let mut v = base.to_vec();
+    if std::env::var_os("HERDFIT_BENCH_LARGE").is_some() {
+        v.push(100_000);
+    }
+    v
+}
+
+fn perception(c: &mut Criterion) {
+    let device = cpu_device(Precision::F32).unwrap();
+    let mut g = c.benchmark_group("perception_kernel");
+    g.sample_size(10).measurement_time(Duration::from_secs(3));
+    for n in sizes(&[1500, 10_000]) {
+        let (model, init) = bench_model(n, 1).unwrap();
+        let snap = HerdState::from_rows(&init, &device).snapshot().unwrap();
+        let cfg = model.perception_config();
+        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+            b.iter(|| perceive(&snap.pos, &snap.head, None, &cfg))
+        });
+    }
+    g.finish();
+}
+
+fn sim_step(c: &mut Criterion) {
+    let device = cpu_device(Precision::F32).unwrap();
+    let mut g = c.benchmark_group("sim_step");
+    g.sample_size(10).measurement_time(Duration::from_secs(3));
+    for n in sizes(&[500, 1500, 5000]) {
+        let (model, init) = bench_model(n, 1).unwrap();
+        let theta = theta_tensor(&model.params.to_vec(), &device);
+        let state = HerdState::from_rows(&init, &device);
+        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+            b.iter(|| {
+                let s = model
+                    .rollout(
+                        &theta,
+                        state.clone(),
+                        1,
+                        Decide::Live {
+                            rng: &mut rng,
+                            record: None,
+                        },
+                        |_, _, _| Ok(()),
+                    )
+                    .unwrap();
+                s.x.into_data()
+            })
+        });
+    }
+    g.finish();
+}
+
+fn grad_window(c: &mut Criterion) {
+    let device = cpu_device(Precision::F32).unwrap();
+    let ad = device.clone().autodiff();
+    let mut g = c.benchmark_group("forward_backward_10_steps");
+    g.sample_size(10).measurement_time(Duration::from_secs(5));
+    for n in [500, 1000, 1500] {
+        let (model, init) = bench_model(n, 1).unwrap();
+        let theta_v = model.params.to_vec();
+        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+            b.iter(|| {
+                let th = theta_tensor(&theta_v, &ad).require_grad();
+                let end = model
+                    .rollout(
+                        &th,
+                        HerdState::from_rows(&init, &ad),
+                        10,
+                        Decide::Live {
+                            rng: &mut rng,
+                            record: None,
+                        },
+                        |_, _, _| Ok(()),
+                    )
+                    .unwrap();
+                let grads = objective(&end, 4.0).backward();
+                th.grad(&grads).unwrap().into_data()
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, perception, sim_step, grad_window);
+criterion_main!(benches);

@@ -12,15 +12,24 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         _ => Path::new("."),
     };
     let fail = |e: std::io::Error| Error::file(path, format!("cannot write: {e}"));
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".herdfit-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(fail)?;
+    let mut tmp = temp_builder().tempfile_in(dir).map_err(fail)?;
     tmp.write_all(bytes).map_err(fail)?;
     tmp.as_file().sync_all().map_err(fail)?;
     tmp.persist(path).map_err(|e| fail(e.error))?;
     Ok(())
+}
+
+/// Temporary siblings of output files: hidden names, and the permissions of an ordinary file
+/// (rw-r--r--) rather than the private 0600 of a temporary file, since they are renamed into place.
+fn temp_builder() -> tempfile::Builder<'static, 'static> {
+    let mut b = tempfile::Builder::new();
+    b.prefix(".herdfit-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        b.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    b
 }
 
 /// Checks early that `path` can be created (its folder exists and is writable), so long runs fail
@@ -150,6 +159,50 @@ pub fn push_traj_frame(
     }
 }
 
+/// A file written through a temporary sibling and renamed into place by [`AtomicFile::commit`];
+/// dropped without commit, it leaves nothing behind.
+pub struct AtomicFile {
+    path: std::path::PathBuf,
+    out: std::io::BufWriter<tempfile::NamedTempFile>,
+}
+
+impl AtomicFile {
+    /// Starts writing `path`.
+    pub fn create(path: &Path) -> Result<Self> {
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        if path.is_dir() {
+            return Err(Error::file(path, "cannot write: is a directory"));
+        }
+        let tmp = temp_builder()
+            .tempfile_in(dir)
+            .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+        Ok(AtomicFile {
+            path: path.to_path_buf(),
+            out: std::io::BufWriter::with_capacity(1 << 20, tmp),
+        })
+    }
+
+    /// Appends text.
+    pub fn write_str(&mut self, s: &str) -> Result<()> {
+        self.out
+            .write_all(s.as_bytes())
+            .map_err(|e| Error::file(&self.path, format!("cannot write: {e}")))
+    }
+
+    /// Flushes and renames the file into place.
+    pub fn commit(self) -> Result<()> {
+        let path = self.path;
+        let fail = |e: std::io::Error| Error::file(&path, format!("cannot write: {e}"));
+        let tmp = self.out.into_inner().map_err(|e| fail(e.into_error()))?;
+        tmp.as_file().sync_all().map_err(fail)?;
+        tmp.persist(&path).map_err(|e| fail(e.error))?;
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,51 +254,5 @@ mod tests {
         assert!(check_writable(&bad).is_err());
         // Nothing but the file itself is left in the folder.
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
-    }
-}
-
-/// A file written through a temporary sibling and renamed into place by [`AtomicFile::commit`];
-/// dropped without commit, it leaves nothing behind.
-pub struct AtomicFile {
-    path: std::path::PathBuf,
-    out: std::io::BufWriter<tempfile::NamedTempFile>,
-}
-
-impl AtomicFile {
-    /// Starts writing `path`.
-    pub fn create(path: &Path) -> Result<Self> {
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        if path.is_dir() {
-            return Err(Error::file(path, "cannot write: is a directory"));
-        }
-        let tmp = tempfile::Builder::new()
-            .prefix(".herdfit-")
-            .suffix(".tmp")
-            .tempfile_in(dir)
-            .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
-        Ok(AtomicFile {
-            path: path.to_path_buf(),
-            out: std::io::BufWriter::with_capacity(1 << 20, tmp),
-        })
-    }
-
-    /// Appends text.
-    pub fn write_str(&mut self, s: &str) -> Result<()> {
-        self.out
-            .write_all(s.as_bytes())
-            .map_err(|e| Error::file(&self.path, format!("cannot write: {e}")))
-    }
-
-    /// Flushes and renames the file into place.
-    pub fn commit(self) -> Result<()> {
-        let path = self.path;
-        let fail = |e: std::io::Error| Error::file(&path, format!("cannot write: {e}"));
-        let tmp = self.out.into_inner().map_err(|e| fail(e.into_error()))?;
-        tmp.as_file().sync_all().map_err(fail)?;
-        tmp.persist(&path).map_err(|e| fail(e.error))?;
-        Ok(())
     }
 }

@@ -15,7 +15,26 @@ fn main() {
             .unwrap_or_default();
         eprintln!("error: internal error{loc}: {}", msg.replace('\n', " "));
     }));
-    let cli = herdfit::cli::Cli::parse();
+    let cli = match herdfit::cli::Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind::{DisplayHelp, DisplayVersion};
+            if matches!(e.kind(), DisplayHelp | DisplayVersion)
+                || e.kind() == clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            {
+                e.exit();
+            }
+            // Usage errors: clap's message folded onto one line (no usage block), exit 2.
+            let text = e.render().to_string();
+            let msg: Vec<&str> = text
+                .lines()
+                .take_while(|l| !l.trim().is_empty())
+                .map(str::trim)
+                .collect();
+            eprintln!("{}", msg.join(" "));
+            std::process::exit(2);
+        }
+    };
     if let Err(e) = herdfit::cli::run(cli) {
         eprintln!("error: {e}");
         std::process::exit(1);

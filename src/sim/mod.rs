@@ -231,7 +231,7 @@ impl ForceTensors {
     /// order). Gradients flow from the forces back to `theta`.
     pub fn new(theta: &Tensor<1>, c: &Constants) -> Self {
         assert_eq!(theta.dims()[0], N_PARAMS, "theta must hold 12 values");
-        let at = |i: usize| theta.clone().slice([i..i + 1]).reshape([1, 1]);
+        let at = |i: usize| theta.clone().narrow(0, i, 1).reshape([1, 1]);
         let r2 = c.perception_radius * c.perception_radius;
         let pi2 = std::f64::consts::PI * std::f64::consts::PI;
         let w = std::array::from_fn(|g| at(3 * g).mul_scalar(c.sensitivity));
@@ -411,7 +411,7 @@ impl Model {
         let cp = (cc - cv).reshape([n, k]);
         let mut fx = (cp.clone() * dx + ca.clone() * gather(&s.hx)).sum_dim(1);
         let mut fy = (cp * dy + ca * gather(&s.hy)).sum_dim(1);
-        if p.obstacle_mask.iter().any(|&m| m == 1) {
+        if p.obstacle_mask.contains(&1) {
             let ko = p.ko;
             let om: Vec<f64> = p.obstacle_mask.iter().map(|&b| b as f64).collect();
             let oguard = mat_tensor(om.iter().map(|m| 1.0 - m).collect(), n, ko, &device);
