@@ -23,6 +23,8 @@ pub struct BenchReport {
     /// Mean visible neighbours per agent and the padded list width K, at the first step.
     pub mean_neighbours: f64,
     pub k: usize,
+    /// burn's balanced gradient checkpointing was on for the forward+backward pass.
+    pub checkpointing: bool,
 }
 
 /// The benchmark scene: the standard herd (one agent per 2 BL²), default parameters, occlusion on,
@@ -73,6 +75,7 @@ pub fn run_bench(
     steps: usize,
     sim_only: bool,
     repeats: usize,
+    checkpointing: bool,
     mut progress: impl FnMut(),
 ) -> Result<BenchReport> {
     if steps == 0 {
@@ -115,7 +118,11 @@ pub fn run_bench(
     let grad_ms_per_step = if sim_only {
         None
     } else {
-        let ad = device.clone().autodiff();
+        let ad = if checkpointing {
+            device.clone().autodiff().gradient_checkpointing()
+        } else {
+            device.clone().autodiff()
+        };
         let mut per_step = Vec::with_capacity(repeats);
         for r in 0..repeats.max(1) {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3 + r as u64);
@@ -152,5 +159,6 @@ pub fn run_bench(
         occlusion: model.params.constants.occlusion,
         mean_neighbours,
         k,
+        checkpointing,
     })
 }

@@ -132,6 +132,10 @@ pub struct BenchArgs {
     /// Forward + backward repetitions (median reported).
     #[arg(long, default_value_t = 3)]
     pub repeats: usize,
+    /// Recompute memory-bound activations in the backward pass (burn's balanced gradient
+    /// checkpointing): less memory for long windows, more time.
+    #[arg(long)]
+    pub checkpointing: bool,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: PathBuf,
@@ -338,7 +342,14 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
     check_writable(&a.json)?;
     let total = a.steps + 1 + if a.sim_only { 0 } else { a.repeats.max(1) };
     let pb = progress_bar(total as u64, "bench");
-    let r = run_bench(a.agents, a.steps, a.sim_only, a.repeats, || pb.inc(1))?;
+    let r = run_bench(
+        a.agents,
+        a.steps,
+        a.sim_only,
+        a.repeats,
+        a.checkpointing,
+        || pb.inc(1),
+    )?;
     pb.finish_and_clear();
     println!(
         "bench: {} agents, {} steps: simulation {:.3} ms/step{}, peak RSS {:.1} MB (K = {}, {:.1} visible neighbours/agent)",
