@@ -8,9 +8,12 @@ pub mod backend;
 pub mod bench;
 pub mod cli;
 pub mod error;
+pub mod fields;
 pub mod io;
+pub mod metrics;
 pub mod params;
 pub mod sim;
+pub mod synth;
 pub mod train;
 
 pub use error::{Error, Result};

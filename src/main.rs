@@ -1,6 +1,13 @@
 use clap::Parser;
 
 fn main() {
+    // Die quietly on a closed pipe (`herdfit fields-info CLIP | head`), like other Unix tools,
+    // instead of failing a print.
+    #[cfg(unix)]
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     // A panic is a bug; still, the user sees one line and a non-zero exit, not a backtrace.
     std::panic::set_hook(Box::new(|info| {
         let msg = info

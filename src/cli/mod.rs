@@ -33,9 +33,90 @@ pub enum Command {
     Gradcheck(GradcheckArgs),
     /// Time simulation and forward+backward steps on the standard random herd.
     Bench(BenchArgs),
+    /// Make a synthetic clip with known parameters (fields, truth.json, trajectories.csv).
+    Synth(SynthArgs),
+    /// Convert the public Herds-From-Video extractor's text files into a clip folder.
+    ImportReference(ImportArgs),
+    /// Summarise a clip: grid, frames, agents, speed model, polarization, angular momentum.
+    FieldsInfo(FieldsInfoArgs),
     /// The built-in walk-through. For now: simulate a built-in herd behind a guidance direction,
     /// export its parameter set and check its gradients (the fit comes in a later release).
     Demo(DemoArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct SynthArgs {
+    /// Parameter set (the truth); the built-in default set when omitted.
+    #[arg(long, value_name = "P.json")]
+    pub params: Option<PathBuf>,
+    #[arg(long, value_name = "N")]
+    pub agents: usize,
+    /// Number of frames (frame 0 included).
+    #[arg(long, value_name = "F")]
+    pub frames: usize,
+    #[arg(long, value_name = "FPS", default_value_t = 25.0)]
+    pub fps: f64,
+    /// Grid size in cells, NXxNY.
+    #[arg(long, value_name = "NXxNY", value_parser = parse_grid)]
+    pub grid: (usize, usize),
+    /// Cell side (BL).
+    #[arg(long, value_name = "C")]
+    pub cell_size: f64,
+    /// Obstacle cells: {"cells": [[ix, iy], …]} (row 0 at the bottom).
+    #[arg(long, value_name = "CELLS.json")]
+    pub obstacles: Option<PathBuf>,
+    /// Direction of travel of the herd and its guidance, degrees from +x.
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 0.0,
+        allow_hyphen_values = true
+    )]
+    pub heading: f64,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
+    /// Output clip folder.
+    #[arg(long, value_name = "CLIP/")]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct ImportArgs {
+    /// Prefix of the three files: PREFIX_data_meta.txt, PREFIX_data_frame.txt, PREFIX_data_cell.txt.
+    #[arg(value_name = "PREFIX")]
+    pub prefix: PathBuf,
+    /// Output clip folder.
+    #[arg(long, value_name = "CLIP/")]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct FieldsInfoArgs {
+    #[arg(value_name = "CLIP/")]
+    pub clip: PathBuf,
+    /// Also write the summary and per-frame measures as JSON.
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+}
+
+fn parse_grid(s: &str) -> std::result::Result<(usize, usize), String> {
+    let (a, b) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected NXxNY, got '{s}'"))?;
+    let nx: usize = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{a}' is not a cell count"))?;
+    let ny: usize = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{b}' is not a cell count"))?;
+    if nx == 0 || ny == 0 {
+        return Err("the grid needs at least one cell each way".into());
+    }
+    Ok((nx, ny))
 }
 
 #[derive(Args, Debug)]
@@ -199,6 +280,9 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Simulate(a) => simulate(a),
         Command::Gradcheck(a) => gradcheck_cmd(a),
         Command::Bench(a) => bench_cmd(a),
+        Command::Synth(a) => synth_cmd(a),
+        Command::ImportReference(a) => import_cmd(a),
+        Command::FieldsInfo(a) => fields_info(a),
         Command::Demo(a) => demo(a),
     }
 }
@@ -409,5 +493,149 @@ fn demo(a: DemoArgs) -> Result<()> {
         json: gc.clone(),
     })?;
     println!("  gradient check        {}", gc.display());
+    Ok(())
+}
+
+fn synth_cmd(a: SynthArgs) -> Result<()> {
+    let params = load_params(&a.params)?;
+    if !(a.cell_size.is_finite() && a.cell_size > 0.0) {
+        return Err(Error::invalid(format!(
+            "--cell-size {} must be > 0",
+            a.cell_size
+        )));
+    }
+    let (nx, ny) = a.grid;
+    let grid = crate::fields::Grid {
+        origin: [0.0, 0.0],
+        cell_size: a.cell_size,
+        nx,
+        ny,
+    };
+    let obstacles = match &a.obstacles {
+        Some(p) => crate::synth::read_cells(p, nx, ny)?,
+        None => ndarray::Array2::zeros((ny, nx)),
+    };
+    crate::io::AtomicDir::create(&a.out)?; // fail early on an unusable --out
+    let device = cpu_device(a.precision)?;
+    let cfg = crate::synth::SynthConfig {
+        params: params.clone(),
+        agents: a.agents,
+        frames: a.frames,
+        fps: a.fps,
+        grid,
+        obstacles,
+        seed: a.seed,
+        heading_deg: a.heading,
+        precision: a.precision,
+    };
+    let pb = progress_bar(a.frames.saturating_sub(1) as u64, "synth");
+    let syn = crate::synth::synthesise(&cfg, &device, || pb.inc(1))?;
+    pb.finish_and_clear();
+    let mut truth = params.clone();
+    truth.physical = Some(params.physical_values());
+    truth.provenance = Some(serde_json::json!({"source": "synth truth", "seed": a.seed}));
+    let truth = serde_json::to_string_pretty(&truth)
+        .map_err(|e| Error::Internal(format!("serialising truth: {e}")))?;
+    let traj = syn.trajectories_csv(a.fps);
+    syn.clip.save(
+        &a.out,
+        &[
+            ("truth.json", format!("{truth}\n").into_bytes()),
+            ("trajectories.csv", traj.into_bytes()),
+        ],
+    )?;
+    let counts: Vec<f64> = (0..syn.clip.frames()).map(|f| syn.clip.count(f)).collect();
+    println!(
+        "synth: {} agents, {} frames at {} fps on a {nx}×{ny} grid of {} BL cells; {:.0}–{:.0} agents inside the grid; wrote {}",
+        a.agents,
+        a.frames,
+        a.fps,
+        a.cell_size,
+        counts.iter().cloned().fold(f64::INFINITY, f64::min),
+        counts.iter().cloned().fold(0.0, f64::max),
+        a.out.display()
+    );
+    Ok(())
+}
+
+fn import_cmd(a: ImportArgs) -> Result<()> {
+    let clip = crate::fields::import_reference(&a.prefix)?;
+    clip.save(&a.out, &[])?;
+    println!(
+        "import-reference: {} frames, {}×{} cells of {:.4} BL, {:.3} fps; wrote {}",
+        clip.frames(),
+        clip.meta.nx,
+        clip.meta.ny,
+        clip.meta.cell_size,
+        clip.meta.fps,
+        a.out.display()
+    );
+    Ok(())
+}
+
+fn fields_info(a: FieldsInfoArgs) -> Result<()> {
+    let clip = crate::fields::ClipFields::load(&a.clip)?;
+    if let Some(j) = &a.json {
+        check_writable(j)?;
+    }
+    let m = &clip.meta;
+    let measures = crate::metrics::clip_measures(&clip);
+    let counts: Vec<f64> = measures.iter().map(|x| x.agents).collect();
+    let mean = counts.iter().sum::<f64>() / counts.len() as f64;
+    let obstacles = clip.obstacles.iter().filter(|&&v| v != 0).count();
+    println!("clip        {}", a.clip.display());
+    println!(
+        "grid        {}×{} cells of {} BL (origin {:?}), {} obstacle cells",
+        m.nx, m.ny, m.cell_size, m.origin, obstacles
+    );
+    println!(
+        "frames      {} at {} fps ({:.2} s)",
+        m.frames,
+        m.fps,
+        m.frames as f64 / m.fps
+    );
+    println!(
+        "agents      min {:.1}, mean {:.1}, max {:.1} per frame (Σ density × cell area)",
+        counts.iter().cloned().fold(f64::INFINITY, f64::min),
+        mean,
+        counts.iter().cloned().fold(0.0, f64::max)
+    );
+    println!(
+        "speed       mean {:.4} BL/s, std {:.4} BL/s, {} speed–density rows",
+        m.speed.mean,
+        m.speed.std,
+        m.speed.density_table.len()
+    );
+    for r in &m.speed.density_table {
+        println!(
+            "              density {:.4} agents/BL² → {:.4} BL/s",
+            r[0], r[1]
+        );
+    }
+    println!(
+        "{:>6} {:>10} {:>13} {:>18} {:>18}",
+        "frame", "agents", "polarization", "ang.mom centroid", "ang.mom centre"
+    );
+    for x in &measures {
+        println!(
+            "{:>6} {:>10.2} {:>13.4} {:>18.4} {:>18.4}",
+            x.frame,
+            x.agents,
+            x.polarization,
+            x.angular_momentum_centroid,
+            x.angular_momentum_frame_centre
+        );
+    }
+    if let Some(j) = &a.json {
+        let out = serde_json::json!({
+            "clip": a.clip.display().to_string(),
+            "meta": m,
+            "obstacle_cells": obstacles,
+            "frames": measures,
+        });
+        let text = serde_json::to_string_pretty(&out)
+            .map_err(|e| Error::Internal(format!("serialising: {e}")))?;
+        write_atomic(j, format!("{text}\n").as_bytes())?;
+    }
     Ok(())
 }
