@@ -15,5 +15,7 @@ pub mod params;
 pub mod sim;
 pub mod synth;
 pub mod train;
+#[cfg(feature = "video")]
+pub mod video;
 
 pub use error::{Error, Result};

@@ -77,9 +77,36 @@ pub struct SynthArgs {
     pub seed: u64,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
+    /// Also render the overhead view as an MJPG AVI (needs the `video` feature).
+    #[arg(long, value_name = "OUT.avi")]
+    pub video: Option<PathBuf>,
+    /// Video scale: pixels per body length.
+    #[arg(long, value_name = "PX", default_value_t = 12.0)]
+    pub px_per_bl: f64,
+    /// Body colour of the rendered agents, R,G,B.
+    #[arg(long, value_name = "R,G,B", default_value = "235,235,225", value_parser = parse_rgb)]
+    pub body_colour: [u8; 3],
+    /// Smooth pan, zoom and rotation of the camera (identity at frame 0); poses go to camera.json.
+    #[arg(long)]
+    pub camera_motion: bool,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
     pub out: PathBuf,
+}
+
+fn parse_rgb(s: &str) -> std::result::Result<[u8; 3], String> {
+    let v: Vec<&str> = s.split(',').collect();
+    if v.len() != 3 {
+        return Err(format!("expected R,G,B, got '{s}'"));
+    }
+    let mut out = [0u8; 3];
+    for (o, t) in out.iter_mut().zip(v) {
+        *o = t
+            .trim()
+            .parse()
+            .map_err(|_| format!("'{t}' is not a value in 0..=255"))?;
+    }
+    Ok(out)
 }
 
 #[derive(Args, Debug)]
@@ -537,13 +564,32 @@ fn synth_cmd(a: SynthArgs) -> Result<()> {
     let truth = serde_json::to_string_pretty(&truth)
         .map_err(|e| Error::Internal(format!("serialising truth: {e}")))?;
     let traj = syn.trajectories_csv(a.fps);
-    syn.clip.save(
-        &a.out,
-        &[
-            ("truth.json", format!("{truth}\n").into_bytes()),
-            ("trajectories.csv", traj.into_bytes()),
-        ],
-    )?;
+    let mut clip = syn.clip.clone();
+    let mut extra = vec![
+        ("truth.json", format!("{truth}\n").into_bytes()),
+        ("trajectories.csv", traj.into_bytes()),
+    ];
+    let pending = match &a.video {
+        None => None,
+        Some(path) => {
+            let (cameras, pending, settings) = render_synth_video(&a, &syn, path)?;
+            let s = a.px_per_bl;
+            clip.meta.body_length_px = Some(s);
+            clip.meta.body_pixel_coverage =
+                Some(std::f64::consts::PI * 0.5 * s * 0.5 * crate_body_width() * s);
+            if let serde_json::Value::Object(m) = &mut clip.meta.provenance {
+                m.insert("video".into(), settings);
+            }
+            let cams = serde_json::to_string_pretty(&cameras)
+                .map_err(|e| Error::Internal(format!("serialising cameras: {e}")))?;
+            extra.push(("camera.json", format!("{cams}\n").into_bytes()));
+            Some(pending)
+        }
+    };
+    clip.save(&a.out, &extra)?;
+    if let Some(p) = pending {
+        commit_video(p)?;
+    }
     let counts: Vec<f64> = (0..syn.clip.frames()).map(|f| syn.clip.count(f)).collect();
     println!(
         "synth: {} agents, {} frames at {} fps on a {nx}×{ny} grid of {} BL cells; {:.0}–{:.0} agents inside the grid; wrote {}",
@@ -637,5 +683,78 @@ fn fields_info(a: FieldsInfoArgs) -> Result<()> {
             .map_err(|e| Error::Internal(format!("serialising: {e}")))?;
         write_atomic(j, format!("{text}\n").as_bytes())?;
     }
+    Ok(())
+}
+
+#[cfg(feature = "video")]
+fn crate_body_width() -> f64 {
+    crate::video::render::BODY_WIDTH_BL
+}
+
+#[cfg(not(feature = "video"))]
+fn crate_body_width() -> f64 {
+    0.4
+}
+
+#[cfg(feature = "video")]
+type Pending = crate::video::PendingVideo;
+#[cfg(not(feature = "video"))]
+type Pending = ();
+
+#[cfg(feature = "video")]
+fn render_synth_video(
+    a: &SynthArgs,
+    syn: &crate::synth::Synth,
+    path: &std::path::Path,
+) -> Result<(Vec<serde_json::Value>, Pending, serde_json::Value)> {
+    check_writable(path)?;
+    let cfg = crate::video::RenderConfig {
+        px_per_bl: a.px_per_bl,
+        body_rgb: a.body_colour,
+        camera_motion: a.camera_motion,
+        seed: a.seed,
+    };
+    let pb = progress_bar(syn.frames.len() as u64, "render");
+    let (cams, pending) = crate::video::render_video(
+        path,
+        &syn.frames,
+        &syn.clip.grid(),
+        &syn.clip.obstacles,
+        a.fps,
+        &cfg,
+        || pb.inc(1),
+    )?;
+    pb.finish_and_clear();
+    let cams = cams
+        .iter()
+        .map(|c| serde_json::to_value(c).unwrap_or_default())
+        .collect();
+    let settings = serde_json::json!({
+        "file": path.display().to_string(),
+        "render": cfg,
+        "frame_size": crate::video::render::frame_size(&syn.clip.grid(), a.px_per_bl),
+    });
+    Ok((cams, pending, settings))
+}
+
+#[cfg(not(feature = "video"))]
+fn render_synth_video(
+    _a: &SynthArgs,
+    _syn: &crate::synth::Synth,
+    path: &std::path::Path,
+) -> Result<(Vec<serde_json::Value>, Pending, serde_json::Value)> {
+    Err(Error::file(
+        path,
+        "this herdfit was built without the `video` feature (OpenCV)",
+    ))
+}
+
+#[cfg(feature = "video")]
+fn commit_video(p: Pending) -> Result<()> {
+    p.commit()
+}
+
+#[cfg(not(feature = "video"))]
+fn commit_video(_p: Pending) -> Result<()> {
     Ok(())
 }

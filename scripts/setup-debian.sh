@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Installs what herdfit needs on a fresh Debian machine that has Rust: the system OpenCV and the
+# clang it is bound with (cargo feature `video`), and the Python packages the tests and notebooks
+# use. Idempotent: packages already present are not fetched again.
+set -euo pipefail
+
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config python3 python3-pip)
+PIP_PACKAGES=(numpy)
+
+missing=()
+for p in "${APT_PACKAGES[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  echo "setup: installing ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+PY=python3
+if ! $PY -c "import numpy" >/dev/null 2>&1; then
+  echo "setup: installing ${PIP_PACKAGES[*]} (pip)"
+  $PY -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}" \
+    || $PY -m pip install --quiet --disable-pip-version-check --break-system-packages "${PIP_PACKAGES[@]}"
+fi

@@ -1,0 +1,335 @@
+//! Overhead rendering of a herd: agents as body-length ellipses of one colour over a textured
+//! ground, obstacle cells in dark grey, optionally seen through a moving camera (smooth pan, zoom
+//! and rotation starting from the identity at frame 0). Used by `synth --video` to make test
+//! videos with known truth for extraction.
+
+use crate::error::{Error, Result};
+use crate::fields::Grid;
+use crate::io::AgentRow;
+use ndarray::Array2;
+use opencv::core::{Mat, Point, Scalar, Size, CV_8UC3};
+use opencv::prelude::*;
+use opencv::{imgproc, videoio};
+use serde::Serialize;
+use std::path::Path;
+
+/// Rendering settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RenderConfig {
+    /// Pixels per body length.
+    pub px_per_bl: f64,
+    /// Body colour, RGB.
+    pub body_rgb: [u8; 3],
+    /// Apply the smooth camera motion of [`camera_at`].
+    pub camera_motion: bool,
+    /// Seed of the ground texture.
+    pub seed: u64,
+}
+
+/// Body ellipse: full length 1 BL, full width 0.4 BL.
+pub const BODY_WIDTH_BL: f64 = 0.4;
+
+/// The camera of frame `f` of `frames`: image-space similarity about the image centre,
+/// `p' = c + t + z R(θ) (p − c)`. Identity at frame 0, easing smoothly (raised cosine) to a pan of
+/// (6%, −4%) of the frame, a zoom of 1.15 and a rotation of 8° at the last frame.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Camera {
+    pub frame: usize,
+    pub pan_px: [f64; 2],
+    pub zoom: f64,
+    pub rotation_deg: f64,
+}
+
+/// Camera pose of frame `f` (of `frames`) for a `w × h` image.
+pub fn camera_at(f: usize, frames: usize, w: usize, h: usize) -> Camera {
+    let s = if frames > 1 {
+        0.5 * (1.0 - (std::f64::consts::PI * f as f64 / (frames - 1) as f64).cos())
+    } else {
+        0.0
+    };
+    Camera {
+        frame: f,
+        pan_px: [0.06 * w as f64 * s, -0.04 * h as f64 * s],
+        zoom: 1.0 + 0.15 * s,
+        rotation_deg: 8.0 * s,
+    }
+}
+
+impl Camera {
+    /// The 2×3 affine matrix mapping world-render pixels to camera pixels.
+    pub fn matrix(&self, w: usize, h: usize) -> [[f64; 3]; 2] {
+        let (c, s) = {
+            let a = self.rotation_deg.to_radians();
+            (a.cos() * self.zoom, a.sin() * self.zoom)
+        };
+        let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
+        [
+            [c, -s, cx + self.pan_px[0] - c * cx + s * cy],
+            [s, c, cy + self.pan_px[1] - s * cx - c * cy],
+        ]
+    }
+}
+
+fn cv(path: &Path) -> impl Fn(opencv::Error) -> Error + '_ {
+    move |e| Error::file(path, format!("OpenCV: {}", e.message))
+}
+
+/// Image size (width, height) for a grid: the grid at `px_per_bl`, rounded up to even numbers.
+pub fn frame_size(grid: &Grid, px_per_bl: f64) -> (usize, usize) {
+    let s = grid.size();
+    let even = |v: f64| ((v * px_per_bl).ceil() as usize).div_ceil(2) * 2;
+    (even(s[0]).max(2), even(s[1]).max(2))
+}
+
+/// World position → world-render pixel (y up in the world, down in the image).
+pub fn world_to_px(grid: &Grid, px_per_bl: f64, h: usize, p: [f64; 2]) -> [f64; 2] {
+    [
+        (p[0] - grid.origin[0]) * px_per_bl,
+        h as f64 - (p[1] - grid.origin[1]) * px_per_bl,
+    ]
+}
+
+/// A smooth, deterministic grass-like texture (BGR), from a few octaves of value noise.
+fn ground(w: usize, h: usize, seed: u64) -> Vec<u8> {
+    let hash = |x: i64, y: i64, o: u64| -> f64 {
+        let mut z = (x as u64)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add((y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F))
+            .wrapping_add(seed.wrapping_add(o).wrapping_mul(0x1656_67B1_9E37_79F9));
+        z ^= z >> 29;
+        z = z.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z ^= z >> 32;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let noise = |x: f64, y: f64, cell: f64, o: u64| -> f64 {
+        let (fx, fy) = (x / cell, y / cell);
+        let (ix, iy) = (fx.floor() as i64, fy.floor() as i64);
+        let (tx, ty) = (fx - ix as f64, fy - iy as f64);
+        let (sx, sy) = (tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty));
+        let a = hash(ix, iy, o) * (1.0 - sx) + hash(ix + 1, iy, o) * sx;
+        let b = hash(ix, iy + 1, o) * (1.0 - sx) + hash(ix + 1, iy + 1, o) * sx;
+        a * (1.0 - sy) + b * sy
+    };
+    let mut buf = vec![0u8; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            let (fx, fy) = (x as f64, y as f64);
+            let n = 0.5 * noise(fx, fy, 24.0, 1)
+                + 0.3 * noise(fx, fy, 7.0, 2)
+                + 0.2 * noise(fx, fy, 2.5, 3);
+            let i = (y * w + x) * 3;
+            // Olive-green grass: B, G, R.
+            buf[i] = (40.0 + 25.0 * n) as u8;
+            buf[i + 1] = (95.0 + 55.0 * n) as u8;
+            buf[i + 2] = (70.0 + 45.0 * n) as u8;
+        }
+    }
+    buf
+}
+
+fn mat_from_bgr(buf: &[u8], w: usize, h: usize, path: &Path) -> Result<Mat> {
+    let mut m = Mat::new_rows_cols_with_default(h as i32, w as i32, CV_8UC3, Scalar::all(0.0))
+        .map_err(cv(path))?;
+    m.data_bytes_mut().map_err(cv(path))?.copy_from_slice(buf);
+    Ok(m)
+}
+
+/// A rendered video waiting in a temporary sibling of its destination.
+pub struct PendingVideo {
+    path: std::path::PathBuf,
+    tmp: tempfile::NamedTempFile,
+}
+
+impl PendingVideo {
+    /// Renames the video into place.
+    pub fn commit(self) -> Result<()> {
+        let path = self.path;
+        self.tmp
+            .persist(&path)
+            .map_err(|e| Error::file(&path, format!("cannot write: {}", e.error)))?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let _ = std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644));
+        }
+        Ok(())
+    }
+}
+
+/// Renders `frames` (positions and velocities per frame) as an MJPG AVI for `path`, into a
+/// temporary sibling that [`PendingVideo::commit`] renames into place. Returns the camera pose of
+/// every frame.
+pub fn render_video(
+    path: &Path,
+    frames: &[Vec<AgentRow>],
+    grid: &Grid,
+    obstacles: &Array2<u8>,
+    fps: f64,
+    cfg: &RenderConfig,
+    mut progress: impl FnMut(),
+) -> Result<(Vec<Camera>, PendingVideo)> {
+    if !(cfg.px_per_bl.is_finite() && cfg.px_per_bl >= 2.0) {
+        return Err(Error::invalid(format!(
+            "--px-per-bl {} must be ≥ 2",
+            cfg.px_per_bl
+        )));
+    }
+    let (w, h) = frame_size(grid, cfg.px_per_bl);
+    if w * h > 8192 * 8192 {
+        return Err(Error::invalid(format!(
+            "a {w}×{h} video frame is too large"
+        )));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".herdfit-")
+        .suffix(".avi")
+        .tempfile_in(dir)
+        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
+    let tmp_name = tmp.path().to_string_lossy().into_owned();
+    let mut writer =
+        videoio::VideoWriter::new(&tmp_name, fourcc, fps, Size::new(w as i32, h as i32), true)
+            .map_err(cv(path))?;
+    if !writer.is_opened().map_err(cv(path))? {
+        return Err(Error::file(
+            path,
+            "OpenCV cannot open an MJPG AVI writer here",
+        ));
+    }
+    // Static layer: ground + obstacle cells.
+    let mut base = mat_from_bgr(&ground(w, h, cfg.seed), w, h, path)?;
+    let s = cfg.px_per_bl;
+    for ((iy, ix), &v) in obstacles.indexed_iter() {
+        if v == 0 {
+            continue;
+        }
+        let c = grid.centre(ix, iy);
+        let half = grid.cell_size / 2.0;
+        let a = world_to_px(grid, s, h, [c[0] - half, c[1] + half]);
+        let b = world_to_px(grid, s, h, [c[0] + half, c[1] - half]);
+        let rect = opencv::core::Rect::new(
+            a[0].round() as i32,
+            a[1].round() as i32,
+            (b[0] - a[0]).round() as i32,
+            (b[1] - a[1]).round() as i32,
+        );
+        imgproc::rectangle(
+            &mut base,
+            rect,
+            Scalar::new(55.0, 60.0, 62.0, 0.0),
+            -1,
+            imgproc::LINE_8,
+            0,
+        )
+        .map_err(cv(path))?;
+    }
+    let colour = Scalar::new(
+        cfg.body_rgb[2] as f64,
+        cfg.body_rgb[1] as f64,
+        cfg.body_rgb[0] as f64,
+        0.0,
+    );
+    const SHIFT: i32 = 4;
+    let sub = (1 << SHIFT) as f64;
+    let axes = Size::new(
+        (0.5 * s * sub).round() as i32,
+        (0.5 * BODY_WIDTH_BL * s * sub).round() as i32,
+    );
+    let mut cameras = Vec::with_capacity(frames.len());
+    let mut frame = Mat::default();
+    let mut out = Mat::default();
+    for (f, agents) in frames.iter().enumerate() {
+        base.copy_to(&mut frame).map_err(cv(path))?;
+        for a in agents {
+            let p = world_to_px(grid, s, h, [a.x, a.y]);
+            let angle = -a.vy.atan2(a.vx).to_degrees();
+            imgproc::ellipse(
+                &mut frame,
+                Point::new((p[0] * sub).round() as i32, (p[1] * sub).round() as i32),
+                axes,
+                angle,
+                0.0,
+                360.0,
+                colour,
+                -1,
+                imgproc::LINE_AA,
+                SHIFT,
+            )
+            .map_err(cv(path))?;
+        }
+        let cam = if cfg.camera_motion {
+            camera_at(f, frames.len(), w, h)
+        } else {
+            camera_at(0, 1, w, h)
+        };
+        if cfg.camera_motion && f > 0 {
+            let m = cam.matrix(w, h);
+            let mm = Mat::from_slice_2d(&[m[0].to_vec(), m[1].to_vec()]).map_err(cv(path))?;
+            imgproc::warp_affine(
+                &frame,
+                &mut out,
+                &mm,
+                Size::new(w as i32, h as i32),
+                imgproc::INTER_LINEAR,
+                opencv::core::BORDER_REFLECT,
+                Scalar::all(0.0),
+            )
+            .map_err(cv(path))?;
+            writer.write(&out).map_err(cv(path))?;
+        } else {
+            writer.write(&frame).map_err(cv(path))?;
+        }
+        cameras.push(cam);
+        progress();
+    }
+    writer.release().map_err(cv(path))?;
+    Ok((
+        cameras,
+        PendingVideo {
+            path: path.to_path_buf(),
+            tmp,
+        },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn camera_is_identity_at_frame_zero_and_smooth() {
+        let c0 = camera_at(0, 50, 200, 100);
+        let m = c0.matrix(200, 100);
+        assert_eq!(m, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        let last = camera_at(49, 50, 200, 100);
+        assert!((last.zoom - 1.15).abs() < 1e-12 && (last.rotation_deg - 8.0).abs() < 1e-12);
+        // The image centre moves by the pan only.
+        let m = last.matrix(200, 100);
+        let cx = m[0][0] * 100.0 + m[0][1] * 50.0 + m[0][2];
+        let cy = m[1][0] * 100.0 + m[1][1] * 50.0 + m[1][2];
+        assert!(
+            (cx - 112.0).abs() < 1e-9 && (cy - 46.0).abs() < 1e-9,
+            "{cx} {cy}"
+        );
+        // Small steps between frames.
+        for f in 1..50 {
+            let (a, b) = (camera_at(f - 1, 50, 200, 100), camera_at(f, 50, 200, 100));
+            assert!((b.rotation_deg - a.rotation_deg).abs() < 0.3);
+        }
+    }
+
+    #[test]
+    fn frame_size_is_even() {
+        let g = Grid {
+            origin: [0.0, 0.0],
+            cell_size: 2.5,
+            nx: 7,
+            ny: 3,
+        };
+        assert_eq!(frame_size(&g, 5.0), (88, 38));
+    }
+}
