@@ -4,7 +4,7 @@
 # use. Idempotent: packages already present are not fetched again.
 set -euo pipefail
 
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config python3 python3-pip)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core python3 python3-pip)
 PIP_PACKAGES=(numpy)
 
 missing=()

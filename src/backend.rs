@@ -6,7 +6,9 @@ use crate::error::{Error, Result};
 use burn::tensor::{Device, FloatDType};
 
 /// Float precision of the tensors of a run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {
     F32,

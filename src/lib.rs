@@ -12,6 +12,7 @@ pub mod fields;
 pub mod io;
 pub mod metrics;
 pub mod params;
+pub mod plot;
 pub mod sim;
 pub mod synth;
 pub mod train;

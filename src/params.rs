@@ -193,6 +193,12 @@ impl Default for Params {
 }
 
 impl Params {
+    /// A generic starting point for fitting: every normalised value at 0.5, default constants and
+    /// speed model.
+    pub fn neutral() -> Params {
+        Params::default().with_vec(&[0.5; N_PARAMS])
+    }
+
     /// The 12 normalised values in [`param_names`] order.
     pub fn to_vec(&self) -> [f64; N_PARAMS] {
         let f = &self.forces;

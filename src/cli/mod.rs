@@ -33,6 +33,8 @@ pub enum Command {
     Gradcheck(GradcheckArgs),
     /// Time simulation and forward+backward steps on the standard random herd.
     Bench(BenchArgs),
+    /// Fit the 12 force parameters (and the speed model) to a clip's fields; export a parameter set.
+    Fit(FitArgs),
     /// Make a synthetic clip with known parameters (fields, truth.json, trajectories.csv).
     Synth(SynthArgs),
     /// Convert the public Herds-From-Video extractor's text files into a clip folder.
@@ -107,6 +109,82 @@ fn parse_rgb(s: &str) -> std::result::Result<[u8; 3], String> {
             .map_err(|_| format!("'{t}' is not a value in 0..=255"))?;
     }
     Ok(out)
+}
+
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    #[arg(value_name = "CLIP/")]
+    pub clip: PathBuf,
+    /// Output parameter set (herdfit.params/1).
+    #[arg(long, value_name = "PARAMS.json")]
+    pub out: PathBuf,
+    /// Starting parameters; a generic start (every value 0.5) when omitted.
+    #[arg(long, value_name = "P.json")]
+    pub init: Option<PathBuf>,
+    /// Unrolled steps per update (1 = the paper's greedy per-frame scheme).
+    #[arg(long, value_name = "W", default_value_t = 4)]
+    pub window: usize,
+    #[arg(long, value_name = "E", default_value_t = 8)]
+    pub epochs: usize,
+    /// β of eq. 11 (density vs velocity in the target).
+    #[arg(long, value_name = "B", default_value_t = 0.7)]
+    pub beta: f64,
+    /// λ_var, the weight of E_var.
+    #[arg(long, value_name = "L", default_value_t = 1.0)]
+    pub var_weight: f64,
+    #[arg(long, value_name = "X", default_value_t = 0.02)]
+    pub lr: f64,
+    #[arg(long, value_enum, default_value_t = crate::train::fit::Optimizer::Adam)]
+    pub optimizer: crate::train::fit::Optimizer,
+    /// Frames used, a..b (b exclusive); all frames when omitted.
+    #[arg(long, value_name = "a..b", value_parser = parse_range)]
+    pub frames: Option<(usize, usize)>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Density error above which the population is rebalanced.
+    #[arg(long, value_name = "E", default_value_t = 0.3)]
+    pub density_threshold: f64,
+    /// Every parameter follows ∇(E_mean + λ E_var) instead of the paper's split (alignment from
+    /// E_var, the others from E_mean).
+    #[arg(long)]
+    pub joint_gradients: bool,
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
+    /// Write a checkpoint into DIR after every epoch.
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
+    /// Continue from DIR/checkpoint.json (same flags required).
+    #[arg(long, requires = "checkpoint")]
+    pub resume: bool,
+    /// Training log CSV (default: next to --out, .log.csv).
+    #[arg(long, value_name = "LOG.csv")]
+    pub log: Option<PathBuf>,
+    /// Loss-curve PNG (default: next to --out, .loss.png).
+    #[arg(long, value_name = "LOSS.png")]
+    pub plot: Option<PathBuf>,
+}
+
+fn parse_range(s: &str) -> std::result::Result<(usize, usize), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("expected a..b, got '{s}'"))?;
+    let a: usize = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{a}' is not a frame index"))?;
+    let b: usize = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{b}' is not a frame index"))?;
+    Ok((a, b))
+}
+
+fn sibling(out: &std::path::Path, suffix: &str) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "params".into());
+    out.with_file_name(format!("{stem}{suffix}"))
 }
 
 #[derive(Args, Debug)]
@@ -223,9 +301,24 @@ pub struct GradcheckArgs {
     /// Use these recorded decisions instead of recording new ones.
     #[arg(long, value_name = "REC.json", conflicts_with = "record")]
     pub replay: Option<PathBuf>,
+    /// Objective: the documented herd objective, or the fit's loss on --clip.
+    #[arg(long, value_enum, default_value_t = Objective::Herd)]
+    pub objective: Objective,
+    /// Clip for `--objective loss` (the herd starts from its first frame's fields).
+    #[arg(long, value_name = "CLIP/", required_if_eq("objective", "loss"))]
+    pub clip: Option<PathBuf>,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: PathBuf,
+}
+
+/// What `gradcheck` differentiates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Objective {
+    /// Spread + mean heading of the default scenario's herd after T steps.
+    Herd,
+    /// The fit's loss E_mean + λ E_var (eq. 7–8) over T steps on a clip.
+    Loss,
 }
 
 #[derive(Args, Debug)]
@@ -307,6 +400,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Simulate(a) => simulate(a),
         Command::Gradcheck(a) => gradcheck_cmd(a),
         Command::Bench(a) => bench_cmd(a),
+        Command::Fit(a) => fit_cmd(a),
         Command::Synth(a) => synth_cmd(a),
         Command::ImportReference(a) => import_cmd(a),
         Command::FieldsInfo(a) => fields_info(a),
@@ -400,6 +494,27 @@ fn gradcheck_cmd(a: GradcheckArgs) -> Result<()> {
         return Err(Error::invalid("--steps must be ≥ 1"));
     }
     let params = load_params(&a.params)?;
+    if a.objective == Objective::Loss {
+        let path = a
+            .clip
+            .clone()
+            .ok_or_else(|| Error::invalid("--objective loss needs --clip"))?;
+        let clip = crate::fields::ClipFields::load(&path)?;
+        check_writable(&a.json)?;
+        let device = cpu_device(a.precision)?;
+        let sc = crate::train::gradcheck::LossScenario::record(
+            &clip, &params, 0, a.steps, 0.7, 1.0, a.seed, &device,
+        )
+        .map_err(|e| e.in_file(&path))?;
+        let h = a.fd_step.unwrap_or(match a.precision {
+            Precision::F64 => 1e-4,
+            Precision::F32 => 1e-2,
+        });
+        let pb = progress_bar(13, "gradcheck");
+        let report = sc.check(a.precision, h, || pb.inc(1))?;
+        pb.finish_and_clear();
+        return print_grad_report(&report, &a.json);
+    }
     let sc = match (&a.herd.init, a.herd.agents) {
         (Some(p), _) => {
             let base = default_scenario(params, 1, a.seed)?;
@@ -426,6 +541,13 @@ fn gradcheck_cmd(a: GradcheckArgs) -> Result<()> {
     let pb = progress_bar(13, "gradcheck");
     let report = gradcheck(&sc, a.steps, a.precision, h, &rec, || pb.inc(1))?;
     pb.finish_and_clear();
+    print_grad_report(&report, &a.json)
+}
+
+fn print_grad_report(
+    report: &crate::train::gradcheck::GradReport,
+    json: &std::path::Path,
+) -> Result<()> {
     println!(
         "gradcheck: {} agents, {} unrolled steps, {:?}, J = {:.6e}, h = {:e}",
         report.agents, report.steps, report.precision, report.objective, report.fd_step
@@ -443,7 +565,7 @@ fn gradcheck_cmd(a: GradcheckArgs) -> Result<()> {
     println!("max rel err {:.3e}", report.max_rel_err);
     let text = serde_json::to_string_pretty(&report)
         .map_err(|e| Error::Internal(format!("serialising report: {e}")))?;
-    write_atomic(&a.json, format!("{text}\n").as_bytes())
+    write_atomic(json, format!("{text}\n").as_bytes())
 }
 
 fn bench_cmd(a: BenchArgs) -> Result<()> {
@@ -517,6 +639,8 @@ fn demo(a: DemoArgs) -> Result<()> {
         seed: 0,
         record: None,
         replay: None,
+        objective: Objective::Herd,
+        clip: None,
         json: gc.clone(),
     })?;
     println!("  gradient check        {}", gc.display());
@@ -756,5 +880,182 @@ fn commit_video(p: Pending) -> Result<()> {
 
 #[cfg(not(feature = "video"))]
 fn commit_video(_p: Pending) -> Result<()> {
+    Ok(())
+}
+
+fn fit_cmd(a: FitArgs) -> Result<()> {
+    use crate::train::fit::{evaluate, fit, write_log, CheckpointDir, FitConfig};
+    let clip = crate::fields::ClipFields::load(&a.clip)?;
+    let init = match &a.init {
+        Some(p) => Params::load(p)?,
+        None => Params::neutral(),
+    };
+    let frames = a.frames.map_or(0..clip.frames(), |(x, y)| x..y);
+    let cfg = FitConfig {
+        window: a.window,
+        epochs: a.epochs,
+        beta: a.beta,
+        var_weight: a.var_weight,
+        lr: a.lr,
+        optimizer: a.optimizer,
+        frames: frames.clone(),
+        seed: a.seed,
+        density_threshold: a.density_threshold,
+        zero_grad_step: 0.02,
+        precision: a.precision,
+        split_gradients: !a.joint_gradients,
+    };
+    cfg.check(&clip).map_err(|e| e.in_file(&a.clip))?;
+    let log_path = a.log.clone().unwrap_or_else(|| sibling(&a.out, ".log.csv"));
+    let plot_path = a
+        .plot
+        .clone()
+        .unwrap_or_else(|| sibling(&a.out, ".loss.png"));
+    for p in [&a.out, &log_path, &plot_path] {
+        check_writable(p)?;
+    }
+    let ckpt = match &a.checkpoint {
+        Some(d) => {
+            std::fs::create_dir_all(d)
+                .map_err(|e| Error::file(d, format!("cannot create folder: {e}")))?;
+            Some(CheckpointDir {
+                dir: d.clone(),
+                resume: a.resume,
+            })
+        }
+        None => None,
+    };
+    let windows_per_epoch = (frames.end - frames.start - 1).div_ceil(a.window);
+    let pb = progress_bar((windows_per_epoch * a.epochs) as u64, "fit");
+    if let Some(c) = &ckpt {
+        if c.resume {
+            if let Ok(text) = std::fs::read_to_string(c.dir.join("checkpoint.json")) {
+                if let Ok(k) = serde_json::from_str::<crate::train::fit::Checkpoint>(&text) {
+                    pb.set_position((k.epochs_done * windows_per_epoch) as u64);
+                }
+            }
+        }
+    }
+    let res = fit(
+        &clip,
+        &init,
+        &cfg,
+        ckpt.as_ref(),
+        |epoch, frame, e_mean, ms| {
+            pb.set_message(format!(
+                "epoch {epoch} frame {frame} E_mean {e_mean:.4} {ms:.1} ms/step"
+            ));
+            pb.inc(1);
+        },
+    )?;
+    pb.finish_and_clear();
+    let mut start_params = init.clone();
+    start_params.speed = res.params.speed.clone();
+    let loss_before = crate::train::fit::loss_of(&clip, &start_params, &cfg)?;
+    let loss_after = crate::train::fit::loss_of(&clip, &res.params, &cfg)?;
+    let before = evaluate(&clip, &start_params, frames.clone(), a.seed, a.precision)?;
+    let after = evaluate(&clip, &res.params, frames.clone(), a.seed, a.precision)?;
+    let last_epoch = res.log.last().map_or(0, |r| r.epoch);
+    let last: Vec<&crate::train::fit::LogRow> =
+        res.log.iter().filter(|r| r.epoch == last_epoch).collect();
+    let mean = |f: &dyn Fn(&crate::train::fit::LogRow) -> f64| {
+        last.iter().map(|r| f(r)).sum::<f64>() / last.len().max(1) as f64
+    };
+    let mut out = res.params.clone();
+    out.provenance = Some(serde_json::json!({
+        "source": "fit",
+        "clip": a.clip.display().to_string(),
+        "frames": [frames.start, frames.end],
+        "settings": cfg,
+        "start": res.start,
+        "final_losses": {
+            "e_mean": mean(&|r| r.e_mean),
+            "e_var": mean(&|r| r.e_var),
+            "density_error": mean(&|r| r.density_error),
+            "velocity_error": mean(&|r| r.velocity_error),
+        },
+        "loss": {
+            "what": "mean E_mean and E_var over one epoch of the fit's schedule without updates (same herd and noise)",
+            "start": {"e_mean": loss_before.0, "e_var": loss_before.1},
+            "fitted": {"e_mean": loss_after.0, "e_var": loss_after.1},
+        },
+        "evaluation": {
+            "what": "mean per-frame errors of a run from the first frame's fields, no population control",
+            "start": {"density_error": before.0, "velocity_error": before.1},
+            "fitted": {"density_error": after.0, "velocity_error": after.1},
+        },
+    }));
+    write_log(&log_path, &res.log)?;
+    let per_epoch = |f: &dyn Fn(&crate::train::fit::LogRow) -> f64| -> Vec<(f64, f64)> {
+        (0..a.epochs)
+            .filter_map(|e| {
+                let rows: Vec<_> = res.log.iter().filter(|r| r.epoch == e).collect();
+                (!rows.is_empty()).then(|| {
+                    (
+                        e as f64 + 1.0,
+                        rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64,
+                    )
+                })
+            })
+            .collect()
+    };
+    let series = [
+        crate::plot::Series {
+            name: "E_mean",
+            points: per_epoch(&|r| r.e_mean),
+            colour: plotters::style::RGBColor(31, 119, 180),
+        },
+        crate::plot::Series {
+            name: "E_var",
+            points: per_epoch(&|r| r.e_var),
+            colour: plotters::style::RGBColor(255, 127, 14),
+        },
+        crate::plot::Series {
+            name: "density error",
+            points: per_epoch(&|r| r.density_error),
+            colour: plotters::style::RGBColor(44, 160, 44),
+        },
+        crate::plot::Series {
+            name: "velocity error",
+            points: per_epoch(&|r| r.velocity_error),
+            colour: plotters::style::RGBColor(214, 39, 40),
+        },
+    ];
+    if let Err(e) = crate::plot::line_chart(
+        &plot_path,
+        "herdfit fit",
+        "epoch",
+        "mean over the epoch's windows",
+        &series,
+    ) {
+        eprintln!("warning: no loss curve: {e}");
+    }
+    out.save(&a.out)?;
+    println!(
+        "fit: {} epochs × {} windows of {} steps on frames {}..{} of {}",
+        a.epochs,
+        windows_per_epoch,
+        a.window,
+        frames.start,
+        frames.end,
+        a.clip.display()
+    );
+    println!("{:<20} {:>8} {:>8}", "parameter", "start", "fitted");
+    for (n, (s0, s1)) in crate::params::param_names()
+        .iter()
+        .zip(res.start.iter().zip(res.params.to_vec()))
+    {
+        println!("{n:<20} {s0:>8.4} {s1:>8.4}");
+    }
+    println!(
+        "loss E_mean {:.4} → {:.4}, E_var {:.4} → {:.4}; density error {:.4} → {:.4}, velocity error {:.4} → {:.4}",
+        loss_before.0, loss_after.0, loss_before.1, loss_after.1, before.0, after.0, before.1, after.1
+    );
+    println!(
+        "wrote {}, {}, {}",
+        a.out.display(),
+        log_path.display(),
+        plot_path.display()
+    );
     Ok(())
 }

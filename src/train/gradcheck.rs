@@ -238,3 +238,143 @@ pub fn gradcheck(
         max_rel_err,
     })
 }
+
+/// The fit's loss as the objective: the mean over `steps` steps of E_mean + λ E_var (eq. 7–8)
+/// from a herd initialised from the clip's frame `start`, with the planned decisions and targets
+/// (perception, roles, noise, cells, U) recorded once and replayed for every evaluation.
+pub struct LossScenario {
+    pub model: Model,
+    pub init: Vec<AgentRow>,
+    pub plans: Vec<(crate::sim::StepDecisions, super::loss::StepTarget)>,
+    pub var_weight: f64,
+}
+
+impl LossScenario {
+    /// Plans `steps` steps from frame `start` of `clip` with the parameters `params`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        clip: &crate::fields::ClipFields,
+        params: &Params,
+        start: usize,
+        steps: usize,
+        beta: f64,
+        var_weight: f64,
+        seed: u64,
+        device: &Device,
+    ) -> Result<Self> {
+        use super::fit::{guidance_field, init_herd, plan_step};
+        if start + steps >= clip.frames() {
+            return Err(Error::invalid(format!(
+                "{steps} steps from frame {start} need {} frames; the clip has {}",
+                start + steps + 1,
+                clip.frames()
+            )));
+        }
+        let mut params = params.clone();
+        params.speed = clip.speed_model(&params.speed);
+        let g = clip.grid();
+        let mut model = Model {
+            params,
+            world: World {
+                obstacles: Some(crate::synth::obstacle_map(&g, &clip.obstacles)),
+                guidance: Guidance::None,
+            },
+            dt: 1.0 / clip.meta.fps,
+        };
+        let guidance: Vec<Guidance> = (0..clip.frames())
+            .map(|f| guidance_field(clip, f))
+            .collect();
+        let stencil = super::target::Stencil::new(clip);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let init = init_herd(clip, start, &model.params.speed, &mut rng);
+        if init.is_empty() {
+            return Err(Error::invalid(format!(
+                "frame {start} of the clip holds no agents"
+            )));
+        }
+        let theta = theta_tensor(&model.params.to_vec(), device);
+        let f = crate::sim::ForceTensors::new(&theta, &model.params.constants);
+        let mut state = HerdState::from_rows(&init, device);
+        let mut plans = Vec::with_capacity(steps);
+        for s in 0..steps {
+            let plan = plan_step(
+                &mut model,
+                clip,
+                &guidance,
+                &stencil,
+                beta,
+                &state,
+                start + s,
+                &mut rng,
+            )?;
+            state = model.step(&f, &state, &plan.0)?;
+            plans.push(plan);
+        }
+        Ok(LossScenario {
+            model,
+            init,
+            plans,
+            var_weight,
+        })
+    }
+
+    fn loss(&self, theta: &[f64; N_PARAMS], device: &Device) -> Result<(Tensor<1>, Tensor<1>)> {
+        let t = theta_tensor(theta, device);
+        let t = if device.is_autodiff() {
+            t.require_grad()
+        } else {
+            t
+        };
+        let f = crate::sim::ForceTensors::new(&t, &self.model.params.constants);
+        let state = HerdState::from_rows(&self.init, device);
+        let (_, loss, _, _) =
+            super::fit::window_loss(&self.model, &f, state, &self.plans, self.var_weight)?;
+        Ok((loss, t))
+    }
+
+    /// Gradient check of the loss: autodiff vs 4-point central differences.
+    pub fn check(
+        &self,
+        precision: Precision,
+        h: f64,
+        mut progress: impl FnMut(),
+    ) -> Result<GradReport> {
+        let device = cpu_device(precision)?;
+        let theta = self.model.params.to_vec();
+        let ad = device.clone().autodiff();
+        let (loss, t) = self.loss(&theta, &ad)?;
+        let value = read_vec(&loss.clone().detach())?[0];
+        let grads = loss.backward();
+        let g = read_vec(
+            &t.grad(&grads)
+                .ok_or_else(|| Error::Internal("no gradient reached the parameters".into()))?,
+        )?;
+        progress();
+        let mut parameters = Vec::with_capacity(N_PARAMS);
+        for (p, name) in param_names().into_iter().enumerate() {
+            let at = |off: f64| -> Result<f64> {
+                let mut th = theta;
+                th[p] += off;
+                Ok(read_vec(&self.loss(&th, &device)?.0)?[0])
+            };
+            let fd = (8.0 * (at(h)? - at(-h)?) - (at(2.0 * h)? - at(-2.0 * h)?)) / (12.0 * h);
+            parameters.push(GradRow {
+                name,
+                autodiff: g[p],
+                finite_difference: fd,
+                rel_err: rel_err(g[p], fd),
+            });
+            progress();
+        }
+        let max_rel_err = parameters.iter().map(|r| r.rel_err).fold(0.0, f64::max);
+        Ok(GradReport {
+            steps: self.plans.len(),
+            agents: self.init.len(),
+            precision,
+            objective: value,
+            fd_step: h,
+            parameters,
+            max_rel_err,
+        })
+    }
+}

@@ -1,0 +1,851 @@
+//! Fitting the 12 force parameters to clip fields by gradient descent through unrolled steps
+//! (paper §6, DESIGN §5), then the speed model from the clip (§6.2).
+//!
+//! An epoch starts a herd from the fields of the first frame of the range and walks through the
+//! frames in windows of W steps. Each step is first *planned* without gradient — perception and
+//! roles (leaders follow the clip's velocity field propagated into empty cells), OU noise, each
+//! agent's cell and the target direction U of every cell (eq. 10–11) — then *evaluated* as tensor
+//! ops; the window's mean loss E_mean + λ_var E_var is back-propagated through its W steps to θ,
+//! the optimiser updates θ, and the state is detached. Between windows agents that left the grid
+//! are removed and, when the density error exceeds a threshold or the clip has more agents than
+//! the simulation, the population is rebalanced from the fields.
+
+use super::loss::{step_loss, StepTarget};
+use super::target::{target_directions, Stencil};
+use crate::backend::{cpu_device, Precision};
+use crate::error::{Error, Result};
+use crate::fields::ClipFields;
+use crate::io::{write_atomic, AgentRow};
+use crate::params::{param_names, Params, N_PARAMS};
+use crate::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model, StepDecisions, World};
+use crate::synth::obstacle_map;
+use burn::tensor::{Device, Tensor};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// The optimiser.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// Adam (β₁ 0.9, β₂ 0.999, ε 1e-8).
+    Adam,
+    /// The paper's normalised gradient step θ ← θ − lr · g/‖g‖.
+    Normalized,
+}
+
+/// Settings of a fit (the `fit` command's flags).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitConfig {
+    /// Unrolled steps per gradient update (1 = the paper's greedy per-frame scheme).
+    pub window: usize,
+    pub epochs: usize,
+    /// β of eq. 11.
+    pub beta: f64,
+    /// λ_var: weight of E_var.
+    pub var_weight: f64,
+    pub lr: f64,
+    pub optimizer: Optimizer,
+    /// Frames of the clip used (start..end, end exclusive).
+    pub frames: Range<usize>,
+    pub seed: u64,
+    /// Density error Σ|ρ' − ρ| / Σρ above which the population is rebalanced.
+    pub density_threshold: f64,
+    /// Size of the random step taken when the gradient vanishes.
+    pub zero_grad_step: f64,
+    pub precision: Precision,
+    /// The paper's split (§6.1): alignment parameters follow ∇E_var, the others ∇E_mean.
+    /// Off: every parameter follows ∇(E_mean + λ E_var).
+    pub split_gradients: bool,
+}
+
+/// Indices of the alignment parameters in the θ vector.
+pub const ALIGNMENT: [usize; 3] = [6, 7, 8];
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            window: 4,
+            epochs: 8,
+            beta: 0.7,
+            var_weight: 1.0,
+            lr: 0.02,
+            optimizer: Optimizer::Adam,
+            frames: 0..0,
+            seed: 0,
+            density_threshold: 0.3,
+            zero_grad_step: 0.02,
+            precision: Precision::F32,
+            split_gradients: true,
+        }
+    }
+}
+
+impl FitConfig {
+    /// Checks the settings against a clip.
+    pub fn check(&self, clip: &ClipFields) -> Result<()> {
+        let f = clip.frames();
+        if self.frames.start >= self.frames.end || self.frames.end > f {
+            return Err(Error::invalid(format!(
+                "--frames {}..{} is out of range: the clip has frames 0..{f}",
+                self.frames.start, self.frames.end
+            )));
+        }
+        if self.frames.end - self.frames.start < 2 {
+            return Err(Error::invalid("--frames must span at least 2 frames"));
+        }
+        if self.window == 0 || self.epochs == 0 {
+            return Err(Error::invalid("--window and --epochs must be ≥ 1"));
+        }
+        for (name, v, lo, hi) in [
+            ("--beta", self.beta, 0.0, 1.0),
+            ("--var-weight", self.var_weight, 0.0, f64::INFINITY),
+            ("--lr", self.lr, 1e-12, 1.0),
+        ] {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err(Error::invalid(format!("{name} {v} is out of range")));
+            }
+        }
+        let total: f64 = (self.frames.start..self.frames.end)
+            .map(|k| clip.count(k))
+            .sum();
+        if total < 1.0 {
+            return Err(Error::invalid(
+                "the clip's density is zero everywhere in the frames used: nothing to fit",
+            ));
+        }
+        if clip.count(self.frames.start) < 1.0 {
+            return Err(Error::invalid(format!(
+                "frame {} of the clip holds no agents: start the fit where the herd is",
+                self.frames.start
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// One row of the training log.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LogRow {
+    pub epoch: usize,
+    /// Frame reached at the end of the window.
+    pub frame: usize,
+    pub e_mean: f64,
+    pub e_var: f64,
+    pub density_error: f64,
+    pub velocity_error: f64,
+    pub agents: usize,
+    pub theta: [f64; N_PARAMS],
+}
+
+/// The log as CSV.
+pub fn log_csv(rows: &[LogRow]) -> String {
+    let mut s = String::from("epoch,frame,e_mean,e_var,density_error,velocity_error,agents");
+    for n in param_names() {
+        s.push(',');
+        s.push_str(&n);
+    }
+    s.push('\n');
+    for r in rows {
+        s.push_str(&format!(
+            "{},{},{},{},{},{},{}",
+            r.epoch, r.frame, r.e_mean, r.e_var, r.density_error, r.velocity_error, r.agents
+        ));
+        for v in r.theta {
+            s.push_str(&format!(",{v}"));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// The clip's velocity field of frame `f`, propagated into empty accessible cells (each empty cell
+/// takes the mean of its already-filled 4-neighbours, breadth first), as leader guidance.
+pub fn guidance_field(clip: &ClipFields, f: usize) -> Guidance {
+    let g = clip.grid();
+    let (nx, ny) = (g.nx, g.ny);
+    let mut dirs = vec![[0.0f64; 2]; nx * ny];
+    let mut filled = vec![false; nx * ny];
+    let mut frontier = Vec::new();
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let c = iy * nx + ix;
+            let v = [
+                clip.velocity[[f, iy, ix, 0]] as f64,
+                clip.velocity[[f, iy, ix, 1]] as f64,
+            ];
+            if clip.density[[f, iy, ix]] > 0.0 && (v[0] != 0.0 || v[1] != 0.0) {
+                dirs[c] = v;
+                filled[c] = true;
+                frontier.push(c);
+            }
+        }
+    }
+    while !frontier.is_empty() {
+        let mut next = Vec::new();
+        let mut acc: std::collections::BTreeMap<usize, ([f64; 2], u32)> = Default::default();
+        for &c in &frontier {
+            let (ix, iy) = ((c % nx) as i64, (c / nx) as i64);
+            for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                let (jx, jy) = (ix + dx, iy + dy);
+                if jx < 0 || jy < 0 || jx >= nx as i64 || jy >= ny as i64 {
+                    continue;
+                }
+                let j = jy as usize * nx + jx as usize;
+                if filled[j] || clip.obstacles[[jy as usize, jx as usize]] != 0 {
+                    continue;
+                }
+                let e = acc.entry(j).or_insert(([0.0; 2], 0));
+                e.0[0] += dirs[c][0];
+                e.0[1] += dirs[c][1];
+                e.1 += 1;
+            }
+        }
+        for (j, (v, k)) in acc {
+            dirs[j] = [v[0] / k as f64, v[1] / k as f64];
+            filled[j] = true;
+            next.push(j);
+        }
+        frontier = next;
+    }
+    Guidance::Field {
+        origin: g.origin,
+        cell_size: g.cell_size,
+        nx,
+        ny,
+        dirs,
+    }
+}
+
+fn cell_counts(clip: &ClipFields, rows: &[AgentRow]) -> (Vec<f64>, Vec<[f64; 2]>) {
+    let g = clip.grid();
+    let mut n = vec![0.0; g.nx * g.ny];
+    let mut v = vec![[0.0; 2]; g.nx * g.ny];
+    for r in rows {
+        if let Some((ix, iy)) = g.cell_of([r.x, r.y]) {
+            let c = iy * g.nx + ix;
+            n[c] += 1.0;
+            v[c][0] += r.vx;
+            v[c][1] += r.vy;
+        }
+    }
+    (n, v)
+}
+
+/// Density and velocity errors of a herd against frame `f` of the clip, by cell counts:
+/// density Σ|n'_c − n_c| / Σ n_c (n = ρ·area), velocity Σ n_c ‖V'_c − V_c‖ / Σ n_c ‖V_c‖ over the
+/// clip's occupied cells (V'_c = 0 where the simulation has nobody).
+pub fn field_errors(clip: &ClipFields, f: usize, rows: &[AgentRow]) -> (f64, f64) {
+    let g = clip.grid();
+    let a = g.cell_area();
+    let (n_sim, v_sum) = cell_counts(clip, rows);
+    let (mut dn, mut tn, mut dv, mut tv) = (0.0, 0.0, 0.0, 0.0);
+    for iy in 0..g.ny {
+        for ix in 0..g.nx {
+            let c = iy * g.nx + ix;
+            let n = clip.density[[f, iy, ix]] as f64 * a;
+            dn += (n_sim[c] - n).abs();
+            tn += n;
+            if n > 0.0 {
+                let v = [
+                    clip.velocity[[f, iy, ix, 0]] as f64,
+                    clip.velocity[[f, iy, ix, 1]] as f64,
+                ];
+                let vs = if n_sim[c] > 0.0 {
+                    [v_sum[c][0] / n_sim[c], v_sum[c][1] / n_sim[c]]
+                } else {
+                    [0.0, 0.0]
+                };
+                dv += n * ((vs[0] - v[0]).powi(2) + (vs[1] - v[1]).powi(2)).sqrt();
+                tv += n * (v[0] * v[0] + v[1] * v[1]).sqrt();
+            }
+        }
+    }
+    (
+        if tn > 0.0 { dn / tn } else { 0.0 },
+        if tv > 0.0 { dv / tv } else { 0.0 },
+    )
+}
+
+fn new_agent(
+    clip: &ClipFields,
+    f: usize,
+    ix: usize,
+    iy: usize,
+    id: u64,
+    speed: f64,
+    rng: &mut impl Rng,
+) -> AgentRow {
+    let g = clip.grid();
+    let c = g.centre(ix, iy);
+    let h = g.cell_size / 2.0;
+    let x = c[0] + (rng.gen::<f64>() * 2.0 - 1.0) * h * 0.999;
+    let y = c[1] + (rng.gen::<f64>() * 2.0 - 1.0) * h * 0.999;
+    let v = [
+        clip.velocity[[f, iy, ix, 0]] as f64,
+        clip.velocity[[f, iy, ix, 1]] as f64,
+    ];
+    let l = (v[0] * v[0] + v[1] * v[1]).sqrt();
+    let d = if l > 1e-9 {
+        [v[0] / l, v[1] / l]
+    } else {
+        let a = rng.gen::<f64>() * std::f64::consts::TAU;
+        [a.cos(), a.sin()]
+    };
+    AgentRow {
+        id,
+        x,
+        y,
+        vx: speed * d[0],
+        vy: speed * d[1],
+    }
+}
+
+/// The initial herd of frame `f`: round(Σ ρ·area) agents, allocated to cells in proportion to
+/// their expected counts (integer parts, then the largest remainders), uniform inside the cell,
+/// heading along the cell's mean velocity (random where it is zero), speed from the speed model.
+pub fn init_herd(
+    clip: &ClipFields,
+    f: usize,
+    speed: &crate::params::SpeedModel,
+    rng: &mut impl Rng,
+) -> Vec<AgentRow> {
+    let g = clip.grid();
+    let a = g.cell_area();
+    let mut want: Vec<(usize, usize, f64)> = Vec::new();
+    for iy in 0..g.ny {
+        for ix in 0..g.nx {
+            let n = clip.density[[f, iy, ix]] as f64 * a;
+            if n > 0.0 && clip.obstacles[[iy, ix]] == 0 {
+                want.push((ix, iy, n));
+            }
+        }
+    }
+    let total = want.iter().map(|w| w.2).sum::<f64>().round() as usize;
+    let mut counts: Vec<usize> = want.iter().map(|w| w.2.floor() as usize).collect();
+    let mut rest: Vec<(f64, usize)> = want
+        .iter()
+        .enumerate()
+        .map(|(k, w)| (w.2 - w.2.floor(), k))
+        .collect();
+    rest.sort_by(|p, q| q.0.total_cmp(&p.0).then(p.1.cmp(&q.1)));
+    let have: usize = counts.iter().sum();
+    for &(_, k) in rest.iter().take(total.saturating_sub(have)) {
+        counts[k] += 1;
+    }
+    let mut rows = Vec::with_capacity(total);
+    for (k, &(ix, iy, _)) in want.iter().enumerate() {
+        for _ in 0..counts[k] {
+            let z: f64 = rng.sample(StandardNormal);
+            let s = (speed.mean + speed.std * z).clamp(0.0, speed.max);
+            let id = rows.len() as u64;
+            rows.push(new_agent(clip, f, ix, iy, id, s, rng));
+        }
+    }
+    rows
+}
+
+/// Between windows: drop agents outside the grid; when the density error exceeds `threshold`,
+/// move agents from the most over-filled cells to the most under-filled ones; and add agents where
+/// the clip holds more than the simulation (entries), seeded from the fields.
+pub fn population_control(
+    clip: &ClipFields,
+    f: usize,
+    mut rows: Vec<AgentRow>,
+    threshold: f64,
+    speed: &crate::params::SpeedModel,
+    next_id: &mut u64,
+    rng: &mut impl Rng,
+) -> Vec<AgentRow> {
+    let g = clip.grid();
+    rows.retain(|r| g.cell_of([r.x, r.y]).is_some());
+    let a = g.cell_area();
+    let target: Vec<f64> = (0..g.ny * g.nx)
+        .map(|c| clip.density[[f, c / g.nx, c % g.nx]] as f64 * a)
+        .collect();
+    let total = target.iter().sum::<f64>().round() as usize;
+    let (err, _) = field_errors(clip, f, &rows);
+    let rebalance = err > threshold;
+    let (mut n_sim, _) = cell_counts(clip, &rows);
+    if rebalance {
+        // Remove from surplus cells (largest surplus first) while the surplus is ≥ 1.
+        while let Some((c, s)) = (0..n_sim.len())
+            .map(|c| (c, n_sim[c] - target[c]))
+            .max_by(|p, q| p.1.total_cmp(&q.1).then(q.0.cmp(&p.0)))
+        {
+            if s < 1.0 || rows.len() <= total {
+                break;
+            }
+            let members: Vec<usize> = rows
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| g.cell_of([r.x, r.y]).map(|(ix, iy)| iy * g.nx + ix) == Some(c))
+                .map(|(i, _)| i)
+                .collect();
+            let k = members[rng.gen_range(0..members.len())];
+            rows.remove(k);
+            n_sim[c] -= 1.0;
+        }
+    }
+    // Add to deficit cells (largest first) while agents are missing overall.
+    while rows.len() < total {
+        let Some((c, d)) = (0..n_sim.len())
+            .filter(|&c| clip.obstacles[[c / g.nx, c % g.nx]] == 0)
+            .map(|c| (c, target[c] - n_sim[c]))
+            .max_by(|p, q| p.1.total_cmp(&q.1).then(q.0.cmp(&p.0)))
+        else {
+            break;
+        };
+        if d <= 0.0 {
+            break;
+        }
+        let z: f64 = rng.sample(StandardNormal);
+        let s = (speed.mean + speed.std * z).clamp(0.0, speed.max);
+        rows.push(new_agent(clip, f, c % g.nx, c / g.nx, *next_id, s, rng));
+        *next_id += 1;
+        n_sim[c] += 1.0;
+    }
+    rows
+}
+
+/// Plans one step without gradient: leader guidance from frame `f`, perception, roles and noise,
+/// each agent's cell and the target directions toward frame `f + 1`.
+#[allow(clippy::too_many_arguments)]
+pub fn plan_step(
+    model: &mut Model,
+    clip: &ClipFields,
+    guidance: &[Guidance],
+    stencil: &Stencil,
+    beta: f64,
+    state: &HerdState,
+    f: usize,
+    rng: &mut impl Rng,
+) -> Result<(StepDecisions, StepTarget)> {
+    let snap = state.snapshot()?;
+    model.world.guidance = guidance[f].clone();
+    let dec = model.decide(&snap, rng);
+    let g = clip.grid();
+    let cell = snap
+        .pos
+        .iter()
+        .map(|p| g.cell_of(*p).map_or(-1, |(ix, iy)| (iy * g.nx + ix) as i64))
+        .collect();
+    let u = target_directions(clip, stencil, beta, &state.x, &state.y, &snap.pos, f + 1)?;
+    let s = clip
+        .dir_variance
+        .index_axis(ndarray::Axis(0), f + 1)
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
+    let follower = dec.leader.iter().map(|&l| !l).collect();
+    Ok((
+        dec,
+        StepTarget {
+            cell,
+            follower,
+            u,
+            s,
+        },
+    ))
+}
+
+/// Loss of one window: mean over its steps of E_mean + λ E_var. Returns the end state, the loss
+/// tensor and the mean E_mean and E_var values.
+pub fn window_loss(
+    model: &Model,
+    f: &ForceTensors,
+    mut state: HerdState,
+    plans: &[(StepDecisions, StepTarget)],
+    var_weight: f64,
+) -> Result<(HerdState, Tensor<1>, f64, f64)> {
+    let mut total: Option<Tensor<1>> = None;
+    let (mut em, mut ev) = (0.0, 0.0);
+    for (dec, tgt) in plans {
+        state = model.step(f, &state, dec)?;
+        let l = step_loss(&state.hx, &state.hy, tgt);
+        em += crate::sim::read_vec(&l.e_mean.clone().detach())?[0];
+        ev += crate::sim::read_vec(&l.e_var.clone().detach())?[0];
+        let step = l.e_mean + l.e_var.mul_scalar(var_weight);
+        total = Some(match total {
+            None => step,
+            Some(t) => t + step,
+        });
+    }
+    let k = plans.len().max(1) as f64;
+    let total = total
+        .ok_or_else(|| Error::invalid("empty window"))?
+        .div_scalar(k);
+    Ok((state, total, em / k, ev / k))
+}
+
+/// Adam state (or nothing for the normalised step).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OptState {
+    pub m: [f64; N_PARAMS],
+    pub v: [f64; N_PARAMS],
+    pub t: u64,
+}
+
+fn update(
+    theta: &mut [f64; N_PARAMS],
+    g: &[f64; N_PARAMS],
+    opt: &mut OptState,
+    cfg: &FitConfig,
+    rng: &mut impl Rng,
+) {
+    let norm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if norm.is_nan() || norm <= 1e-12 || !norm.is_finite() {
+        // Flat region (§6.1): a fixed-size step in a random direction.
+        let d: Vec<f64> = (0..N_PARAMS).map(|_| rng.sample(StandardNormal)).collect();
+        let l = d.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
+        for (t, x) in theta.iter_mut().zip(d) {
+            *t += cfg.zero_grad_step * x / l;
+        }
+    } else {
+        match cfg.optimizer {
+            Optimizer::Normalized => {
+                for (t, x) in theta.iter_mut().zip(g) {
+                    *t -= cfg.lr * x / norm;
+                }
+            }
+            Optimizer::Adam => {
+                let (b1, b2, eps): (f64, f64, f64) = (0.9, 0.999, 1e-8);
+                opt.t += 1;
+                let (c1, c2) = (1.0 - b1.powi(opt.t as i32), 1.0 - b2.powi(opt.t as i32));
+                for p in 0..N_PARAMS {
+                    opt.m[p] = b1 * opt.m[p] + (1.0 - b1) * g[p];
+                    opt.v[p] = b2 * opt.v[p] + (1.0 - b2) * g[p] * g[p];
+                    theta[p] -= cfg.lr * (opt.m[p] / c1) / ((opt.v[p] / c2).sqrt() + eps);
+                }
+            }
+        }
+    }
+    Params::clamp_vec(theta);
+}
+
+/// Checkpoint of a fit, written after every epoch.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Checkpoint {
+    pub schema: String,
+    pub epochs_done: usize,
+    pub theta: [f64; N_PARAMS],
+    pub opt: OptState,
+    pub log: Vec<LogRow>,
+    /// The settings and start the run was made with (a resume must match).
+    pub config: FitConfig,
+    pub start: [f64; N_PARAMS],
+}
+
+const CHECKPOINT_SCHEMA: &str = "herdfit.checkpoint/1";
+
+/// Result of a fit.
+#[derive(Clone, Debug)]
+pub struct FitResult {
+    pub params: Params,
+    pub start: [f64; N_PARAMS],
+    pub log: Vec<LogRow>,
+}
+
+/// Where checkpoints go.
+pub struct CheckpointDir {
+    pub dir: PathBuf,
+    pub resume: bool,
+}
+
+impl CheckpointDir {
+    fn file(&self) -> PathBuf {
+        self.dir.join("checkpoint.json")
+    }
+}
+
+fn epoch_rng(seed: u64, epoch: usize) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(seed ^ (epoch as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
+/// Runs the fit. `progress(epoch, frame, e_mean, ms_per_step)` is called after every window.
+pub fn fit(
+    clip: &ClipFields,
+    init: &Params,
+    cfg: &FitConfig,
+    ckpt: Option<&CheckpointDir>,
+    progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<FitResult> {
+    fit_inner(clip, init, cfg, ckpt, true, progress)
+}
+
+/// The loss of a parameter set on a clip without learning: one epoch of the fit's schedule
+/// (epoch-0 herd and noise) with no updates; returns the mean E_mean and E_var over its windows.
+/// Comparing two parameter sets this way uses the same herd, noise and population control seed.
+pub fn loss_of(clip: &ClipFields, params: &Params, cfg: &FitConfig) -> Result<(f64, f64)> {
+    let one = FitConfig {
+        epochs: 1,
+        ..cfg.clone()
+    };
+    let r = fit_inner(clip, params, &one, None, false, |_, _, _, _| {})?;
+    let n = r.log.len().max(1) as f64;
+    Ok((
+        r.log.iter().map(|x| x.e_mean).sum::<f64>() / n,
+        r.log.iter().map(|x| x.e_var).sum::<f64>() / n,
+    ))
+}
+
+fn fit_inner(
+    clip: &ClipFields,
+    init: &Params,
+    cfg: &FitConfig,
+    ckpt: Option<&CheckpointDir>,
+    learn: bool,
+    mut progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<FitResult> {
+    cfg.check(clip)?;
+    init.validate()?;
+    let device = cpu_device(cfg.precision)?;
+    let ad: Device = device.autodiff();
+    let mut params = init.clone();
+    // Stage 2 (§6.2) first: the forces are learnt with the clip's own speeds.
+    params.speed = clip.speed_model(&init.speed);
+    let g = clip.grid();
+    let mut model = Model {
+        params: params.clone(),
+        world: World {
+            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
+            guidance: Guidance::None,
+        },
+        dt: 1.0 / clip.meta.fps,
+    };
+    let guidance: Vec<Guidance> = (0..clip.frames())
+        .map(|f| guidance_field(clip, f))
+        .collect();
+    let stencil = Stencil::new(clip);
+    let start = init.to_vec();
+    let (mut theta, mut opt, mut log, first_epoch) = match ckpt {
+        Some(c) if c.resume && c.file().exists() => {
+            let text = std::fs::read_to_string(c.file())
+                .map_err(|e| Error::file(c.file(), format!("cannot read: {e}")))?;
+            let k: Checkpoint = serde_json::from_str(&text).map_err(|e| {
+                Error::file(c.file(), format!("not a {CHECKPOINT_SCHEMA} file: {e}"))
+            })?;
+            if k.config != *cfg || k.start != start {
+                return Err(Error::file(
+                    c.file(),
+                    "was written by a fit with other settings or another start; resume with the same flags",
+                ));
+            }
+            (k.theta, k.opt, k.log, k.epochs_done)
+        }
+        _ => (
+            start,
+            OptState {
+                m: [0.0; N_PARAMS],
+                v: [0.0; N_PARAMS],
+                t: 0,
+            },
+            Vec::new(),
+            0,
+        ),
+    };
+    let (a, b) = (cfg.frames.start, cfg.frames.end);
+    for epoch in first_epoch..cfg.epochs {
+        let mut rng = epoch_rng(cfg.seed, epoch);
+        let mut rows = init_herd(clip, a, &model.params.speed, &mut rng);
+        let mut next_id = rows.len() as u64;
+        let mut f = a;
+        while f + 1 < b {
+            let w = cfg.window.min(b - 1 - f);
+            let t0 = std::time::Instant::now();
+            if rows.is_empty() {
+                rows = population_control(
+                    clip,
+                    f,
+                    rows,
+                    0.0,
+                    &model.params.speed,
+                    &mut next_id,
+                    &mut rng,
+                );
+                if rows.is_empty() {
+                    f += w;
+                    continue;
+                }
+            }
+            let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+            // Pass 1: plan each step on the live state and evaluate E_mean (+ λ E_var).
+            let th = theta_tensor(&theta, &ad).require_grad();
+            let forces = ForceTensors::new(&th, &model.params.constants);
+            let mut state = HerdState::from_rows(&rows, &ad);
+            let mut plans = Vec::with_capacity(w);
+            let mut total: Option<Tensor<1>> = None;
+            let (mut em, mut ev) = (0.0, 0.0);
+            let mean_weight = if cfg.split_gradients {
+                0.0
+            } else {
+                cfg.var_weight
+            };
+            for s in 0..w {
+                let plan = plan_step(
+                    &mut model,
+                    clip,
+                    &guidance,
+                    &stencil,
+                    cfg.beta,
+                    &state,
+                    f + s,
+                    &mut rng,
+                )?;
+                let (next, loss, e_m, e_v) = window_loss(
+                    &model,
+                    &forces,
+                    state,
+                    std::slice::from_ref(&plan),
+                    mean_weight,
+                )?;
+                plans.push(plan);
+                state = next;
+                em += e_m / w as f64;
+                ev += e_v / w as f64;
+                total = Some(match total {
+                    None => loss,
+                    Some(t) => t + loss,
+                });
+            }
+            let loss = total
+                .ok_or_else(|| Error::invalid("empty window"))?
+                .div_scalar(w as f64);
+            let grad_of = |loss: Tensor<1>, th: &Tensor<1>| -> Result<[f64; N_PARAMS]> {
+                let grads = loss.backward();
+                let gv = th
+                    .grad(&grads)
+                    .map(|t| crate::sim::read_vec(&t))
+                    .transpose()?
+                    .unwrap_or_else(|| vec![0.0; N_PARAMS]);
+                let mut g = [0.0; N_PARAMS];
+                g.copy_from_slice(&gv);
+                Ok(g)
+            };
+            let mut garr = grad_of(loss, &th)?;
+            if cfg.split_gradients {
+                // Pass 2 (§6.1): the alignment parameters learn from E_var alone, on the same
+                // (replayed) decisions and targets.
+                let th2 = theta_tensor(&theta, &ad).require_grad();
+                let forces2 = ForceTensors::new(&th2, &model.params.constants);
+                let mut s2 = HerdState::from_rows(&rows, &ad);
+                let mut total2: Option<Tensor<1>> = None;
+                for (dec, tgt) in &plans {
+                    s2 = model.step(&forces2, &s2, dec)?;
+                    let l = step_loss(&s2.hx, &s2.hy, tgt).e_var;
+                    total2 = Some(match total2 {
+                        None => l,
+                        Some(t) => t + l,
+                    });
+                }
+                let loss2 = total2
+                    .ok_or_else(|| Error::invalid("empty window"))?
+                    .div_scalar(w as f64);
+                let gvar = grad_of(loss2, &th2)?;
+                for p in ALIGNMENT {
+                    garr[p] = cfg.var_weight * gvar[p];
+                }
+            }
+            if learn {
+                update(&mut theta, &garr, &mut opt, cfg, &mut rng);
+            }
+            model.params = model.params.with_vec(&theta);
+            rows = state.detach().rows(&ids)?;
+            f += w;
+            rows = population_control(
+                clip,
+                f,
+                rows,
+                cfg.density_threshold,
+                &model.params.speed,
+                &mut next_id,
+                &mut rng,
+            );
+            let (de, ve) = field_errors(clip, f, &rows);
+            log.push(LogRow {
+                epoch,
+                frame: f,
+                e_mean: em,
+                e_var: ev,
+                density_error: de,
+                velocity_error: ve,
+                agents: rows.len(),
+                theta,
+            });
+            progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
+        }
+        if let Some(c) = ckpt {
+            let k = Checkpoint {
+                schema: CHECKPOINT_SCHEMA.into(),
+                epochs_done: epoch + 1,
+                theta,
+                opt: opt.clone(),
+                log: log.clone(),
+                config: cfg.clone(),
+                start,
+            };
+            let text = serde_json::to_string(&k)
+                .map_err(|e| Error::Internal(format!("serialising checkpoint: {e}")))?;
+            write_atomic(&c.file(), text.as_bytes())?;
+        }
+    }
+    let mut out = params.with_vec(&theta);
+    out.speed = params.speed.clone();
+    Ok(FitResult {
+        params: out,
+        start,
+        log,
+    })
+}
+
+/// Simulates the frames `range` of the clip from its first frame's fields with `params`
+/// (leaders following the clip's velocity field, no population control) and returns the mean
+/// density and velocity errors over the frames after the first.
+pub fn evaluate(
+    clip: &ClipFields,
+    params: &Params,
+    range: Range<usize>,
+    seed: u64,
+    precision: Precision,
+) -> Result<(f64, f64)> {
+    let device = cpu_device(precision)?;
+    let g = clip.grid();
+    let mut model = Model {
+        params: params.clone(),
+        world: World {
+            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
+            guidance: Guidance::None,
+        },
+        dt: 1.0 / clip.meta.fps,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let rows = init_herd(clip, range.start, &params.speed, &mut rng);
+    if rows.is_empty() {
+        return Err(Error::invalid("the first frame holds no agents"));
+    }
+    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+    let theta = theta_tensor(&params.to_vec(), &device);
+    let f = ForceTensors::new(&theta, &params.constants);
+    let mut state = HerdState::from_rows(&rows, &device);
+    let (mut de, mut ve, mut n): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    for fr in range.start..range.end.saturating_sub(1) {
+        let snap = state.snapshot()?;
+        model.world.guidance = guidance_field(clip, fr);
+        let dec = model.decide(&snap, &mut rng);
+        state = model.step(&f, &state, &dec)?;
+        let (d, v) = field_errors(clip, fr + 1, &state.rows(&ids)?);
+        de += d;
+        ve += v;
+        n += 1.0;
+    }
+    Ok((de / n.max(1.0), ve / n.max(1.0)))
+}
+
+/// Writes the training log CSV atomically.
+pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
+    write_atomic(path, log_csv(rows).as_bytes())
+}

@@ -1,0 +1,116 @@
+//! The fit's losses over followers (paper §6.1): E_mean (eq. 7) and E_var (eq. 8).
+//!
+//! Normalisation (ours; the paper sums): both are divided by the number of followers that take
+//! part, so they do not grow with the herd. E_mean ∈ [0, 2] is the mean distance between a
+//! follower's unit direction and its cell's unit target N(U); E_var is the follower-weighted mean
+//! of |Var_cell − S_cell| over cells holding ≥ 2 followers (rad²). Norms and absolute values are
+//! smoothed, √(x² + 1e-12), so the gradient exists everywhere.
+
+use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
+use herdfit_kernels::P2;
+use serde::{Deserialize, Serialize};
+
+const SMOOTH: f64 = 1e-12;
+
+/// What a step's losses compare against, fixed without gradient when the step is planned (so it
+/// can be recorded and replayed like the perception).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepTarget {
+    /// Cell of each agent at the start of the step, −1 outside the grid.
+    pub cell: Vec<i64>,
+    /// Followers (leaders are excluded from the losses).
+    pub follower: Vec<bool>,
+    /// Unit target direction N(U) per cell (zero where U vanishes).
+    pub u: Vec<P2>,
+    /// The clip's direction variance S per cell (rad²) at the step's frame.
+    pub s: Vec<f64>,
+}
+
+/// The two loss values of a step (tensors `[1]`).
+pub struct StepLoss {
+    pub e_mean: Tensor<1>,
+    pub e_var: Tensor<1>,
+}
+
+fn floats(v: Vec<f64>, device: &Device) -> Tensor<1> {
+    let n = v.len();
+    Tensor::from_data(TensorData::new(v, [n]), device)
+}
+
+/// E_mean (eq. 7) and E_var (eq. 8) of the new unit directions `(hx, hy)` (`[n]`).
+pub fn step_loss(hx: &Tensor<1>, hy: &Tensor<1>, t: &StepTarget) -> StepLoss {
+    let device = hx.device();
+    let n = t.cell.len();
+    let cells = t.u.len();
+    // E_mean over followers in cells with a target.
+    let mut mean_mask = vec![0.0; n];
+    let mut ux = vec![0.0; n];
+    let mut uy = vec![0.0; n];
+    // E_var over followers in cells (target or not).
+    let mut var_mask = vec![0.0; n];
+    let mut cell_idx = vec![0i64; n];
+    let mut count = vec![0.0f64; cells];
+    for i in 0..n {
+        if !t.follower[i] || t.cell[i] < 0 {
+            continue;
+        }
+        let c = t.cell[i] as usize;
+        var_mask[i] = 1.0;
+        cell_idx[i] = c as i64;
+        count[c] += 1.0;
+        let u = t.u[c];
+        if u != [0.0, 0.0] {
+            mean_mask[i] = 1.0;
+            ux[i] = u[0];
+            uy[i] = u[1];
+        }
+    }
+    let n_mean: f64 = mean_mask.iter().sum::<f64>().max(1.0);
+    let n_var: f64 = var_mask.iter().sum::<f64>().max(1.0);
+    let mm = floats(mean_mask, &device);
+    let dist = ((hx.clone() - floats(ux, &device)).square()
+        + (hy.clone() - floats(uy, &device)).square())
+    .add_scalar(SMOOTH)
+    .sqrt();
+    let e_mean = (dist * mm).sum().div_scalar(n_mean);
+    // Cell mean directions Ṽ (sum of member directions), gathered back to the members.
+    let vm = floats(var_mask, &device);
+    let idx = Tensor::<1, Int>::from_data(TensorData::new(cell_idx, [n]), &device);
+    let zeros = Tensor::<1>::zeros([cells], &device);
+    let mx = zeros
+        .clone()
+        .scatter(
+            0,
+            idx.clone(),
+            hx.clone() * vm.clone(),
+            IndexingUpdateOp::Add,
+        )
+        .gather(0, idx.clone());
+    let my = zeros
+        .clone()
+        .scatter(
+            0,
+            idx.clone(),
+            hy.clone() * vm.clone(),
+            IndexingUpdateOp::Add,
+        )
+        .gather(0, idx.clone());
+    let cross = hx.clone() * my.clone() - hy.clone() * mx.clone();
+    let dot = hx.clone() * mx + hy.clone() * my;
+    let ang2 = cross.atan2(dot.add_scalar(1e-9)).square() * vm;
+    let sum_c = zeros.scatter(0, idx, ang2, IndexingUpdateOp::Add);
+    let (mut weight, mut inv) = (vec![0.0; cells], vec![0.0; cells]);
+    for c in 0..cells {
+        if count[c] >= 2.0 {
+            weight[c] = count[c] / n_var;
+            inv[c] = 1.0 / count[c];
+        }
+    }
+    let var_c = sum_c * floats(inv, &device);
+    let dev_c = (var_c - floats(t.s.clone(), &device))
+        .square()
+        .add_scalar(SMOOTH)
+        .sqrt();
+    let e_var = (dev_c * floats(weight, &device)).sum();
+    StepLoss { e_mean, e_var }
+}

@@ -1,0 +1,394 @@
+//! The fit: loss terms and the target field on hand-made cases, a short fit that reduces the loss,
+//! kill-and-resume identity, the loss gradient check, and bad input. Runs in f64.
+
+use herdfit::backend::{cpu_device, Precision};
+use herdfit::fields::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
+use herdfit::params::Params;
+use herdfit::sim::read_vec;
+use herdfit::train::loss::{step_loss, StepTarget};
+use herdfit::train::target::{splat_density, target_field, Stencil};
+use ndarray::{Array2, Array3, Array4};
+use std::f64::consts::PI;
+use std::path::Path;
+use std::process::Command;
+
+fn dev() -> burn::tensor::Device {
+    cpu_device(Precision::F64).unwrap()
+}
+
+fn t1(v: Vec<f64>) -> burn::tensor::Tensor<1> {
+    let n = v.len();
+    burn::tensor::Tensor::from_data(burn::tensor::TensorData::new(v, [n]), &dev())
+}
+
+fn val(t: burn::tensor::Tensor<1>) -> f64 {
+    read_vec(&t).unwrap()[0]
+}
+
+#[test]
+fn e_mean_on_hand_made_agents() {
+    // Three agents in cell 0 (target +x): a follower along +x, a follower along +y, a leader
+    // along −x (excluded). E_mean = (0 + √2) / 2.
+    let t = StepTarget {
+        cell: vec![0, 0, 0],
+        follower: vec![true, true, false],
+        u: vec![[1.0, 0.0], [0.0, 0.0]],
+        s: vec![0.0, 0.0],
+    };
+    let l = step_loss(&t1(vec![1.0, 0.0, -1.0]), &t1(vec![0.0, 1.0, 0.0]), &t);
+    assert!((val(l.e_mean) - 2f64.sqrt() / 2.0).abs() < 1e-6);
+    // An agent outside the grid or in a cell without target does not count.
+    let t = StepTarget {
+        cell: vec![0, -1, 1],
+        follower: vec![true; 3],
+        u: vec![[0.0, 1.0], [0.0, 0.0]],
+        s: vec![0.0, 0.0],
+    };
+    let l = step_loss(&t1(vec![1.0, 1.0, 1.0]), &t1(vec![0.0, 0.0, 0.0]), &t);
+    assert!((val(l.e_mean) - 2f64.sqrt()).abs() < 1e-6);
+}
+
+#[test]
+fn e_var_on_hand_made_agents() {
+    // Cell 0: two followers at ±30° around +x: variance (π/6)²; target S = 0.1.
+    // Cell 1: a single follower (no variance term) — it still counts in the normalisation.
+    let a = PI / 6.0;
+    let t = StepTarget {
+        cell: vec![0, 0, 1],
+        follower: vec![true; 3],
+        u: vec![[1.0, 0.0]; 2],
+        s: vec![0.1, 0.5],
+    };
+    let l = step_loss(
+        &t1(vec![a.cos(), a.cos(), 1.0]),
+        &t1(vec![a.sin(), -a.sin(), 0.0]),
+        &t,
+    );
+    let want = 2.0 * ((a * a) - 0.1f64).abs() / 3.0;
+    let got = val(l.e_var);
+    assert!((got - want).abs() < 1e-6, "{got} vs {want}");
+    // Aligned agents matching S = 0 give zero.
+    let t = StepTarget {
+        cell: vec![0, 0],
+        follower: vec![true; 2],
+        u: vec![[1.0, 0.0]],
+        s: vec![0.0],
+    };
+    let l = step_loss(&t1(vec![0.0, 0.0]), &t1(vec![1.0, 1.0]), &t);
+    assert!(val(l.e_var) < 1e-5);
+}
+
+fn line_clip(density: [f32; 5], vel: [f32; 2]) -> ClipFields {
+    let mut d = Array3::zeros((2, 1, 5));
+    let mut v = Array4::zeros((2, 1, 5, 2));
+    for f in 0..2 {
+        for x in 0..5 {
+            d[[f, 0, x]] = density[x];
+            v[[f, 0, x, 0]] = vel[0];
+            v[[f, 0, x, 1]] = vel[1];
+        }
+    }
+    ClipFields {
+        meta: ClipMeta {
+            schema: CLIP_SCHEMA.into(),
+            fps: 10.0,
+            cell_size: 1.0,
+            nx: 5,
+            ny: 1,
+            frames: 2,
+            origin: [0.0, 0.0],
+            body_length_px: None,
+            body_pixel_coverage: None,
+            speed: ClipSpeed {
+                mean: 1.0,
+                std: 0.1,
+                density_table: vec![],
+            },
+            provenance: serde_json::Value::Null,
+        },
+        density: d,
+        velocity: v,
+        dir_variance: Array3::zeros((2, 1, 5)),
+        obstacles: Array2::zeros((1, 5)),
+    }
+}
+
+#[test]
+fn target_field_points_up_the_missing_density() {
+    // The clip has density only in cell 4; the simulation has nobody: D = −∇(ρ' − ρ) = ∇ρ points
+    // towards cell 4 (+x) in cell 3. With β = 1, U = N(D) = +x there; with β = ½ and a clip
+    // velocity +y, U = ½(1, 0) + ½(0, 1).
+    let clip = line_clip([0.0, 0.0, 0.0, 0.0, 1.0], [0.0, 2.0]);
+    let st = Stencil::new(&clip);
+    let rho_sim = t1(vec![0.0; 5]);
+    let rho = t1(vec![0.0, 0.0, 0.0, 0.0, 1.0]);
+    let (vx, vy) = (t1(vec![0.0; 5]), t1(vec![2.0; 5]));
+    let (ux, uy) = target_field(&rho_sim, &rho, &vx, &vy, &st, 1.0);
+    let (ux, uy) = (read_vec(&ux).unwrap(), read_vec(&uy).unwrap());
+    assert!((ux[3] - 1.0).abs() < 1e-9 && uy[3].abs() < 1e-9);
+    // Cell 4 is a border cell: one-sided difference (ρ[4] − ρ[3]) also points +x.
+    assert!((ux[4] - 1.0).abs() < 1e-9);
+    // Far from the herd the density gradient vanishes: U is 0 there with β = 1.
+    assert!(ux[0].abs() < 1e-6);
+    let (ux, uy) = target_field(&rho_sim, &rho, &vx, &vy, &st, 0.5);
+    let (ux, uy) = (read_vec(&ux).unwrap(), read_vec(&uy).unwrap());
+    assert!((ux[3] - 0.5).abs() < 1e-9 && (uy[3] - 0.5).abs() < 1e-9);
+}
+
+#[test]
+fn splatting_is_bilinear_conserves_mass_and_is_differentiable() {
+    let g = Grid {
+        origin: [0.0, 0.0],
+        cell_size: 2.0,
+        nx: 4,
+        ny: 3,
+    };
+    // At a cell centre: all mass in that cell. Halfway between two centres: half and half.
+    let pos = vec![[3.0, 3.0], [4.0, 1.0]];
+    let rho = splat_density(&t1(vec![3.0, 4.0]), &t1(vec![3.0, 1.0]), &pos, &g);
+    let r = read_vec(&rho).unwrap();
+    assert!((r[4 + 1] - 0.25).abs() < 1e-12, "{r:?}");
+    assert!(
+        (r[1] - 0.125).abs() < 1e-12 && (r[2] - 0.125).abs() < 1e-12,
+        "{r:?}"
+    );
+    assert!((r.iter().sum::<f64>() * 4.0 - 2.0).abs() < 1e-12);
+    // d/dx of Σ w_c ρ_c against central differences.
+    let w: Vec<f64> = (0..12).map(|k| (k as f64 * 0.7).sin()).collect();
+    let j = |x: f64| -> f64 {
+        let p = vec![[x, 2.6]];
+        let r = read_vec(&splat_density(&t1(vec![x]), &t1(vec![2.6]), &p, &g)).unwrap();
+        r.iter().zip(&w).map(|(a, b)| a * b).sum()
+    };
+    let ad = dev().autodiff();
+    let x =
+        burn::tensor::Tensor::<1>::from_data(burn::tensor::TensorData::new(vec![3.3], [1]), &ad)
+            .require_grad();
+    let y =
+        burn::tensor::Tensor::<1>::from_data(burn::tensor::TensorData::new(vec![2.6], [1]), &ad);
+    let wt =
+        burn::tensor::Tensor::<1>::from_data(burn::tensor::TensorData::new(w.clone(), [12]), &ad);
+    let s = (splat_density(&x, &y, &[[3.3, 2.6]], &g) * wt).sum();
+    let gx = read_vec(&x.grad(&s.backward()).unwrap()).unwrap()[0];
+    let fd = (j(3.3 + 1e-6) - j(3.3 - 1e-6)) / 2e-6;
+    assert!((gx - fd).abs() < 1e-7, "{gx} vs {fd}");
+}
+
+fn herdfit(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_herdfit"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = herdfit(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn make_clip(dir: &Path, name: &str, agents: &str, frames: &str) -> std::path::PathBuf {
+    let out = dir.join(name);
+    ok(&[
+        "synth",
+        "--agents",
+        agents,
+        "--frames",
+        frames,
+        "--grid",
+        "10x6",
+        "--cell-size",
+        "3",
+        "--seed",
+        "3",
+        "--out",
+        s(&out),
+    ]);
+    out
+}
+
+#[test]
+fn a_short_fit_reduces_the_loss() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = make_clip(dir.path(), "clip", "120", "25");
+    let out = dir.path().join("p.json");
+    ok(&[
+        "fit",
+        s(&clip),
+        "--out",
+        s(&out),
+        "--epochs",
+        "4",
+        "--window",
+        "4",
+        "--lr",
+        "0.05",
+        "--joint-gradients",
+    ]);
+    let log = std::fs::read_to_string(dir.path().join("p.log.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = log
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let epoch_loss = |e: f64| -> f64 {
+        let r: Vec<_> = rows.iter().filter(|r| r[0] == e).collect();
+        r.iter().map(|r| r[2] + r[3]).sum::<f64>() / r.len() as f64
+    };
+    assert_eq!(rows.len(), 4 * 6, "4 epochs × 6 windows of 4 steps");
+    assert!(epoch_loss(0.0) > 0.0);
+    assert!(dir.path().join("p.loss.png").is_file());
+    let p = Params::load(&out).unwrap();
+    let prov = p.provenance.unwrap();
+    // The same schedule (herd, noise) evaluated with the start and the fitted parameters.
+    let l = &prov["loss"];
+    let total = |k: &str| l[k]["e_mean"].as_f64().unwrap() + l[k]["e_var"].as_f64().unwrap();
+    assert!(total("fitted") < total("start") - 0.005, "{l}");
+    assert_eq!(prov["frames"], serde_json::json!([0, 25]));
+    assert!(prov["final_losses"]["e_mean"].as_f64().unwrap() > 0.0);
+    // Stage 2: the speed model comes from the clip.
+    let c = ClipFields::load(&clip).unwrap();
+    assert_eq!(p.speed.mean, c.meta.speed.mean);
+}
+
+#[test]
+fn killed_and_resumed_fit_ends_with_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = make_clip(d, "clip", "200", "40");
+    let args = |out: &Path, ck: &Path| -> Vec<String> {
+        [
+            "fit",
+            s(&clip),
+            "--out",
+            s(out),
+            "--epochs",
+            "12",
+            "--window",
+            "2",
+            "--checkpoint",
+            s(ck),
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect()
+    };
+    let (a, cka) = (d.join("a.json"), d.join("ck-a"));
+    let v: Vec<String> = args(&a, &cka);
+    ok(&v.iter().map(String::as_str).collect::<Vec<_>>());
+    // Second run: kill it once its first checkpoint exists, then resume.
+    let (b, ckb) = (d.join("b.json"), d.join("ck-b"));
+    let v: Vec<String> = args(&b, &ckb);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_herdfit"))
+        .args(&v)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while !ckb.join("checkpoint.json").exists() && t0.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!b.exists(), "the run was killed before it finished");
+    let mut v2 = v.clone();
+    v2.push("--resume".into());
+    ok(&v2.iter().map(String::as_str).collect::<Vec<_>>());
+    for (x, y) in [
+        (a.clone(), b.clone()),
+        (d.join("a.log.csv"), d.join("b.log.csv")),
+    ] {
+        let (bx, by) = (std::fs::read(&x).unwrap(), std::fs::read(&y).unwrap());
+        if x.extension().is_some_and(|e| e == "json") {
+            // The clip path is the same; only the checkpoint folder differs, and it is not recorded.
+            assert_eq!(bx, by, "{x:?} vs {y:?}");
+        } else {
+            assert_eq!(bx, by);
+        }
+    }
+    // A resume with other settings is refused.
+    let mut v3 = args(&d.join("c.json"), &ckb);
+    v3[5] = "8".into(); // --epochs 8
+    v3.push("--resume".into());
+    let o = herdfit(&v3.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("other settings"));
+}
+
+#[test]
+fn loss_gradcheck_passes() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = make_clip(dir.path(), "clip", "120", "20");
+    let json = dir.path().join("g.json");
+    ok(&[
+        "gradcheck",
+        "--objective",
+        "loss",
+        "--clip",
+        s(&clip),
+        "--steps",
+        "8",
+        "--json",
+        s(&json),
+    ]);
+    let g: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+    assert!(g["max_rel_err"].as_f64().unwrap() <= 1e-6, "{g}");
+    assert_eq!(g["steps"], 8);
+}
+
+#[test]
+fn bad_fit_input_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = make_clip(d, "clip", "60", "10");
+    let out = d.join("p.json");
+    let fails = |args: &[&str], needle: &str| {
+        let o = herdfit(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}");
+        let e = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+        assert!(e.contains(needle), "{args:?}: {e}");
+        assert!(!out.exists() && !d.join("p.log.csv").exists());
+    };
+    fails(
+        &["fit", s(&clip), "--out", s(&out), "--frames", "5..40"],
+        "out of range",
+    );
+    fails(
+        &["fit", s(&clip), "--out", s(&out), "--frames", "5..6"],
+        "at least 2 frames",
+    );
+    fails(&["fit", s(&d.join("none")), "--out", s(&out)], "none");
+    let bad = d.join("bad.json");
+    std::fs::write(&bad, "{\"schema\": \"herdfit.params/1\"").unwrap();
+    fails(
+        &["fit", s(&clip), "--out", s(&out), "--init", s(&bad)],
+        "bad.json",
+    );
+    fails(&["fit", s(&clip), "--out", s(&out), "--lr", "5"], "--lr");
+    // A clip with zero density everywhere.
+    let mut c = ClipFields::load(&clip).unwrap();
+    c.density.fill(0.0);
+    let empty = d.join("empty");
+    c.save(&empty, &[]).unwrap();
+    fails(&["fit", s(&empty), "--out", s(&out)], "zero everywhere");
+    fails(
+        &[
+            "fit",
+            s(&clip),
+            "--out",
+            s(&d.join("no-dir").join("p.json")),
+        ],
+        "no-dir",
+    );
+}
