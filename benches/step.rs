@@ -98,5 +98,47 @@ fn grad_window(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, perception, sim_step, grad_window);
+criterion_group!(benches, perception, sim_step, grad_window, fit_frames);
 criterion_main!(benches);
+
+/// One epoch of `fit` (W = 1, the paper's per-frame scheme, split gradients: two forward+backward
+/// passes per frame) over 10 frames of a synthetic clip, per agent count.
+fn fit_frames(c: &mut Criterion) {
+    use herdfit::fields::Grid;
+    use herdfit::params::Params;
+    use herdfit::synth::{synthesise, SynthConfig};
+    use herdfit::train::fit::{fit, FitConfig};
+    let device = cpu_device(Precision::F32).unwrap();
+    let mut g = c.benchmark_group("fit_epoch_10_frames");
+    g.sample_size(10).measurement_time(Duration::from_secs(8));
+    for n in [500, 1000, 1500] {
+        let side = ((n as f64 * 2.0).sqrt() / 4.0).ceil() as usize * 2 + 2;
+        let cfg = SynthConfig {
+            params: Params::default(),
+            agents: n,
+            frames: 11,
+            fps: 25.0,
+            grid: Grid {
+                origin: [0.0, 0.0],
+                cell_size: 4.0,
+                nx: side,
+                ny: side,
+            },
+            obstacles: ndarray::Array2::zeros((side, side)),
+            seed: 1,
+            heading_deg: 0.0,
+            precision: Precision::F32,
+        };
+        let clip = synthesise(&cfg, &device, || {}).unwrap().clip;
+        let fc = FitConfig {
+            window: 1,
+            epochs: 1,
+            frames: 0..11,
+            ..FitConfig::default()
+        };
+        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+            b.iter(|| fit(&clip, &Params::neutral(), &fc, None, |_, _, _, _| {}).unwrap())
+        });
+    }
+    g.finish();
+}

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Installs what herdfit needs on a fresh Debian machine that has Rust: the system OpenCV and the
-# clang it is bound with (cargo feature `video`), and the Python packages the tests and notebooks
-# use. Idempotent: packages already present are not fetched again.
+# clang it is bound with (cargo feature `video`), a font for plots, OpenCV's sample video
+# vtest.avi (opencv-doc) that the extraction tests read, and the Python packages the tests and
+# notebooks use. Idempotent: packages already present are not fetched again.
 set -euo pipefail
 
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core python3 python3-pip)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip)
 PIP_PACKAGES=(numpy)
 
 missing=()

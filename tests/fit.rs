@@ -34,6 +34,7 @@ fn e_mean_on_hand_made_agents() {
         follower: vec![true, true, false],
         u: vec![[1.0, 0.0], [0.0, 0.0]],
         s: vec![0.0, 0.0],
+        cell_mean: false,
     };
     let l = step_loss(&t1(vec![1.0, 0.0, -1.0]), &t1(vec![0.0, 1.0, 0.0]), &t);
     assert!((val(l.e_mean) - 2f64.sqrt() / 2.0).abs() < 1e-6);
@@ -43,6 +44,7 @@ fn e_mean_on_hand_made_agents() {
         follower: vec![true; 3],
         u: vec![[0.0, 1.0], [0.0, 0.0]],
         s: vec![0.0, 0.0],
+        cell_mean: false,
     };
     let l = step_loss(&t1(vec![1.0, 1.0, 1.0]), &t1(vec![0.0, 0.0, 0.0]), &t);
     assert!((val(l.e_mean) - 2f64.sqrt()).abs() < 1e-6);
@@ -58,6 +60,7 @@ fn e_var_on_hand_made_agents() {
         follower: vec![true; 3],
         u: vec![[1.0, 0.0]; 2],
         s: vec![0.1, 0.5],
+        cell_mean: false,
     };
     let l = step_loss(
         &t1(vec![a.cos(), a.cos(), 1.0]),
@@ -73,6 +76,7 @@ fn e_var_on_hand_made_agents() {
         follower: vec![true; 2],
         u: vec![[1.0, 0.0]],
         s: vec![0.0],
+        cell_mean: false,
     };
     let l = step_loss(&t1(vec![0.0, 0.0]), &t1(vec![1.0, 1.0]), &t);
     assert!(val(l.e_var) < 1e-5);

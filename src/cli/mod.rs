@@ -35,6 +35,8 @@ pub enum Command {
     Bench(BenchArgs),
     /// Fit the 12 force parameters (and the speed model) to a clip's fields; export a parameter set.
     Fit(FitArgs),
+    /// Extract clip fields from an overhead video (needs the `video` feature).
+    Extract(ExtractArgs),
     /// Make a synthetic clip with known parameters (fields, truth.json, trajectories.csv).
     Synth(SynthArgs),
     /// Convert the public Herds-From-Video extractor's text files into a clip folder.
@@ -148,6 +150,9 @@ pub struct FitArgs {
     /// E_var, the others from E_mean).
     #[arg(long)]
     pub joint_gradients: bool,
+    /// E_mean on each cell's mean direction instead of every follower's (spread left to E_var).
+    #[arg(long)]
+    pub cell_mean: bool,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Write a checkpoint into DIR after every epoch.
@@ -185,6 +190,58 @@ fn sibling(out: &std::path::Path, suffix: &str) -> PathBuf {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "params".into());
     out.with_file_name(format!("{stem}{suffix}"))
+}
+
+#[derive(Args, Debug)]
+pub struct ExtractArgs {
+    #[arg(value_name = "VIDEO")]
+    pub video: PathBuf,
+    /// Output clip folder.
+    #[arg(long, value_name = "CLIP/")]
+    pub out: PathBuf,
+    /// Settings file (the `settings` object a previous extraction recorded in clip.json); flags
+    /// given on the command line override it.
+    #[arg(long, value_name = "extract.json")]
+    pub config: Option<PathBuf>,
+    /// Cells along the longer side of the frame.
+    #[arg(long, value_name = "N")]
+    pub grid: Option<usize>,
+    /// Body length in pixels.
+    #[arg(long, value_name = "L")]
+    pub body_length_px: Option<f64>,
+    /// Body colour R,G,B (herd pixels must also be within --colour-threshold of it).
+    #[arg(long, value_name = "R,G,B", value_parser = parse_rgb)]
+    pub body_colour: Option<[u8; 3]>,
+    #[arg(long, value_name = "T")]
+    pub colour_threshold: Option<f64>,
+    /// Per-channel difference to the background above which a pixel can be herd.
+    #[arg(long, value_name = "T")]
+    pub background_threshold: Option<f64>,
+    /// Body pixels per animal (default: an ellipse of L × 0.4 L).
+    #[arg(long, value_name = "NBP")]
+    pub body_pixels: Option<f64>,
+    /// Anchor rectangle x,y,w,h of the first frame tracked with CSRT (repeat for several;
+    /// `center` for the central quarter of the frame). None: a static camera.
+    #[arg(long, value_name = "x,y,w,h")]
+    pub anchor: Vec<String>,
+    /// `auto` (temporal median of stabilised frames) or a background image.
+    #[arg(long, value_name = "auto|IMAGE")]
+    pub background: Option<String>,
+    /// Obstacle mask image (non-zero = obstacle), the size of the video frame.
+    #[arg(long, value_name = "MASK.png")]
+    pub obstacles: Option<PathBuf>,
+    /// Frames used, a..b (b exclusive).
+    #[arg(long, value_name = "a..b", value_parser = parse_range)]
+    pub frames: Option<(usize, usize)>,
+    /// Smoothing window (frames) for the camera path and velocities.
+    #[arg(long, value_name = "K")]
+    pub smooth: Option<usize>,
+    /// Write preview PNGs (density and velocity over the stabilised frame) into DIR.
+    #[arg(long, value_name = "DIR")]
+    pub preview: Option<PathBuf>,
+    /// One preview every N frames.
+    #[arg(long, value_name = "N", default_value_t = 25)]
+    pub preview_every: usize,
 }
 
 #[derive(Args, Debug)]
@@ -401,6 +458,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Gradcheck(a) => gradcheck_cmd(a),
         Command::Bench(a) => bench_cmd(a),
         Command::Fit(a) => fit_cmd(a),
+        Command::Extract(a) => extract_cmd(a),
         Command::Synth(a) => synth_cmd(a),
         Command::ImportReference(a) => import_cmd(a),
         Command::FieldsInfo(a) => fields_info(a),
@@ -904,6 +962,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         zero_grad_step: 0.02,
         precision: a.precision,
         split_gradients: !a.joint_gradients,
+        cell_mean: a.cell_mean,
     };
     cfg.check(&clip).map_err(|e| e.in_file(&a.clip))?;
     let log_path = a.log.clone().unwrap_or_else(|| sibling(&a.out, ".log.csv"));
@@ -1056,6 +1115,147 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         a.out.display(),
         log_path.display(),
         plot_path.display()
+    );
+    Ok(())
+}
+
+#[cfg(not(feature = "video"))]
+fn extract_cmd(a: ExtractArgs) -> Result<()> {
+    Err(Error::file(
+        &a.video,
+        "this herdfit was built without the `video` feature (OpenCV)",
+    ))
+}
+
+#[cfg(feature = "video")]
+fn extract_cmd(a: ExtractArgs) -> Result<()> {
+    use crate::video::extract::{extract, ExtractConfig};
+    let mut cfg = match &a.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
+            serde_json::from_str::<ExtractConfig>(&text)
+                .map_err(|e| Error::file(p, format!("not an extraction settings file: {e}")))?
+        }
+        None => ExtractConfig::default(),
+    };
+    if let Some(v) = a.grid {
+        cfg.grid = v;
+    }
+    if let Some(v) = a.body_length_px {
+        cfg.body_length_px = v;
+    }
+    if a.body_colour.is_some() {
+        cfg.body_colour = a.body_colour;
+    }
+    if let Some(v) = a.colour_threshold {
+        cfg.colour_threshold = v;
+    }
+    if let Some(v) = a.background_threshold {
+        cfg.background_threshold = v;
+    }
+    if a.body_pixels.is_some() {
+        cfg.body_pixels = a.body_pixels;
+    }
+    if let Some(v) = a.smooth {
+        cfg.smooth = v;
+    }
+    if let Some((x, y)) = a.frames {
+        cfg.frames = Some([x, y]);
+    }
+    if a.obstacles.is_some() {
+        cfg.obstacles = a.obstacles.clone();
+    }
+    match a.background.as_deref() {
+        None => {}
+        Some("auto") => cfg.background = None,
+        Some(p) => cfg.background = Some(PathBuf::from(p)),
+    }
+    if a.config.is_none() && a.body_length_px.is_none() {
+        return Err(Error::invalid("give --body-length-px (or --config)"));
+    }
+    if !a.anchor.is_empty() {
+        cfg.anchors.clear();
+        for s in &a.anchor {
+            if s == "center" || s == "centre" {
+                cfg.anchors.push([-1, -1, -1, -1]);
+                continue;
+            }
+            let v: Vec<i32> = s
+                .split(',')
+                .map(|t| t.trim().parse::<i32>())
+                .collect::<std::result::Result<_, _>>()
+                .map_err(|_| Error::invalid(format!("--anchor '{s}' is not x,y,w,h")))?;
+            if v.len() != 4 {
+                return Err(Error::invalid(format!("--anchor '{s}' is not x,y,w,h")));
+            }
+            cfg.anchors.push([v[0], v[1], v[2], v[3]]);
+        }
+    }
+    // `center`: the central quarter of the first frame.
+    if cfg.anchors.iter().any(|a| a[0] < 0 && a[2] < 0) {
+        let probe =
+            opencv::videoio::VideoCapture::from_file(a.video.as_os_str(), opencv::videoio::CAP_ANY)
+                .ok()
+                .and_then(|c| {
+                    use opencv::prelude::VideoCaptureTraitConst;
+                    Some((
+                        c.get(opencv::videoio::CAP_PROP_FRAME_WIDTH).ok()? as i32,
+                        c.get(opencv::videoio::CAP_PROP_FRAME_HEIGHT).ok()? as i32,
+                    ))
+                });
+        let (w, h) = probe
+            .filter(|p| p.0 > 0)
+            .ok_or_else(|| Error::file(&a.video, "cannot open as a video"))?;
+        for r in cfg.anchors.iter_mut().filter(|r| r[0] < 0 && r[2] < 0) {
+            *r = [w * 3 / 8, h * 3 / 8, w / 4, h / 4];
+        }
+    }
+    crate::io::AtomicDir::create(&a.out)?;
+    if let Some(d) = &a.preview {
+        crate::io::AtomicDir::create(d)?;
+    }
+    let pb = progress_bar(0, "extract");
+    let ex = extract(
+        &a.video,
+        &cfg,
+        a.preview.as_ref().map(|_| a.preview_every),
+        |stage, done, total| {
+            if pb.length() != Some(total as u64) {
+                pb.set_length(total as u64);
+            }
+            pb.set_message(stage.to_string());
+            pb.set_position(done as u64);
+        },
+    )?;
+    pb.finish_and_clear();
+    let cams =
+        serde_json::to_string_pretty(&ex.camera).map_err(|e| Error::Internal(e.to_string()))?;
+    ex.clip
+        .save(&a.out, &[("camera.json", format!("{cams}\n").into_bytes())])?;
+    if let Some(d) = &a.preview {
+        let dir = crate::io::AtomicDir::create(d)?;
+        for (name, bytes) in &ex.previews {
+            dir.write(name, bytes)?;
+        }
+        dir.write(
+            "report.json",
+            b"{\"source\": \"herdfit extract --preview\"}\n",
+        )?;
+        dir.commit()?;
+    }
+    let c = &ex.clip;
+    let counts: Vec<f64> = (0..c.frames()).map(|f| c.count(f)).collect();
+    println!(
+        "extract: {} frames, {}×{} cells of {:.3} BL, {:.1}–{:.1} animals per frame, mean speed {:.3} BL/s; wrote {}",
+        c.frames(),
+        c.meta.nx,
+        c.meta.ny,
+        c.meta.cell_size,
+        counts.iter().cloned().fold(f64::INFINITY, f64::min),
+        counts.iter().cloned().fold(0.0, f64::max),
+        c.meta.speed.mean,
+        a.out.display()
     );
     Ok(())
 }

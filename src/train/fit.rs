@@ -60,6 +60,8 @@ pub struct FitConfig {
     /// The paper's split (§6.1): alignment parameters follow ∇E_var, the others ∇E_mean.
     /// Off: every parameter follows ∇(E_mean + λ E_var).
     pub split_gradients: bool,
+    /// E_mean on cell means rather than per agent (see [`StepTarget::cell_mean`]).
+    pub cell_mean: bool,
 }
 
 /// Indices of the alignment parameters in the θ vector.
@@ -80,6 +82,7 @@ impl Default for FitConfig {
             zero_grad_step: 0.02,
             precision: Precision::F32,
             split_gradients: true,
+            cell_mean: false,
         }
     }
 }
@@ -290,7 +293,11 @@ fn new_agent(
     ];
     let l = (v[0] * v[0] + v[1] * v[1]).sqrt();
     let d = if l > 1e-9 {
-        [v[0] / l, v[1] / l]
+        // The cell's mean direction, spread by the clip's direction variance.
+        let spread = (clip.dir_variance[[f, iy, ix]] as f64).max(0.0).sqrt();
+        let z: f64 = rng.sample(StandardNormal);
+        let a = v[1].atan2(v[0]) + spread * z;
+        [a.cos(), a.sin()]
     } else {
         let a = rng.gen::<f64>() * std::f64::consts::TAU;
         [a.cos(), a.sin()]
@@ -306,7 +313,8 @@ fn new_agent(
 
 /// The initial herd of frame `f`: round(Σ ρ·area) agents, allocated to cells in proportion to
 /// their expected counts (integer parts, then the largest remainders), uniform inside the cell,
-/// heading along the cell's mean velocity (random where it is zero), speed from the speed model.
+/// heading along the cell's mean velocity with a normal angular spread of the cell's direction
+/// variance (random where the velocity is zero), speed from the speed model.
 pub fn init_herd(
     clip: &ClipFields,
     f: usize,
@@ -420,6 +428,7 @@ pub fn plan_step(
     guidance: &[Guidance],
     stencil: &Stencil,
     beta: f64,
+    cell_mean: bool,
     state: &HerdState,
     f: usize,
     rng: &mut impl Rng,
@@ -448,6 +457,7 @@ pub fn plan_step(
             follower,
             u,
             s,
+            cell_mean,
         },
     ))
 }
@@ -494,6 +504,7 @@ fn update(
     g: &[f64; N_PARAMS],
     opt: &mut OptState,
     cfg: &FitConfig,
+    lr: f64,
     rng: &mut impl Rng,
 ) {
     let norm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -508,7 +519,7 @@ fn update(
         match cfg.optimizer {
             Optimizer::Normalized => {
                 for (t, x) in theta.iter_mut().zip(g) {
-                    *t -= cfg.lr * x / norm;
+                    *t -= lr * x / norm;
                 }
             }
             Optimizer::Adam => {
@@ -518,7 +529,7 @@ fn update(
                 for p in 0..N_PARAMS {
                     opt.m[p] = b1 * opt.m[p] + (1.0 - b1) * g[p];
                     opt.v[p] = b2 * opt.v[p] + (1.0 - b2) * g[p] * g[p];
-                    theta[p] -= cfg.lr * (opt.m[p] / c1) / ((opt.v[p] / c2).sqrt() + eps);
+                    theta[p] -= lr * (opt.m[p] / c1) / ((opt.v[p] / c2).sqrt() + eps);
                 }
             }
         }
@@ -692,6 +703,7 @@ fn fit_inner(
                     &guidance,
                     &stencil,
                     cfg.beta,
+                    cfg.cell_mean,
                     &state,
                     f + s,
                     &mut rng,
@@ -751,7 +763,9 @@ fn fit_inner(
                 }
             }
             if learn {
-                update(&mut theta, &garr, &mut opt, cfg, &mut rng);
+                // Learning rate decays linearly to 10 % over the epochs.
+                let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
+                update(&mut theta, &garr, &mut opt, cfg, lr, &mut rng);
             }
             model.params = model.params.with_vec(&theta);
             rows = state.detach().rows(&ids)?;

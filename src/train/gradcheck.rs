@@ -303,6 +303,7 @@ impl LossScenario {
                 &guidance,
                 &stencil,
                 beta,
+                false,
                 &state,
                 start + s,
                 &mut rng,

@@ -24,6 +24,11 @@ pub struct StepTarget {
     pub u: Vec<P2>,
     /// The clip's direction variance S per cell (rad²) at the step's frame.
     pub s: Vec<f64>,
+    /// E_mean on cell means: compare each cell's mean follower direction N(Σ d_i) with N(U)
+    /// (weighted by the cell's followers) instead of every follower's direction. The spread of
+    /// directions is then left to E_var alone.
+    #[serde(default)]
+    pub cell_mean: bool,
 }
 
 /// The two loss values of a step (tensors `[1]`).
@@ -68,15 +73,47 @@ pub fn step_loss(hx: &Tensor<1>, hy: &Tensor<1>, t: &StepTarget) -> StepLoss {
     let n_mean: f64 = mean_mask.iter().sum::<f64>().max(1.0);
     let n_var: f64 = var_mask.iter().sum::<f64>().max(1.0);
     let mm = floats(mean_mask, &device);
-    let dist = ((hx.clone() - floats(ux, &device)).square()
-        + (hy.clone() - floats(uy, &device)).square())
-    .add_scalar(SMOOTH)
-    .sqrt();
-    let e_mean = (dist * mm).sum().div_scalar(n_mean);
-    // Cell mean directions Ṽ (sum of member directions), gathered back to the members.
     let vm = floats(var_mask, &device);
     let idx = Tensor::<1, Int>::from_data(TensorData::new(cell_idx, [n]), &device);
     let zeros = Tensor::<1>::zeros([cells], &device);
+    let e_mean = if t.cell_mean {
+        // Σ_c n_c ‖N(Σ_{i∈c} d_i) − N(U_c)‖ / Σ_c n_c over cells with a target.
+        let sx = zeros.clone().scatter(
+            0,
+            idx.clone(),
+            hx.clone() * mm.clone(),
+            IndexingUpdateOp::Add,
+        );
+        let sy = zeros.clone().scatter(
+            0,
+            idx.clone(),
+            hy.clone() * mm.clone(),
+            IndexingUpdateOp::Add,
+        );
+        let norm = (sx.clone().square() + sy.clone().square())
+            .add_scalar(SMOOTH)
+            .sqrt();
+        let (mut cux, mut cuy, mut w) = (vec![0.0; cells], vec![0.0; cells], vec![0.0; cells]);
+        for c in 0..cells {
+            if t.u[c] != [0.0, 0.0] {
+                cux[c] = t.u[c][0];
+                cuy[c] = t.u[c][1];
+                w[c] = count[c] / n_mean;
+            }
+        }
+        let dist = ((sx / norm.clone() - floats(cux, &device)).square()
+            + (sy / norm - floats(cuy, &device)).square())
+        .add_scalar(SMOOTH)
+        .sqrt();
+        (dist * floats(w, &device)).sum()
+    } else {
+        let dist = ((hx.clone() - floats(ux, &device)).square()
+            + (hy.clone() - floats(uy, &device)).square())
+        .add_scalar(SMOOTH)
+        .sqrt();
+        (dist * mm.clone()).sum().div_scalar(n_mean)
+    };
+    // Cell mean directions Ṽ (sum of member directions), gathered back to the members.
     let mx = zeros
         .clone()
         .scatter(

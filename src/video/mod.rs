@@ -1,6 +1,7 @@
 //! Video I/O through OpenCV (cargo feature `video`, on by default): rendering synthetic overhead
 //! videos with known truth; extraction of clip fields from video follows.
 
+pub mod extract;
 pub mod render;
 
 pub use render::{camera_at, render_video, Camera, PendingVideo, RenderConfig};

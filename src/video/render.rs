@@ -114,14 +114,28 @@ fn ground(w: usize, h: usize, seed: u64) -> Vec<u8> {
     for y in 0..h {
         for x in 0..w {
             let (fx, fy) = (x as f64, y as f64);
-            let n = 0.5 * noise(fx, fy, 24.0, 1)
-                + 0.3 * noise(fx, fy, 7.0, 2)
-                + 0.2 * noise(fx, fy, 2.5, 3);
+            let n = 0.45 * noise(fx, fy, 24.0, 1)
+                + 0.35 * noise(fx, fy, 6.0, 2)
+                + 0.2 * noise(fx, fy, 2.0, 3);
+            // Earth patches and small stones give trackable structure at several scales.
+            let earth = (noise(fx, fy, 40.0, 4) - 0.55).max(0.0) * 2.5;
+            let stone = if noise(fx, fy, 3.0, 5) > 0.82 {
+                0.6
+            } else {
+                0.0
+            };
             let i = (y * w + x) * 3;
-            // Olive-green grass: B, G, R.
-            buf[i] = (40.0 + 25.0 * n) as u8;
-            buf[i + 1] = (95.0 + 55.0 * n) as u8;
-            buf[i + 2] = (70.0 + 45.0 * n) as u8;
+            // Olive-green grass with brown earth (B, G, R); stones are grey.
+            let (b, g, r) = (
+                30.0 + 40.0 * n + 10.0 * earth,
+                80.0 + 80.0 * n - 30.0 * earth,
+                55.0 + 60.0 * n + 25.0 * earth,
+            );
+            let mix =
+                |v: f64, grey: f64| (v * (1.0 - stone) + grey * stone).clamp(0.0, 200.0) as u8;
+            buf[i] = mix(b, 130.0);
+            buf[i + 1] = mix(g, 130.0);
+            buf[i + 2] = mix(r, 125.0);
         }
     }
     buf

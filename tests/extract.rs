@@ -1,0 +1,367 @@
+//! `herdfit extract` on synthetic videos with known trajectories (static camera and a moving
+//! camera), on OpenCV's real sample video `vtest.avi`, and on bad input.
+#![cfg(feature = "video")]
+
+use herdfit::fields::{rasterise, ClipFields, Grid};
+use herdfit::io::AgentRow;
+use ndarray::Array2;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn herdfit(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_herdfit"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = herdfit(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn read_traj(path: &Path) -> Vec<Vec<AgentRow>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut frames: Vec<Vec<AgentRow>> = Vec::new();
+    for l in text.lines().skip(1) {
+        let c: Vec<&str> = l.split(',').collect();
+        let f: usize = c[0].parse().unwrap();
+        if frames.len() <= f {
+            frames.push(Vec::new());
+        }
+        frames[f].push(AgentRow {
+            id: c[2].parse().unwrap(),
+            x: c[3].parse().unwrap(),
+            y: c[4].parse().unwrap(),
+            vx: c[5].parse().unwrap(),
+            vy: c[6].parse().unwrap(),
+        });
+    }
+    frames
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// (median per-frame Pearson r of density, median direction error in degrees, relative error of
+/// the mean speed) of an extraction against the rasterised truth.
+pub fn score(
+    extracted: &ClipFields,
+    truth_traj: &[Vec<AgentRow>],
+    truth_speed: f64,
+) -> (f64, f64, f64) {
+    let m = &extracted.meta;
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        cell_size: m.cell_size,
+        nx: m.nx,
+        ny: m.ny,
+    };
+    let truth = rasterise(
+        truth_traj,
+        grid,
+        m.fps,
+        Array2::zeros((m.ny, m.nx)),
+        serde_json::Value::Null,
+    )
+    .unwrap();
+    let mut rs = Vec::new();
+    let mut errs = Vec::new();
+    for f in 0..m.frames {
+        let a: Vec<f64> = extracted
+            .density
+            .index_axis(ndarray::Axis(0), f)
+            .iter()
+            .map(|&v| v as f64)
+            .collect();
+        let b: Vec<f64> = truth
+            .density
+            .index_axis(ndarray::Axis(0), f)
+            .iter()
+            .map(|&v| v as f64)
+            .collect();
+        let (ma, mb) = (
+            a.iter().sum::<f64>() / a.len() as f64,
+            b.iter().sum::<f64>() / b.len() as f64,
+        );
+        let cov: f64 = a.iter().zip(&b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+        let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
+        let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
+        rs.push(cov / (va * vb).sqrt());
+        for iy in 0..m.ny {
+            for ix in 0..m.nx {
+                if truth.density[[f, iy, ix]] > 0.0 && extracted.density[[f, iy, ix]] > 0.0 {
+                    let u = [
+                        truth.velocity[[f, iy, ix, 0]] as f64,
+                        truth.velocity[[f, iy, ix, 1]] as f64,
+                    ];
+                    let v = [
+                        extracted.velocity[[f, iy, ix, 0]] as f64,
+                        extracted.velocity[[f, iy, ix, 1]] as f64,
+                    ];
+                    if u[0].hypot(u[1]) > 1e-6 && v[0].hypot(v[1]) > 1e-6 {
+                        let a = (u[0] * v[1] - u[1] * v[0])
+                            .abs()
+                            .atan2(u[0] * v[0] + u[1] * v[1]);
+                        errs.push(a.to_degrees());
+                    }
+                }
+            }
+        }
+    }
+    (
+        median(rs),
+        median(errs),
+        (m.speed.mean - truth_speed).abs() / truth_speed,
+    )
+}
+
+fn synth_video(dir: &Path, name: &str, camera: bool) -> (PathBuf, PathBuf) {
+    let clip = dir.join(name);
+    let video = dir.join(format!("{name}.avi"));
+    let mut args = vec![
+        "synth",
+        "--agents",
+        "200",
+        "--frames",
+        "50",
+        "--grid",
+        "20x12",
+        "--cell-size",
+        "2",
+        "--px-per-bl",
+        "16",
+        "--seed",
+        "5",
+        "--out",
+        s(&clip),
+        "--video",
+        s(&video),
+    ];
+    if camera {
+        args.push("--camera-motion");
+    }
+    ok(&args);
+    (clip, video)
+}
+
+const ANCHORS: [&str; 3] = ["430,40,70,70", "430,270,70,70", "500,150,60,60"];
+
+fn extract(dir: &Path, video: &Path, name: &str, anchors: bool) -> ClipFields {
+    let out = dir.join(name);
+    let mut args = vec![
+        "extract",
+        s(video),
+        "--out",
+        s(&out),
+        "--grid",
+        "10",
+        "--body-length-px",
+        "16",
+        "--body-colour",
+        "235,235,225",
+    ];
+    if anchors {
+        for a in ANCHORS {
+            args.push("--anchor");
+            args.push(a);
+        }
+    }
+    ok(&args);
+    ClipFields::load(&out).unwrap()
+}
+
+#[test]
+fn synthetic_videos_extract_to_the_true_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (clip, video) = synth_video(d, "still", false);
+    let truth = read_traj(&clip.join("trajectories.csv"));
+    let truth_speed = ClipFields::load(&clip).unwrap().meta.speed.mean;
+    let still = extract(d, &video, "ex-still", false);
+    let (r, dir_err, speed_err) = score(&still, &truth, truth_speed);
+    eprintln!(
+        "static: r {r:.3}, direction {dir_err:.2}°, speed {:.1}%",
+        speed_err * 100.0
+    );
+    assert!(r >= 0.9, "median Pearson r {r}");
+    assert!(dir_err <= 10.0, "median direction error {dir_err}°");
+    assert!(speed_err <= 0.10, "mean speed off by {}", speed_err);
+    // The same herd through a panning, zooming, rotating camera, stabilised by three anchors.
+    let (clip_m, video_m) = synth_video(d, "moving", true);
+    assert_eq!(
+        std::fs::read(clip.join("trajectories.csv")).unwrap(),
+        std::fs::read(clip_m.join("trajectories.csv")).unwrap()
+    );
+    let moving = extract(d, &video_m, "ex-moving", true);
+    let (rm, dm, sm) = score(&moving, &truth, truth_speed);
+    eprintln!(
+        "moving: r {rm:.3}, direction {dm:.2}°, speed {:.1}%",
+        sm * 100.0
+    );
+    assert!(1.0 - rm <= 1.5 * (1.0 - r) + 0.01, "r {rm} vs static {r}");
+    assert!(
+        dm <= 1.5 * dir_err + 0.5,
+        "direction {dm}° vs static {dir_err}°"
+    );
+    assert!(
+        sm <= 1.5 * speed_err + 0.01,
+        "speed {sm} vs static {speed_err}"
+    );
+}
+
+/// OpenCV's sample video, from Debian's `opencv-doc` (installed by scripts/setup-debian.sh).
+fn vtest() -> PathBuf {
+    let candidates = [
+        "/usr/share/doc/opencv-doc/examples/data/vtest.avi",
+        "/usr/share/opencv4/samples/data/vtest.avi",
+    ];
+    candidates
+        .iter()
+        .map(PathBuf::from)
+        .find(|p| p.is_file())
+        .expect("vtest.avi from the opencv-doc package (scripts/setup-debian.sh installs it)")
+}
+
+#[test]
+fn vtest_avi_extracts_with_horizontal_dominant_motion() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("vtest");
+    let prev = dir.path().join("preview");
+    // Pedestrians seen from above at an angle, static camera, ~40 px tall: no colour test.
+    ok(&[
+        "extract",
+        s(&vtest()),
+        "--out",
+        s(&out),
+        "--grid",
+        "16",
+        "--body-length-px",
+        "40",
+        "--body-pixels",
+        "500",
+        "--frames",
+        "0..120",
+        "--preview",
+        s(&prev),
+        "--preview-every",
+        "60",
+    ]);
+    let c = ClipFields::load(&out).unwrap();
+    assert_eq!(c.frames(), 120);
+    let (mut sx, mut sy) = (0.0f64, 0.0f64);
+    for v in c.velocity.outer_iter() {
+        for row in v.outer_iter() {
+            for cell in row.outer_iter() {
+                sx += (cell[0] as f64).abs();
+                sy += (cell[1] as f64).abs();
+            }
+        }
+    }
+    assert!(sx > 2.0 * sy, "horizontal {sx} vs vertical {sy}");
+    assert!((0..c.frames()).all(|f| c.count(f) > 0.5));
+    assert!(prev.join("preview-00000.png").is_file() && prev.join("preview-00060.png").is_file());
+}
+
+#[test]
+fn bad_video_input_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("clip");
+    let fails = |args: &[&str], needle: &str| {
+        let o = herdfit(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}");
+        let e = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+        assert!(e.contains(needle), "{args:?}: {e}");
+        assert!(!out.exists());
+    };
+    fails(
+        &[
+            "extract",
+            s(&d.join("none.avi")),
+            "--out",
+            s(&out),
+            "--body-length-px",
+            "10",
+        ],
+        "none.avi",
+    );
+    let junk = d.join("junk.avi");
+    std::fs::write(&junk, b"RIFF....AVI not really a video").unwrap();
+    fails(
+        &[
+            "extract",
+            s(&junk),
+            "--out",
+            s(&out),
+            "--body-length-px",
+            "10",
+        ],
+        "junk.avi",
+    );
+    let (_, video) = synth_video(d, "v", false);
+    fails(
+        &[
+            "extract",
+            s(&video),
+            "--out",
+            s(&out),
+            "--body-length-px",
+            "16",
+            "--anchor",
+            "600,10,80,80",
+        ],
+        "anchor",
+    );
+    fails(
+        &[
+            "extract",
+            s(&video),
+            "--out",
+            s(&out),
+            "--body-length-px",
+            "16",
+            "--frames",
+            "70..90",
+        ],
+        "out of range",
+    );
+    let mask = d.join("mask.png");
+    std::fs::write(&mask, b"not a png").unwrap();
+    fails(
+        &[
+            "extract",
+            s(&video),
+            "--out",
+            s(&out),
+            "--body-length-px",
+            "16",
+            "--obstacles",
+            s(&mask),
+        ],
+        "mask.png",
+    );
+    fails(
+        &[
+            "extract",
+            s(&video),
+            "--out",
+            s(&d.join("no-dir").join("c")),
+            "--body-length-px",
+            "16",
+        ],
+        "no-dir",
+    );
+}
