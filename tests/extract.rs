@@ -365,3 +365,64 @@ fn bad_video_input_fails_cleanly() {
         "no-dir",
     );
 }
+
+#[test]
+fn recorded_settings_reproduce_the_extraction() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (_, video) = synth_video(d, "v", false);
+    // An obstacle mask: the right quarter of the 640×384 frame.
+    let mut m = opencv::core::Mat::new_rows_cols_with_default(
+        384,
+        640,
+        opencv::core::CV_8UC1,
+        opencv::core::Scalar::all(0.0),
+    )
+    .unwrap();
+    {
+        use opencv::prelude::MatTraitManual;
+        let data = m.data_bytes_mut().unwrap();
+        for y in 0..384 {
+            for x in 480..640 {
+                data[y * 640 + x] = 255;
+            }
+        }
+    }
+    let mask = d.join("mask.png");
+    opencv::imgcodecs::imwrite(s(&mask), &m, &opencv::core::Vector::new()).unwrap();
+    let a = d.join("a");
+    ok(&[
+        "extract",
+        s(&video),
+        "--out",
+        s(&a),
+        "--grid",
+        "10",
+        "--body-length-px",
+        "16",
+        "--body-colour",
+        "235,235,225",
+        "--obstacles",
+        s(&mask),
+        "--frames",
+        "5..40",
+        "--smooth",
+        "5",
+    ]);
+    let clip = ClipFields::load(&a).unwrap();
+    assert_eq!(clip.frames(), 35);
+    // Columns 8 and 9 of 10 (x ≥ 512 px) are obstacles; column 7 straddles 480 px (half).
+    assert!(clip.obstacles.column(9).iter().all(|&v| v == 1));
+    assert!(clip.obstacles.column(8).iter().all(|&v| v == 1));
+    assert!(clip.obstacles.column(6).iter().all(|&v| v == 0));
+    let settings = &clip.meta.provenance["settings"];
+    assert_eq!(settings["smooth"], 5);
+    let cfg = d.join("extract.json");
+    std::fs::write(&cfg, serde_json::to_string_pretty(settings).unwrap()).unwrap();
+    let b = d.join("b");
+    ok(&["extract", s(&video), "--out", s(&b), "--config", s(&cfg)]);
+    assert_eq!(
+        std::fs::read(a.join("fields.npz")).unwrap(),
+        std::fs::read(b.join("fields.npz")).unwrap()
+    );
+}
