@@ -16,6 +16,7 @@ pub mod plot;
 pub mod sim;
 pub mod synth;
 pub mod train;
+pub mod validate;
 #[cfg(feature = "video")]
 pub mod video;
 

@@ -123,3 +123,76 @@ pub fn line_chart(
     }
     Ok(())
 }
+
+/// A heat map of `values[row][col]` (row 0 at the bottom) written atomically as PNG.
+pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
+    font_ready().map_err(|e| e.in_file(path))?;
+    let ny = values.len().max(1);
+    let nx = values.first().map_or(1, |r| r.len()).max(1);
+    let max = values
+        .iter()
+        .flatten()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max)
+        .max(1e-12);
+    let tmp = tempfile::Builder::new()
+        .prefix(".herdfit-")
+        .suffix(".png")
+        .tempfile_in(
+            path.parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        )
+        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
+    {
+        let root = BitMapBackend::new(tmp.path(), (640, 560)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("{title} (max {max:.3})"), ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(30)
+            .y_label_area_size(40)
+            .build_cartesian_2d(0.0..nx as f64, 0.0..ny as f64)
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("coarse cell x")
+            .y_desc("coarse cell y")
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .draw_series(values.iter().enumerate().flat_map(|(iy, row)| {
+                row.iter().enumerate().map(move |(ix, &v)| {
+                    let t = if v.is_finite() {
+                        (v / max).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    // White → orange → dark red.
+                    let c = RGBColor(
+                        (255.0 - 60.0 * t) as u8,
+                        (255.0 - 215.0 * t) as u8,
+                        (255.0 - 235.0 * t) as u8,
+                    );
+                    Rectangle::new(
+                        [(ix as f64, iy as f64), (ix as f64 + 1.0, iy as f64 + 1.0)],
+                        c.filled(),
+                    )
+                })
+            }))
+            .map_err(|e| fail(e.to_string()))?;
+        root.present().map_err(|e| fail(e.to_string()))?;
+    }
+    tmp.persist(path)
+        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)))?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644));
+    }
+    Ok(())
+}

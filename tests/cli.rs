@@ -526,20 +526,3 @@ fn usage_errors_are_one_line_too() {
     assert!(msg.contains("non-zero"), "{msg}");
     assert!(!std::path::Path::new("t.csv").exists());
 }
-
-#[test]
-fn demo_writes_its_outputs() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("demo");
-    let stdout = ok(&["demo", "--out", s(&out)]);
-    assert!(stdout.contains("max rel err"));
-    for f in ["params.json", "trajectories.csv", "gradcheck.json"] {
-        assert!(out.join(f).is_file(), "{f} missing");
-    }
-    let g: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("gradcheck.json")).unwrap())
-            .unwrap();
-    assert!(g["max_rel_err"].as_f64().unwrap() <= 1e-6);
-    // The exported parameter set loads back.
-    herdfit::params::Params::load(&out.join("params.json")).unwrap();
-}

@@ -37,14 +37,17 @@ pub enum Command {
     Fit(FitArgs),
     /// Extract clip fields from an overhead video (needs the `video` feature).
     Extract(ExtractArgs),
+    /// Validate parameter sets on the held-out part of a clip (errors, polarization, angular
+    /// momentum, aspect ratio) and write a report folder.
+    Validate(ValidateArgs),
     /// Make a synthetic clip with known parameters (fields, truth.json, trajectories.csv).
     Synth(SynthArgs),
     /// Convert the public Herds-From-Video extractor's text files into a clip folder.
     ImportReference(ImportArgs),
     /// Summarise a clip: grid, frames, agents, speed model, polarization, angular momentum.
     FieldsInfo(FieldsInfoArgs),
-    /// The built-in walk-through. For now: simulate a built-in herd behind a guidance direction,
-    /// export its parameter set and check its gradients (the fit comes in a later release).
+    /// The built-in walk-through: a synthetic herd rendered to video, extracted, fitted on the first
+    /// half from a generic start, validated on the second half; prints a summary.
     Demo(DemoArgs),
 }
 
@@ -242,6 +245,33 @@ pub struct ExtractArgs {
     /// One preview every N frames.
     #[arg(long, value_name = "N", default_value_t = 25)]
     pub preview_every: usize,
+}
+
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    #[arg(value_name = "CLIP/")]
+    pub clip: PathBuf,
+    /// The parameter set to validate (e.g. the fit's output).
+    #[arg(long, value_name = "P.json")]
+    pub params: PathBuf,
+    /// A baseline to compare with (e.g. the fit's starting parameters).
+    #[arg(long, value_name = "P0.json")]
+    pub baseline: Option<PathBuf>,
+    /// Fraction of the clip before the held-out part.
+    #[arg(long, value_name = "S", default_value_t = 0.5)]
+    pub split: f64,
+    /// Coarse grid (cells per side) of the density and velocity errors.
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    pub grid: usize,
+    /// Simulations per parameter set (averaged).
+    #[arg(long, value_name = "K", default_value_t = 3)]
+    pub seeds: usize,
+    /// Skip the side-by-side video.
+    #[arg(long)]
+    pub no_video: bool,
+    /// Output report folder.
+    #[arg(long, value_name = "REPORT/")]
+    pub out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -459,6 +489,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bench(a) => bench_cmd(a),
         Command::Fit(a) => fit_cmd(a),
         Command::Extract(a) => extract_cmd(a),
+        Command::Validate(a) => validate_cmd(a).map(|_| ()),
         Command::Synth(a) => synth_cmd(a),
         Command::ImportReference(a) => import_cmd(a),
         Command::FieldsInfo(a) => fields_info(a),
@@ -659,49 +690,141 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
 }
 
 fn demo(a: DemoArgs) -> Result<()> {
+    use crate::train::fit::{fit, FitConfig};
     std::fs::create_dir_all(&a.out)
         .map_err(|e| Error::file(&a.out, format!("cannot create folder: {e}")))?;
-    let params_path = a.out.join("params.json");
-    let traj = a.out.join("trajectories.csv");
-    let gc = a.out.join("gradcheck.json");
-    println!("herdfit demo (preview: simulate + gradcheck; fitting comes with a later release)");
-    Params::default().save(&params_path)?;
-    println!("  parameter set         {}", params_path.display());
-    simulate(SimulateArgs {
-        params: Some(params_path.clone()),
-        herd: HerdSource {
-            init: None,
-            agents: Some(500),
-        },
-        steps: 250,
+    let t0 = std::time::Instant::now();
+    println!("herdfit demo: synthetic herd → video → fields → fit (first half) → validation (second half)");
+    let truth = Params::default();
+    let truth_path = a.out.join("truth.json");
+    truth.save(&truth_path)?;
+    // 1. A synthetic herd with known parameters, rendered to video when OpenCV is available.
+    let synth_dir = a.out.join("synthetic");
+    let video = a.out.join("herd.avi");
+    let with_video = cfg!(feature = "video");
+    synth_cmd(SynthArgs {
+        params: Some(truth_path.clone()),
+        agents: 300,
+        frames: 120,
         fps: 25.0,
-        speed_noise: None,
-        guidance: Some((1.0, 0.25)),
-        // One process holds one float precision; the gradient check needs f64.
-        precision: Precision::F64,
+        grid: (16, 10),
+        cell_size: 3.0,
+        obstacles: None,
+        heading: 0.0,
+        seed: 7,
+        precision: Precision::F32,
+        video: with_video.then(|| video.clone()),
+        px_per_bl: 12.0,
+        body_colour: [235, 235, 225],
+        camera_motion: false,
+        out: synth_dir.clone(),
+    })?;
+    // 2. Fields from the video (or the synthetic fields without OpenCV).
+    let clip_dir = if with_video {
+        let d = a.out.join("clip");
+        extract_cmd(ExtractArgs {
+            video: video.clone(),
+            out: d.clone(),
+            config: None,
+            grid: Some(16),
+            body_length_px: Some(12.0),
+            body_colour: Some([235, 235, 225]),
+            colour_threshold: None,
+            background_threshold: None,
+            body_pixels: None,
+            anchor: vec![],
+            background: None,
+            obstacles: None,
+            frames: None,
+            smooth: None,
+            preview: Some(a.out.join("preview")),
+            preview_every: 60,
+        })?;
+        d
+    } else {
+        synth_dir.clone()
+    };
+    let clip = crate::fields::ClipFields::load(&clip_dir)?;
+    // 3. Fit on the first half from a generic start.
+    let half = clip.frames() / 2;
+    let start = Params::neutral();
+    let start_path = a.out.join("start.json");
+    start.save(&start_path)?;
+    let cfg = FitConfig {
+        window: 4,
+        epochs: 6,
+        frames: 0..half,
         seed: 1,
-        record: None,
-        replay: None,
-        out: traj.clone(),
+        ..FitConfig::default()
+    };
+    let pb = progress_bar((cfg.epochs * (half - 1).div_ceil(cfg.window)) as u64, "fit");
+    let res = fit(&clip, &start, &cfg, None, |_, _, e, _| {
+        pb.set_message(format!("E_mean {e:.3}"));
+        pb.inc(1);
     })?;
-    println!("  500 agents, 10 s      {}", traj.display());
-    gradcheck_cmd(GradcheckArgs {
-        params: Some(params_path),
-        herd: HerdSource {
-            init: None,
-            agents: Some(200),
-        },
-        steps: 10,
-        precision: Precision::F64,
-        fd_step: None,
-        seed: 0,
-        record: None,
-        replay: None,
-        objective: Objective::Herd,
-        clip: None,
-        json: gc.clone(),
+    pb.finish_and_clear();
+    let params_path = a.out.join("params.json");
+    let mut fitted = res.params.clone();
+    fitted.provenance = Some(serde_json::json!({
+        "source": "demo fit",
+        "clip": clip_dir.display().to_string(),
+        "frames": [0, half],
+        "settings": cfg,
+    }));
+    fitted.save(&params_path)?;
+    crate::train::fit::write_log(&a.out.join("fit.log.csv"), &res.log)?;
+    // 4. Validation on the second half, fitted vs the generic start.
+    let report_dir = a.out.join("report");
+    let report = validate_cmd(ValidateArgs {
+        clip: clip_dir.clone(),
+        params: params_path.clone(),
+        baseline: Some(start_path),
+        split: 0.5,
+        grid: 10,
+        seeds: 3,
+        no_video: false,
+        out: report_dir.clone(),
     })?;
-    println!("  gradient check        {}", gc.display());
+    println!();
+    println!(
+        "{:<20} {:>8} {:>8} {:>8}",
+        "parameter", "true", "start", "fitted"
+    );
+    for (i, n) in crate::params::param_names().iter().enumerate() {
+        println!(
+            "{n:<20} {:>8.3} {:>8.3} {:>8.3}",
+            truth.to_vec()[i],
+            start.to_vec()[i],
+            res.params.to_vec()[i]
+        );
+    }
+    let mean_abs = |v: [f64; 12]| {
+        v.iter()
+            .zip(truth.to_vec())
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f64>()
+            / 12.0
+    };
+    println!(
+        "mean |θ − θ*| per parameter: start {:.3}, fitted {:.3}",
+        mean_abs(start.to_vec()),
+        mean_abs(res.params.to_vec())
+    );
+    for set in &report.sets {
+        println!(
+            "{:<9} density error {:.3}, velocity error {:.3}, polarization error {:.3}, angular momentum error {:.3}",
+            set.name,
+            set.error("density_error"),
+            set.error("velocity_error"),
+            set.error("polarization"),
+            set.error("angular_momentum_centroid")
+        );
+    }
+    println!(
+        "report: {} (report.md opens with the comparison table); {:.0} s",
+        report_dir.join("report.md").display(),
+        t0.elapsed().as_secs_f64()
+    );
     Ok(())
 }
 
@@ -1258,4 +1381,166 @@ fn extract_cmd(a: ExtractArgs) -> Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+/// Runs `validate` and returns the report.
+fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
+    use crate::validate::{markdown, validate};
+    let clip = crate::fields::ClipFields::load(&a.clip)?;
+    let mut sets = vec![("fitted".to_string(), Params::load(&a.params)?)];
+    if let Some(b) = &a.baseline {
+        sets.push(("baseline".to_string(), Params::load(b)?));
+    }
+    let out = crate::io::AtomicDir::create(&a.out)?;
+    let pb = progress_bar((sets.len() * a.seeds) as u64, "validate");
+    let (report, runs) = validate(
+        &clip,
+        &a.clip.display().to_string(),
+        &sets,
+        a.split,
+        a.grid,
+        a.seeds,
+        || pb.inc(1),
+    )
+    .map_err(|e| e.in_file(&a.clip))?;
+    pb.finish_and_clear();
+    let json = serde_json::to_string_pretty(&report).map_err(|e| Error::Internal(e.to_string()))?;
+    out.write("report.json", format!("{json}\n").as_bytes())?;
+    let md = markdown(&report);
+    out.write("report.md", md.as_bytes())?;
+    let start = report.frames[0];
+    let colours = [
+        plotters::style::RGBColor(31, 119, 180),
+        plotters::style::RGBColor(255, 127, 14),
+        plotters::style::RGBColor(44, 160, 44),
+        plotters::style::RGBColor(214, 39, 40),
+        plotters::style::RGBColor(148, 103, 189),
+        plotters::style::RGBColor(140, 86, 75),
+    ];
+    let mut series = vec![crate::plot::Series {
+        name: "video polarization",
+        points: report
+            .video_per_frame
+            .iter()
+            .enumerate()
+            .map(|(k, v)| ((start + k) as f64, v[0]))
+            .collect(),
+        colour: plotters::style::RGBColor(0, 0, 0),
+    }];
+    let names: Vec<String> = report
+        .sets
+        .iter()
+        .map(|s| format!("{} polarization", s.name))
+        .collect();
+    for (i, set) in report.sets.iter().enumerate() {
+        series.push(crate::plot::Series {
+            name: &names[i],
+            points: set
+                .per_frame
+                .iter()
+                .enumerate()
+                .map(|(k, v)| ((start + k) as f64, v[2]))
+                .collect(),
+            colour: colours[i % 6],
+        });
+    }
+    let am_names: Vec<String> = report
+        .sets
+        .iter()
+        .map(|s| format!("{} angular momentum", s.name))
+        .collect();
+    series.push(crate::plot::Series {
+        name: "video angular momentum",
+        points: report
+            .video_per_frame
+            .iter()
+            .enumerate()
+            .map(|(k, v)| ((start + k) as f64, v[1]))
+            .collect(),
+        colour: plotters::style::RGBColor(120, 120, 120),
+    });
+    for (i, set) in report.sets.iter().enumerate() {
+        series.push(crate::plot::Series {
+            name: &am_names[i],
+            points: set
+                .per_frame
+                .iter()
+                .enumerate()
+                .map(|(k, v)| ((start + k) as f64, v[3]))
+                .collect(),
+            colour: colours[(i + 2) % 6],
+        });
+    }
+    crate::plot::line_chart(
+        &out.path("metrics.png"),
+        "emergent measures (held-out frames)",
+        "frame",
+        "value",
+        &series,
+    )?;
+    let err_names: Vec<(String, String)> = report
+        .sets
+        .iter()
+        .map(|s| {
+            (
+                format!("{} density error", s.name),
+                format!("{} velocity error", s.name),
+            )
+        })
+        .collect();
+    let mut es = Vec::new();
+    for (i, set) in report.sets.iter().enumerate() {
+        es.push(crate::plot::Series {
+            name: &err_names[i].0,
+            points: set
+                .per_frame
+                .iter()
+                .enumerate()
+                .map(|(k, v)| ((start + k) as f64, v[0]))
+                .collect(),
+            colour: colours[(2 * i) % 6],
+        });
+        es.push(crate::plot::Series {
+            name: &err_names[i].1,
+            points: set
+                .per_frame
+                .iter()
+                .enumerate()
+                .map(|(k, v)| ((start + k) as f64, v[1]))
+                .collect(),
+            colour: colours[(2 * i + 1) % 6],
+        });
+    }
+    crate::plot::line_chart(
+        &out.path("errors.png"),
+        "coarse-grid errors (held-out frames)",
+        "frame",
+        "relative error",
+        &es,
+    )?;
+    for set in &report.sets {
+        crate::plot::heat_map(
+            &out.path(&format!("error-map-{}.png", set.name)),
+            &format!("{}: mean |ρ' − ρ| per coarse cell (agents)", set.name),
+            &set.error_map,
+        )?;
+    }
+    #[cfg(feature = "video")]
+    if !a.no_video {
+        if let Some(run) = runs.first().and_then(|r| r.first()) {
+            crate::video::render::render_comparison(
+                &out.path("side-by-side.avi"),
+                &clip,
+                &run.fields,
+                &run.frames,
+                start,
+            )?;
+        }
+    }
+    #[cfg(not(feature = "video"))]
+    let _ = (&runs, a.no_video);
+    out.commit()?;
+    print!("{md}");
+    println!("wrote {}", a.out.display());
+    Ok(report)
 }

@@ -310,6 +310,133 @@ pub fn render_video(
     ))
 }
 
+/// Side-by-side comparison video: the clip's fields (left: density as cell shading, mean velocity
+/// arrows) and the simulation (right: the same from its rasterised fields, agents as dots), for
+/// frames `start..start + sim_frames.len()` of the clip. MJPG AVI, written atomically.
+pub fn render_comparison(
+    path: &Path,
+    clip: &crate::fields::ClipFields,
+    sim: &crate::fields::ClipFields,
+    sim_frames: &[Vec<AgentRow>],
+    start: usize,
+) -> Result<()> {
+    let g = clip.grid();
+    let size = g.size();
+    let s = (400.0 / size[0].max(size[1])).max(2.0);
+    let (w, h) = frame_size(&g, s);
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".herdfit-")
+        .suffix(".avi")
+        .tempfile_in(dir)
+        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
+    let name = tmp.path().to_string_lossy().into_owned();
+    let mut writer = videoio::VideoWriter::new(
+        &name,
+        fourcc,
+        clip.meta.fps,
+        Size::new(2 * w as i32 + 8, h as i32),
+        true,
+    )
+    .map_err(cv(path))?;
+    if !writer.is_opened().map_err(cv(path))? {
+        return Err(Error::file(
+            path,
+            "OpenCV cannot open an MJPG AVI writer here",
+        ));
+    }
+    let max = (0..clip.frames())
+        .map(|f| {
+            clip.density
+                .index_axis(ndarray::Axis(0), f)
+                .iter()
+                .cloned()
+                .fold(0.0f32, f32::max)
+        })
+        .fold(0.0f32, f32::max)
+        .max(1e-6) as f64;
+    for (k, agents) in sim_frames.iter().enumerate() {
+        let f = start + k;
+        let mut img = Mat::new_rows_cols_with_default(
+            h as i32,
+            2 * w as i32 + 8,
+            CV_8UC3,
+            Scalar::all(255.0),
+        )
+        .map_err(cv(path))?;
+        for (panel, src, fr) in [(0usize, clip, f), (1usize, sim, k)] {
+            let ox = panel as f64 * (w as f64 + 8.0);
+            for iy in 0..g.ny {
+                for ix in 0..g.nx {
+                    let d = src.density[[fr, iy, ix]] as f64;
+                    let c = g.centre(ix, iy);
+                    let half = g.cell_size / 2.0;
+                    let a = world_to_px(&g, s, h, [c[0] - half, c[1] + half]);
+                    let b = world_to_px(&g, s, h, [c[0] + half, c[1] - half]);
+                    let rect = opencv::core::Rect::new(
+                        (ox + a[0]) as i32,
+                        a[1] as i32,
+                        (b[0] - a[0]).ceil() as i32,
+                        (b[1] - a[1]).ceil() as i32,
+                    );
+                    let t = (d / max).clamp(0.0, 1.0);
+                    let colour = if clip.obstacles[[iy, ix]] != 0 {
+                        Scalar::new(80.0, 80.0, 80.0, 0.0)
+                    } else {
+                        Scalar::new(255.0 * (1.0 - t), 255.0 - 120.0 * t, 255.0 - 40.0 * t, 0.0)
+                    };
+                    imgproc::rectangle(&mut img, rect, colour, -1, imgproc::LINE_8, 0)
+                        .map_err(cv(path))?;
+                    let v = [
+                        src.velocity[[fr, iy, ix, 0]] as f64,
+                        src.velocity[[fr, iy, ix, 1]] as f64,
+                    ];
+                    let l = v[0].hypot(v[1]);
+                    if d > 0.0 && l > 1e-9 {
+                        let p = world_to_px(&g, s, h, c);
+                        let k = 0.45 * g.cell_size * s / l;
+                        imgproc::arrowed_line(
+                            &mut img,
+                            Point::new((ox + p[0]) as i32, p[1] as i32),
+                            Point::new((ox + p[0] + v[0] * k) as i32, (p[1] - v[1] * k) as i32),
+                            Scalar::new(60.0, 30.0, 0.0, 0.0),
+                            1,
+                            imgproc::LINE_AA,
+                            0,
+                            0.3,
+                        )
+                        .map_err(cv(path))?;
+                    }
+                }
+            }
+        }
+        for a in agents {
+            let p = world_to_px(&g, s, h, [a.x, a.y]);
+            imgproc::circle(
+                &mut img,
+                Point::new((w as f64 + 8.0 + p[0]) as i32, p[1] as i32),
+                1,
+                Scalar::new(0.0, 0.0, 200.0, 0.0),
+                -1,
+                imgproc::LINE_8,
+                0,
+            )
+            .map_err(cv(path))?;
+        }
+        writer.write(&img).map_err(cv(path))?;
+    }
+    writer.release().map_err(cv(path))?;
+    PendingVideo {
+        path: path.to_path_buf(),
+        tmp,
+    }
+    .commit()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,0 +1,427 @@
+//! Held-out validation (paper §7.1.2, DESIGN §7): start a herd from the fields of the first
+//! held-out frame, simulate with the fitted (and baseline) parameters, and compare with the clip
+//! frame by frame — density and velocity errors on a coarse grid, polarization (eq. 12), angular
+//! momentum (eq. 13, about the herd centroid and the frame centre) and the aspect ratio of the
+//! motion-aligned bounding box — as the mean and STD of each measure and of its error, averaged
+//! over seeds (the paper's Tables 1–5).
+
+use crate::backend::{cpu_device, Precision};
+use crate::error::{Error, Result};
+use crate::fields::{rasterise, ClipFields};
+use crate::io::AgentRow;
+use crate::metrics::{angular_momentum, aspect_ratio, centroid, field_points, polarization};
+use crate::params::Params;
+use crate::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model, World};
+use crate::synth::obstacle_map;
+use crate::train::fit::{guidance_field, init_herd};
+use rand::SeedableRng;
+use serde::Serialize;
+
+/// The measures compared, in report order.
+pub const MEASURES: [&str; 6] = [
+    "density_error",
+    "velocity_error",
+    "polarization",
+    "angular_momentum_centroid",
+    "angular_momentum_frame_centre",
+    "aspect_ratio",
+];
+
+/// Per-frame emergent measures of a set of fields.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Emergent {
+    pub polarization: f64,
+    pub angular_momentum_centroid: f64,
+    pub angular_momentum_frame_centre: f64,
+    /// NaN when the herd has no mean direction.
+    pub aspect_ratio: f64,
+}
+
+/// The emergent measures of frame `f` of `c`, from its fields.
+pub fn emergent(c: &ClipFields, f: usize) -> Emergent {
+    let (pos, vel, w) = field_points(c, f);
+    let g = c.grid();
+    let size = g.size();
+    let centre = [g.origin[0] + size[0] / 2.0, g.origin[1] + size[1] / 2.0];
+    Emergent {
+        polarization: polarization(&vel, &w),
+        angular_momentum_centroid: angular_momentum(&pos, &vel, &w, centroid(&pos, &w)),
+        angular_momentum_frame_centre: angular_momentum(&pos, &vel, &w, centre),
+        aspect_ratio: aspect_ratio(&pos, &vel, &w).unwrap_or(f64::NAN),
+    }
+}
+
+/// Density and velocity errors of frame `fs` of `sim` against frame `f` of `clip` (same grid), on
+/// a coarse `k × k` grid: agents and momentum are summed into coarse cells; density
+/// Σ|n' − n| / Σ n, velocity Σ n ‖V' − V‖ / Σ n ‖V‖.
+pub fn coarse_errors(
+    clip: &ClipFields,
+    f: usize,
+    sim: &ClipFields,
+    fs: usize,
+    k: usize,
+) -> (f64, f64) {
+    let g = clip.grid();
+    let a = g.cell_area();
+    let kx = k.min(g.nx).max(1);
+    let ky = k.min(g.ny).max(1);
+    let mut n = vec![[0.0f64; 6]; kx * ky]; // n, mx, my, n', mx', my'
+    for iy in 0..g.ny {
+        for ix in 0..g.nx {
+            let c = (iy * ky / g.ny) * kx + ix * kx / g.nx;
+            for (o, src, fr) in [(0, clip, f), (3, sim, fs)] {
+                let d = src.density[[fr, iy, ix]] as f64 * a;
+                n[c][o] += d;
+                n[c][o + 1] += d * src.velocity[[fr, iy, ix, 0]] as f64;
+                n[c][o + 2] += d * src.velocity[[fr, iy, ix, 1]] as f64;
+            }
+        }
+    }
+    let (mut dn, mut tn, mut dv, mut tv) = (0.0, 0.0, 0.0, 0.0);
+    for c in &n {
+        dn += (c[3] - c[0]).abs();
+        tn += c[0];
+        if c[0] > 0.0 {
+            let v = [c[1] / c[0], c[2] / c[0]];
+            let vs = if c[3] > 0.0 {
+                [c[4] / c[3], c[5] / c[3]]
+            } else {
+                [0.0, 0.0]
+            };
+            dv += c[0] * (vs[0] - v[0]).hypot(vs[1] - v[1]);
+            tv += c[0] * v[0].hypot(v[1]);
+        }
+    }
+    (
+        if tn > 0.0 { dn / tn } else { 0.0 },
+        if tv > 0.0 { dv / tv } else { 0.0 },
+    )
+}
+
+/// A run of the model over frames `range` of a clip from the first frame's fields: the agents of
+/// every frame and their rasterisation on the clip's grid.
+pub struct SimRun {
+    pub frames: Vec<Vec<AgentRow>>,
+    pub fields: ClipFields,
+}
+
+/// Simulates `range` of the clip from its first frame's fields (leaders follow the clip's velocity
+/// field, no population control) with `params` and seed `seed`.
+pub fn simulate_clip(
+    clip: &ClipFields,
+    params: &Params,
+    range: std::ops::Range<usize>,
+    seed: u64,
+    device: &burn::tensor::Device,
+) -> Result<SimRun> {
+    let g = clip.grid();
+    let mut params = params.clone();
+    params.speed = clip.speed_model(&params.speed);
+    let mut model = Model {
+        params,
+        world: World {
+            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
+            guidance: Guidance::None,
+        },
+        dt: 1.0 / clip.meta.fps,
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let rows = init_herd(clip, range.start, &model.params.speed, &mut rng);
+    if rows.is_empty() {
+        return Err(Error::invalid(format!(
+            "frame {} of the clip holds no agents: nothing to start from",
+            range.start
+        )));
+    }
+    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+    let theta = theta_tensor(&model.params.to_vec(), device);
+    let f = ForceTensors::new(&theta, &model.params.constants);
+    let mut state = HerdState::from_rows(&rows, device);
+    let mut frames = vec![rows];
+    for fr in range.start..range.end.saturating_sub(1) {
+        model.world.guidance = guidance_field(clip, fr);
+        let dec = model.decide(&state.snapshot()?, &mut rng);
+        state = model.step(&f, &state, &dec)?;
+        frames.push(state.rows(&ids)?);
+    }
+    let fields = rasterise(
+        &frames,
+        g,
+        clip.meta.fps,
+        clip.obstacles.clone(),
+        serde_json::json!({"source": "validate simulation", "seed": seed}),
+    )?;
+    Ok(SimRun { frames, fields })
+}
+
+/// Mean and standard deviation.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Stat {
+    pub mean: f64,
+    pub std: f64,
+}
+
+fn stat(v: &[f64]) -> Stat {
+    let v: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return Stat {
+            mean: f64::NAN,
+            std: f64::NAN,
+        };
+    }
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    let s = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+    Stat { mean: m, std: s }
+}
+
+/// One measure for one parameter set: the video's value, the simulation's value and the
+/// per-frame absolute error, each as mean ± STD over frames (averaged over seeds).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeasureRow {
+    pub measure: String,
+    pub video: Option<Stat>,
+    pub simulation: Option<Stat>,
+    pub error: Stat,
+}
+
+/// The validation of one parameter set.
+#[derive(Clone, Debug, Serialize)]
+pub struct SetReport {
+    pub name: String,
+    pub params: [f64; 12],
+    pub rows: Vec<MeasureRow>,
+    /// Per frame, seed-averaged: [density error, velocity error, polarization, ang. momentum
+    /// centroid, ang. momentum frame centre, aspect ratio] of the simulation.
+    pub per_frame: Vec<[f64; 6]>,
+    /// Mean |ρ' − ρ| (agents) per coarse cell over frames and seeds, row 0 at the bottom.
+    pub error_map: Vec<Vec<f64>>,
+}
+
+impl SetReport {
+    /// The mean error of a measure.
+    pub fn error(&self, measure: &str) -> f64 {
+        self.rows
+            .iter()
+            .find(|r| r.measure == measure)
+            .map_or(f64::NAN, |r| r.error.mean)
+    }
+}
+
+/// The whole report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub clip: String,
+    pub frames: [usize; 2],
+    pub split: f64,
+    pub grid: usize,
+    pub seeds: usize,
+    /// The video's per-frame measures: [polarization, ang. momentum centroid, frame centre,
+    /// aspect ratio].
+    pub video_per_frame: Vec<[f64; 4]>,
+    pub sets: Vec<SetReport>,
+}
+
+/// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
+pub fn validate(
+    clip: &ClipFields,
+    clip_name: &str,
+    sets: &[(String, Params)],
+    split: f64,
+    grid: usize,
+    seeds: usize,
+    mut progress: impl FnMut(),
+) -> Result<(Report, Vec<Vec<SimRun>>)> {
+    if !(split.is_finite() && (0.0..1.0).contains(&split)) {
+        return Err(Error::invalid(format!("--split {split} must be in [0, 1)")));
+    }
+    if grid == 0 || seeds == 0 {
+        return Err(Error::invalid("--grid and --seeds must be ≥ 1"));
+    }
+    let nf = clip.frames();
+    let start = ((nf as f64) * split).floor() as usize;
+    if nf - start < 2 {
+        return Err(Error::invalid(format!(
+            "the held-out part {start}..{nf} has fewer than 2 frames"
+        )));
+    }
+    let device = cpu_device(Precision::F32)?;
+    let video: Vec<Emergent> = (start..nf).map(|f| emergent(clip, f)).collect();
+    let mut reports = Vec::new();
+    let mut runs_all = Vec::new();
+    let (kx, ky) = (grid.min(clip.meta.nx), grid.min(clip.meta.ny));
+    for (name, params) in sets {
+        params.validate()?;
+        let mut per_frame = vec![[0.0f64; 6]; nf - start];
+        let mut errs: Vec<Vec<f64>> = vec![Vec::new(); 6];
+        let mut sims: Vec<Vec<f64>> = vec![Vec::new(); 6];
+        let mut map = vec![vec![0.0f64; kx]; ky];
+        let mut runs = Vec::new();
+        for seed in 0..seeds {
+            let run = simulate_clip(clip, params, start..nf, seed as u64, &device)?;
+            for (k, f) in (start..nf).enumerate() {
+                // The simulation's fields are indexed from the first held-out frame.
+                let (de, ve) = coarse_errors(clip, f, &run.fields, f - start, grid);
+                let e = emergent(&run.fields, f - start);
+                let v = video[k];
+                let sim_vals = [
+                    de,
+                    ve,
+                    e.polarization,
+                    e.angular_momentum_centroid,
+                    e.angular_momentum_frame_centre,
+                    e.aspect_ratio,
+                ];
+                let vid_vals = [
+                    0.0,
+                    0.0,
+                    v.polarization,
+                    v.angular_momentum_centroid,
+                    v.angular_momentum_frame_centre,
+                    v.aspect_ratio,
+                ];
+                for m in 0..6 {
+                    let err = if m < 2 {
+                        sim_vals[m]
+                    } else {
+                        (sim_vals[m] - vid_vals[m]).abs()
+                    };
+                    errs[m].push(err);
+                    sims[m].push(sim_vals[m]);
+                    per_frame[k][m] += sim_vals[m] / seeds as f64;
+                }
+                // Error map on the coarse grid.
+                let g = clip.grid();
+                let a = g.cell_area();
+                let mut cells = vec![0.0f64; kx * ky];
+                for iy in 0..g.ny {
+                    for ix in 0..g.nx {
+                        let c = (iy * ky / g.ny) * kx + ix * kx / g.nx;
+                        cells[c] += (clip.density[[f, iy, ix]] as f64
+                            - run.fields.density[[f - start, iy, ix]] as f64)
+                            * a;
+                    }
+                }
+                for (c, v) in cells.iter().enumerate() {
+                    map[c / kx][c % kx] += v.abs() / ((nf - start) * seeds) as f64;
+                }
+            }
+            runs.push(run);
+            progress();
+        }
+        let rows = MEASURES
+            .iter()
+            .enumerate()
+            .map(|(m, name)| MeasureRow {
+                measure: name.to_string(),
+                video: (m >= 2).then(|| {
+                    let v: Vec<f64> = video
+                        .iter()
+                        .map(|e| {
+                            [
+                                e.polarization,
+                                e.angular_momentum_centroid,
+                                e.angular_momentum_frame_centre,
+                                e.aspect_ratio,
+                            ][m - 2]
+                        })
+                        .collect();
+                    stat(&v)
+                }),
+                simulation: (m >= 2).then(|| stat(&sims[m])),
+                error: stat(&errs[m]),
+            })
+            .collect();
+        reports.push(SetReport {
+            name: name.clone(),
+            params: params.to_vec(),
+            rows,
+            per_frame,
+            error_map: map,
+        });
+        runs_all.push(runs);
+    }
+    Ok((
+        Report {
+            clip: clip_name.to_string(),
+            frames: [start, nf],
+            split,
+            grid,
+            seeds,
+            video_per_frame: video
+                .iter()
+                .map(|e| {
+                    [
+                        e.polarization,
+                        e.angular_momentum_centroid,
+                        e.angular_momentum_frame_centre,
+                        e.aspect_ratio,
+                    ]
+                })
+                .collect(),
+            sets: reports,
+        },
+        runs_all,
+    ))
+}
+
+/// The report as Markdown, opening with the comparison table.
+pub fn markdown(r: &Report) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "# herdfit validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid.\n\n",
+        r.clip, r.frames[0], r.frames[1], r.split, r.seeds, r.grid, r.grid
+    ));
+    s.push_str("| measure | video mean ± STD |");
+    for set in &r.sets {
+        s.push_str(&format!(
+            " {} simulation mean ± STD | {} error mean ± STD |",
+            set.name, set.name
+        ));
+    }
+    s.push_str("\n|---|---:|");
+    for _ in &r.sets {
+        s.push_str("---:|---:|");
+    }
+    s.push('\n');
+    let f = |x: &Option<Stat>| match x {
+        Some(st) => format!("{:.4} ± {:.4}", st.mean, st.std),
+        None => "—".into(),
+    };
+    for (m, name) in MEASURES.iter().enumerate() {
+        let video = r
+            .sets
+            .first()
+            .map(|s| f(&s.rows[m].video))
+            .unwrap_or_default();
+        s.push_str(&format!("| {name} | {video} |"));
+        for set in &r.sets {
+            let row = &set.rows[m];
+            s.push_str(&format!(
+                " {} | {:.4} ± {:.4} |",
+                f(&row.simulation),
+                row.error.mean,
+                row.error.std
+            ));
+        }
+        s.push('\n');
+    }
+    s.push_str("\nDensity and velocity errors are relative (Σ|n' − n| / Σn and Σn‖V' − V‖ / Σn‖V‖ over coarse cells); the other errors are |simulation − video| per frame. Measures come from the fields of the video and of the rasterised simulation (paper §7.1.2).\n\n");
+    s.push_str("| parameter |");
+    for set in &r.sets {
+        s.push_str(&format!(" {} |", set.name));
+    }
+    s.push_str("\n|---|");
+    for _ in &r.sets {
+        s.push_str("---:|");
+    }
+    s.push('\n');
+    for (i, n) in crate::params::param_names().iter().enumerate() {
+        s.push_str(&format!("| {n} |"));
+        for set in &r.sets {
+            s.push_str(&format!(" {:.4} |", set.params[i]));
+        }
+        s.push('\n');
+    }
+    s.push_str("\nPlots: `metrics.png` (measures over time), `errors.png` (density and velocity errors over time), `error-map-*.png` (mean |ρ' − ρ| per coarse cell).\n");
+    s
+}

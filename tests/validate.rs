@@ -1,0 +1,203 @@
+//! `herdfit validate` and `herdfit demo`: the report's numbers, its files, and bad input.
+
+use std::path::Path;
+use std::process::Command;
+
+fn herdfit(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_herdfit"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = herdfit(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = d.join("clip");
+    ok(&[
+        "synth",
+        "--agents",
+        "200",
+        "--frames",
+        "60",
+        "--grid",
+        "12x8",
+        "--cell-size",
+        "3",
+        "--seed",
+        "7",
+        "--out",
+        s(&clip),
+    ]);
+    // Baseline: no cohesion, no alignment, strong avoidance.
+    let mut bad: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(clip.join("truth.json")).unwrap()).unwrap();
+    bad["forces"]["cohesion"]["weight"] = 0.0.into();
+    bad["forces"]["alignment"]["weight"] = 0.0.into();
+    bad["forces"]["avoidance"]["weight"] = 1.0.into();
+    bad.as_object_mut().unwrap().remove("physical");
+    let bad_path = d.join("bad.json");
+    std::fs::write(&bad_path, bad.to_string()).unwrap();
+    let out = d.join("report");
+    let printed = ok(&[
+        "validate",
+        s(&clip),
+        "--params",
+        s(&clip.join("truth.json")),
+        "--baseline",
+        s(&bad_path),
+        "--seeds",
+        "2",
+        "--out",
+        s(&out),
+    ]);
+    for f in [
+        "report.json",
+        "report.md",
+        "metrics.png",
+        "errors.png",
+        "error-map-fitted.png",
+        "error-map-baseline.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    #[cfg(feature = "video")]
+    assert!(out.join("side-by-side.avi").is_file());
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(r["frames"], serde_json::json!([30, 60]));
+    let err = |set: usize, m: usize| r["sets"][set]["rows"][m]["error"]["mean"].as_f64().unwrap();
+    // density error, velocity error, polarization error: the truth wins.
+    for m in 0..3 {
+        assert!(
+            err(0, m) < err(1, m),
+            "measure {m}: truth {} vs baseline {}",
+            err(0, m),
+            err(1, m)
+        );
+    }
+    // The Markdown report opens with the comparison table and prints these very numbers.
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.starts_with("# herdfit validation"));
+    let first_table = md
+        .lines()
+        .position(|l| l.starts_with("| measure |"))
+        .unwrap();
+    assert!(first_table < 5);
+    for m in 0..6 {
+        let row = &r["sets"][0]["rows"][m];
+        let cell = format!(
+            "{:.4} ± {:.4}",
+            row["error"]["mean"].as_f64().unwrap(),
+            row["error"]["std"].as_f64().unwrap()
+        );
+        assert!(md.contains(&cell), "{cell} not in report.md");
+    }
+    assert!(printed.contains("| measure |"));
+}
+
+#[test]
+fn bad_validation_input_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = d.join("clip");
+    ok(&[
+        "synth",
+        "--agents",
+        "40",
+        "--frames",
+        "10",
+        "--grid",
+        "8x8",
+        "--cell-size",
+        "2",
+        "--out",
+        s(&clip),
+    ]);
+    let out = d.join("report");
+    for (args, needle) in [
+        (
+            vec![
+                "validate",
+                s(&clip),
+                "--params",
+                s(&d.join("none.json")),
+                "--out",
+                s(&out),
+            ],
+            "none.json",
+        ),
+        (
+            vec![
+                "validate",
+                s(&clip),
+                "--params",
+                s(&clip.join("truth.json")),
+                "--split",
+                "1.5",
+                "--out",
+                s(&out),
+            ],
+            "--split",
+        ),
+        (
+            vec![
+                "validate",
+                s(&clip),
+                "--params",
+                s(&clip.join("truth.json")),
+                "--seeds",
+                "0",
+                "--out",
+                s(&out),
+            ],
+            "--seeds",
+        ),
+    ] {
+        let o = herdfit(&args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}");
+        let e = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+        assert!(e.contains(needle), "{e}");
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn demo_runs_the_whole_chain() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let text = ok(&["demo", "--out", s(&out)]);
+    assert!(text.contains("mean |θ − θ*| per parameter"));
+    for f in [
+        "truth.json",
+        "start.json",
+        "params.json",
+        "fit.log.csv",
+        "report/report.md",
+        "report/report.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    #[cfg(feature = "video")]
+    {
+        assert!(out.join("herd.avi").is_file());
+        assert!(out.join("clip/clip.json").is_file());
+    }
+    herdfit::params::Params::load(&out.join("params.json")).unwrap();
+}
