@@ -6,7 +6,7 @@
 set -euo pipefail
 
 APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip)
-PIP_PACKAGES=(numpy)
+PIP_PACKAGES=(numpy matplotlib nbclient nbformat ipykernel)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -20,7 +20,7 @@ if ((${#missing[@]})); then
 fi
 
 PY=python3
-if ! $PY -c "import numpy" >/dev/null 2>&1; then
+if ! $PY -c "import numpy, matplotlib, nbclient, nbformat, ipykernel" >/dev/null 2>&1; then
   echo "setup: installing ${PIP_PACKAGES[*]} (pip)"
   $PY -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}" \
     || $PY -m pip install --quiet --disable-pip-version-check --break-system-packages "${PIP_PACKAGES[@]}"
