@@ -4,6 +4,7 @@
 //! This crate holds the differentiable herd model ([`sim`]), its parameters ([`params`]), the
 //! gradient checks ([`train::gradcheck`]) and the command-line interface ([`cli`]).
 
+pub mod author;
 pub mod backend;
 pub mod bench;
 pub mod cli;

@@ -196,3 +196,128 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
     }
     Ok(())
 }
+
+/// A top view of a scene: obstacle cells (grey), optional per-cell vectors (a navigation field,
+/// drawn as short strokes with a dot at the head), polylines (arrows, paths) and agents coloured
+/// by group.
+#[allow(clippy::too_many_arguments)]
+pub fn scene_plot(
+    path: &Path,
+    title: &str,
+    grid: &crate::fields::Grid,
+    obstacles: &ndarray::Array2<u8>,
+    vectors: Option<&[[f64; 2]]>,
+    lines: &[Vec<[f64; 2]>],
+    agents: &[([f64; 2], usize)],
+) -> Result<()> {
+    font_ready().map_err(|e| e.in_file(path))?;
+    let size = grid.size();
+    let tmp = tempfile::Builder::new()
+        .prefix(".herdfit-")
+        .suffix(".png")
+        .tempfile_in(
+            path.parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        )
+        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
+    let wpx = 1000u32;
+    let hpx = ((wpx as f64 - 80.0) * size[1] / size[0] + 90.0).clamp(200.0, 1400.0) as u32;
+    {
+        let root = BitMapBackend::new(tmp.path(), (wpx, hpx)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(40)
+            .build_cartesian_2d(
+                grid.origin[0]..grid.origin[0] + size[0],
+                grid.origin[1]..grid.origin[1] + size[1],
+            )
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("x (BL)")
+            .y_desc("y (BL)")
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        let c = grid.cell_size;
+        chart
+            .draw_series(
+                obstacles
+                    .indexed_iter()
+                    .filter(|(_, &v)| v != 0)
+                    .map(|((iy, ix), _)| {
+                        let p = grid.centre(ix, iy);
+                        Rectangle::new(
+                            [
+                                (p[0] - c / 2.0, p[1] - c / 2.0),
+                                (p[0] + c / 2.0, p[1] + c / 2.0),
+                            ],
+                            RGBColor(110, 110, 110).filled(),
+                        )
+                    }),
+            )
+            .map_err(|e| fail(e.to_string()))?;
+        if let Some(v) = vectors {
+            let mut strokes = Vec::new();
+            for iy in 0..grid.ny {
+                for ix in 0..grid.nx {
+                    let d = v[iy * grid.nx + ix];
+                    let l = d[0].hypot(d[1]);
+                    if l > 1e-6 {
+                        let p = grid.centre(ix, iy);
+                        let k = 0.45 * c * l.min(1.0) / l;
+                        strokes.push((p, [p[0] + d[0] * k, p[1] + d[1] * k]));
+                    }
+                }
+            }
+            chart
+                .draw_series(strokes.iter().map(|(a, b)| {
+                    PathElement::new(vec![(a[0], a[1]), (b[0], b[1])], RGBColor(31, 119, 180))
+                }))
+                .map_err(|e| fail(e.to_string()))?;
+            chart
+                .draw_series(
+                    strokes.iter().map(|(_, b)| {
+                        Circle::new((b[0], b[1]), 1, RGBColor(31, 119, 180).filled())
+                    }),
+                )
+                .map_err(|e| fail(e.to_string()))?;
+        }
+        for l in lines {
+            chart
+                .draw_series(LineSeries::new(
+                    l.iter().map(|p| (p[0], p[1])),
+                    RGBColor(214, 39, 40).stroke_width(2),
+                ))
+                .map_err(|e| fail(e.to_string()))?;
+        }
+        let palette = [
+            RGBColor(0, 0, 0),
+            RGBColor(255, 127, 14),
+            RGBColor(44, 160, 44),
+            RGBColor(148, 103, 189),
+        ];
+        chart
+            .draw_series(
+                agents
+                    .iter()
+                    .map(|(p, g)| Circle::new((p[0], p[1]), 2, palette[g % 4].filled())),
+            )
+            .map_err(|e| fail(e.to_string()))?;
+        root.present().map_err(|e| fail(e.to_string()))?;
+    }
+    tmp.persist(path)
+        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)))?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644));
+    }
+    Ok(())
+}

@@ -40,6 +40,8 @@ pub enum Command {
     /// Validate parameter sets on the held-out part of a clip (errors, polarization, angular
     /// momentum, aspect ratio) and write a report folder.
     Validate(ValidateArgs),
+    /// Simulate a herd in an authored scene (arrows, destination, obstacles, behaviour regions).
+    Author(AuthorArgs),
     /// Make a synthetic clip with known parameters (fields, truth.json, trajectories.csv).
     Synth(SynthArgs),
     /// Convert the public Herds-From-Video extractor's text files into a clip folder.
@@ -275,6 +277,21 @@ pub struct ValidateArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct AuthorArgs {
+    #[arg(value_name = "SCENE.json")]
+    pub scene: PathBuf,
+    /// Output folder: trajectories.csv, navigation.png, snapshots, report.json (+ herd.avi).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Also render the herd over the scene as an MJPG AVI.
+    #[arg(long)]
+    pub video: bool,
+    /// Video scale: pixels per body length.
+    #[arg(long, value_name = "PX", default_value_t = 8.0)]
+    pub px_per_bl: f64,
+}
+
+#[derive(Args, Debug)]
 pub struct ImportArgs {
     /// Prefix of the three files: PREFIX_data_meta.txt, PREFIX_data_frame.txt, PREFIX_data_cell.txt.
     #[arg(value_name = "PREFIX")]
@@ -490,6 +507,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Fit(a) => fit_cmd(a),
         Command::Extract(a) => extract_cmd(a),
         Command::Validate(a) => validate_cmd(a).map(|_| ()),
+        Command::Author(a) => author_cmd(a),
         Command::Synth(a) => synth_cmd(a),
         Command::ImportReference(a) => import_cmd(a),
         Command::FieldsInfo(a) => fields_info(a),
@@ -1543,4 +1561,147 @@ fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
     print!("{md}");
     println!("wrote {}", a.out.display());
     Ok(report)
+}
+
+fn author_cmd(a: AuthorArgs) -> Result<()> {
+    use crate::author::{run, Scene};
+    let scene = Scene::load(&a.scene)?;
+    let out = crate::io::AtomicDir::create(&a.out)?;
+    let device = cpu_device(Precision::F32)?;
+    let steps = (scene.file.duration * scene.file.fps).round() as u64;
+    let pb = progress_bar(steps, "author");
+    let r = run(&scene, &device, || pb.inc(1))?;
+    pb.finish_and_clear();
+    let fps = scene.file.fps;
+    let mut csv = String::from(TRAJ_HEADER);
+    csv.push('\n');
+    for (f, (rows, roles)) in r.frames.iter().zip(&r.roles).enumerate() {
+        push_traj_frame(&mut csv, f, f as f64 / fps, rows, roles);
+    }
+    out.write("trajectories.csv", csv.as_bytes())?;
+    let mut lines = scene.file.arrows.clone();
+    if let Some(p) = &scene.file.predator {
+        lines.push(p.path.clone());
+    }
+    crate::plot::scene_plot(
+        &out.path("navigation.png"),
+        "navigation field",
+        &scene.grid,
+        &scene.obstacles,
+        Some(&r.navigation),
+        &lines,
+        &[],
+    )?;
+    let n = r.frames.len();
+    for (k, f) in [0, n / 2, n - 1].into_iter().enumerate() {
+        let agents: Vec<([f64; 2], usize)> = r.frames[f]
+            .iter()
+            .zip(&r.regions[f])
+            .map(|(a, &g)| ([a.x, a.y], g))
+            .collect();
+        crate::plot::scene_plot(
+            &out.path(&format!("snapshot-{k}.png")),
+            &format!("t = {:.1} s (colour = behaviour region)", f as f64 / fps),
+            &scene.grid,
+            &scene.obstacles,
+            None,
+            &lines,
+            &agents,
+        )?;
+    }
+    // Summary: centroid path, and polarization / aspect ratio per behaviour region.
+    let centroid: Vec<[f64; 2]> = r
+        .frames
+        .iter()
+        .map(|rows| {
+            let n = rows.len().max(1) as f64;
+            [
+                rows.iter().map(|a| a.x).sum::<f64>() / n,
+                rows.iter().map(|a| a.y).sum::<f64>() / n,
+            ]
+        })
+        .collect();
+    let sets = scene.params.len();
+    let mut per_region = Vec::new();
+    for g in 0..sets {
+        let (mut pol, mut asp, mut frames) = (0.0, 0.0, 0usize);
+        let mut agents_seen = 0usize;
+        for (rows, reg) in r.frames.iter().zip(&r.regions) {
+            let sel: Vec<&crate::io::AgentRow> = rows
+                .iter()
+                .zip(reg)
+                .filter(|(_, &x)| x == g)
+                .map(|(a, _)| a)
+                .collect();
+            if sel.len() < 5 {
+                continue;
+            }
+            let pos: Vec<[f64; 2]> = sel.iter().map(|a| [a.x, a.y]).collect();
+            let vel: Vec<[f64; 2]> = sel.iter().map(|a| [a.vx, a.vy]).collect();
+            let w = vec![1.0; sel.len()];
+            pol += crate::metrics::polarization(&vel, &w);
+            asp += crate::metrics::aspect_ratio(&pos, &vel, &w).unwrap_or(f64::NAN);
+            frames += 1;
+            agents_seen += sel.len();
+        }
+        per_region.push(serde_json::json!({
+            "set": g,
+            "frames": frames,
+            "mean_agents": if frames > 0 { agents_seen as f64 / frames as f64 } else { 0.0 },
+            "polarization": if frames > 0 { pol / frames as f64 } else { f64::NAN },
+            "aspect_ratio": if frames > 0 { asp / frames as f64 } else { f64::NAN },
+        }));
+    }
+    let report = serde_json::json!({
+        "scene": a.scene.display().to_string(),
+        "agents": r.frames[0].len(),
+        "frames": n,
+        "fps": fps,
+        "centroid": centroid,
+        "regions": per_region,
+        "predator": r.predator,
+    });
+    out.write(
+        "report.json",
+        serde_json::to_string_pretty(&report)
+            .map_err(|e| Error::Internal(e.to_string()))?
+            .as_bytes(),
+    )?;
+    #[cfg(feature = "video")]
+    if a.video {
+        let cfg = crate::video::RenderConfig {
+            px_per_bl: a.px_per_bl,
+            body_rgb: [235, 235, 225],
+            camera_motion: false,
+            seed: scene.file.seed,
+        };
+        let (_, pending) = crate::video::render_video(
+            &out.path("herd.avi"),
+            &r.frames,
+            &scene.grid,
+            &scene.obstacles,
+            fps,
+            &cfg,
+            || {},
+        )?;
+        pending.commit()?;
+    }
+    #[cfg(not(feature = "video"))]
+    if a.video {
+        return Err(Error::invalid("--video needs the `video` feature (OpenCV)"));
+    }
+    out.commit()?;
+    let last = centroid[n - 1];
+    println!(
+        "author: {} agents, {} frames ({:.1} s); centroid ({:.1}, {:.1}) → ({:.1}, {:.1}); wrote {}",
+        r.frames[0].len(),
+        n,
+        (n - 1) as f64 / fps,
+        centroid[0][0],
+        centroid[0][1],
+        last[0],
+        last[1],
+        a.out.display()
+    );
+    Ok(())
 }

@@ -224,6 +224,8 @@ pub struct ForceTensors {
     pub w: [Tensor<2>; 4],
     pub alpha: [Tensor<2>; 4],
     pub gamma: [Tensor<2>; 4],
+    /// `[n, 1]` tensors: one parameter set per agent (authoring with behaviour regions).
+    pub per_agent: bool,
 }
 
 impl ForceTensors {
@@ -249,7 +251,30 @@ impl ForceTensors {
                 .recip()
                 .mul_scalar(-0.5)
         });
-        ForceTensors { w, alpha, gamma }
+        ForceTensors {
+            w,
+            alpha,
+            gamma,
+            per_agent: false,
+        }
+    }
+
+    /// One parameter set per agent (no gradient): `thetas[i]` are agent i's 12 values.
+    pub fn per_agent(thetas: &[[f64; N_PARAMS]], c: &Constants, device: &Device) -> Self {
+        let n = thetas.len();
+        let col = |f: &dyn Fn(&[f64; N_PARAMS]) -> f64| {
+            mat_tensor(thetas.iter().map(f).collect(), n, 1, device)
+        };
+        let (r, pi) = (c.perception_radius, std::f64::consts::PI);
+        let w = std::array::from_fn(|g| col(&|t| t[3 * g] * c.sensitivity));
+        let alpha = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 1] * r).powi(2)));
+        let gamma = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 2] * pi).powi(2)));
+        ForceTensors {
+            w,
+            alpha,
+            gamma,
+            per_agent: true,
+        }
     }
 }
 
@@ -371,10 +396,21 @@ impl Model {
         d2: &Tensor<2>,
         phi2: &Tensor<2>,
         mask: &Tensor<2>,
+        n: usize,
     ) -> Tensor<2> {
-        (d2.clone() * f.alpha[g].clone() + phi2.clone() * f.gamma[g].clone()).exp()
-            * f.w[g].clone()
-            * mask.clone()
+        if f.per_agent {
+            let k = d2.dims()[1] / n.max(1);
+            let d2 = d2.clone().reshape([n, k]);
+            let phi2 = phi2.clone().reshape([n, k]);
+            ((d2 * f.alpha[g].clone() + phi2 * f.gamma[g].clone()).exp()
+                * f.w[g].clone()
+                * mask.clone().reshape([n, k]))
+            .reshape([1, n * k])
+        } else {
+            (d2.clone() * f.alpha[g].clone() + phi2.clone() * f.gamma[g].clone()).exp()
+                * f.w[g].clone()
+                * mask.clone()
+        }
     }
 
     /// Stage 2: the total force F_i of eq. 3 with the components of eq. 5 and the Gaussian
@@ -405,9 +441,9 @@ impl Model {
         let dy = gather(&s.y) - yi.clone();
         let (d2, phi2) =
             Self::distances_and_bearings(&dx, &dy, &hxi, &hyi, &p.neighbour_branch, guard);
-        let cc = Self::pair_weight(f, 0, &d2, &phi2, &mask);
-        let cv = Self::pair_weight(f, 1, &d2, &phi2, &mask);
-        let ca = Self::pair_weight(f, 2, &d2, &phi2, &mask).reshape([n, k]);
+        let cc = Self::pair_weight(f, 0, &d2, &phi2, &mask, n);
+        let cv = Self::pair_weight(f, 1, &d2, &phi2, &mask, n);
+        let ca = Self::pair_weight(f, 2, &d2, &phi2, &mask, n).reshape([n, k]);
         let cp = (cc - cv).reshape([n, k]);
         let mut fx = (cp.clone() * dx + ca.clone() * gather(&s.hx)).sum_dim(1);
         let mut fy = (cp * dy + ca * gather(&s.hy)).sum_dim(1);
@@ -432,7 +468,7 @@ impl Model {
             let doy = oy - yi;
             let (d2o, phi2o) =
                 Self::distances_and_bearings(&dox, &doy, &hxi, &hyi, &p.obstacle_branch, oguard);
-            let co = Self::pair_weight(f, 3, &d2o, &phi2o, &omask).reshape([n, ko]);
+            let co = Self::pair_weight(f, 3, &d2o, &phi2o, &omask, n).reshape([n, ko]);
             fx = fx - (co.clone() * dox).sum_dim(1);
             fy = fy - (co * doy).sum_dim(1);
         }
@@ -458,6 +494,18 @@ impl Model {
     /// Stage 3: one step of the model. Followers turn by eq. 2, d' = N(v·d + Δt F); leaders take
     /// their guidance direction; speeds follow eq. 6; positions p' = p + Δt v' d'.
     pub fn step(&self, f: &ForceTensors, s: &HerdState, dec: &StepDecisions) -> Result<HerdState> {
+        self.step_with(f, s, dec, None)
+    }
+
+    /// [`Model::step`] with an extra per-agent force added to F of eq. 3 (the hook of §7.5, e.g.
+    /// predator avoidance); no gradient flows through it.
+    pub fn step_with(
+        &self,
+        f: &ForceTensors,
+        s: &HerdState,
+        dec: &StepDecisions,
+        extra: Option<&[P2]>,
+    ) -> Result<HerdState> {
         let n = s.n();
         if dec.perception.n != n {
             return Err(Error::invalid(format!(
@@ -466,7 +514,11 @@ impl Model {
             )));
         }
         let device = s.x.device();
-        let (fx, fy) = self.forces(f, s, dec);
+        let (mut fx, mut fy) = self.forces(f, s, dec);
+        if let Some(e) = extra {
+            fx = fx + mat_tensor(e.iter().map(|v| v[0]).collect(), n, 1, &device);
+            fy = fy + mat_tensor(e.iter().map(|v| v[1]).collect(), n, 1, &device);
+        }
         let v = s.speed.clone().reshape([n, 1]);
         let ux = v.clone() * s.hx.clone().reshape([n, 1]) + fx.mul_scalar(self.dt);
         let uy = v * s.hy.clone().reshape([n, 1]) + fy.mul_scalar(self.dt);

@@ -1,0 +1,236 @@
+//! Authoring: the two example scenes, a destination behind a U-shaped obstacle, and bad scenes.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn herdfit(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_herdfit"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = herdfit(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn scenes() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
+}
+
+/// (frame, x, y) of every agent, per frame.
+fn trajectories(dir: &Path) -> Vec<Vec<[f64; 2]>> {
+    let text = std::fs::read_to_string(dir.join("trajectories.csv")).unwrap();
+    let mut out: Vec<Vec<[f64; 2]>> = Vec::new();
+    for l in text.lines().skip(1) {
+        let c: Vec<&str> = l.split(',').collect();
+        let f: usize = c[0].parse().unwrap();
+        if out.len() <= f {
+            out.push(Vec::new());
+        }
+        out[f].push([c[3].parse().unwrap(), c[4].parse().unwrap()]);
+    }
+    out
+}
+
+fn dist_to_polyline(p: [f64; 2], poly: &[[f64; 2]]) -> f64 {
+    poly.windows(2)
+        .map(|w| {
+            let (a, b) = (w[0], w[1]);
+            let d = [b[0] - a[0], b[1] - a[1]];
+            let l2 = d[0] * d[0] + d[1] * d[1];
+            let t = (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / l2).clamp(0.0, 1.0);
+            (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn pasture_follows_the_arrow_avoids_obstacles_and_shows_two_behaviours() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("pasture");
+    let scene_path = scenes().join("pasture.json");
+    ok(&["author", s(&scene_path), "--out", s(&out)]);
+    for f in [
+        "trajectories.csv",
+        "navigation.png",
+        "snapshot-0.png",
+        "snapshot-2.png",
+        "report.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let scene = herdfit::author::Scene::load(&scene_path).unwrap();
+    let arrow = &scene.file.arrows[0];
+    let end = arrow[arrow.len() - 1];
+    let frames = trajectories(&out);
+    let centroid: Vec<[f64; 2]> = frames
+        .iter()
+        .map(|a| {
+            let n = a.len() as f64;
+            [
+                a.iter().map(|p| p[0]).sum::<f64>() / n,
+                a.iter().map(|p| p[1]).sum::<f64>() / n,
+            ]
+        })
+        .collect();
+    // The centroid reaches the arrow's end (within 6 BL) ...
+    let reach = centroid
+        .iter()
+        .position(|c| (c[0] - end[0]).hypot(c[1] - end[1]) <= 6.0)
+        .expect("the herd reaches the end of the arrow");
+    // ... staying within 6 BL of the arrow all the way.
+    let worst = centroid[..=reach]
+        .iter()
+        .map(|c| dist_to_polyline(*c, arrow))
+        .fold(0.0, f64::max);
+    assert!(worst <= 6.0, "centroid strays {worst} BL from the arrow");
+    // No agent centre inside an obstacle (or outside the world) in any frame.
+    for (f, agents) in frames.iter().enumerate() {
+        for p in agents {
+            assert!(
+                !scene.blocked(*p),
+                "frame {f}: agent at {p:?} is inside an obstacle"
+            );
+        }
+    }
+    // The two behaviour regions give measurably different herds.
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let (a, b) = (&r["regions"][1], &r["regions"][2]);
+    let da = (a["aspect_ratio"].as_f64().unwrap() - b["aspect_ratio"].as_f64().unwrap()).abs();
+    let dp = (a["polarization"].as_f64().unwrap() - b["polarization"].as_f64().unwrap()).abs();
+    assert!(
+        da > 0.3 || dp > 0.05,
+        "aspect ratio differs by {da}, polarization by {dp}"
+    );
+}
+
+#[test]
+fn anthill_runs_with_a_predator_and_keeps_out_of_the_hill() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("anthill");
+    let scene_path = scenes().join("anthill.json");
+    ok(&["author", s(&scene_path), "--out", s(&out)]);
+    let scene = herdfit::author::Scene::load(&scene_path).unwrap();
+    let frames = trajectories(&out);
+    for agents in &frames {
+        assert!(agents.iter().all(|p| !scene.blocked(*p)));
+    }
+    // The herd circles the hill counter-clockwise: the centroid's angle about the hill's centre
+    // advances.
+    let ang = |a: &Vec<[f64; 2]>| {
+        let n = a.len() as f64;
+        let c = [
+            a.iter().map(|p| p[0]).sum::<f64>() / n - 40.0,
+            a.iter().map(|p| p[1]).sum::<f64>() / n - 40.0,
+        ];
+        c[1].atan2(c[0])
+    };
+    let (a0, a1) = (ang(&frames[0]), ang(&frames[frames.len() / 2]));
+    let mut d = a1 - a0;
+    if d < 0.0 {
+        d += std::f64::consts::TAU;
+    }
+    assert!(d > 0.5 && d < std::f64::consts::PI + 0.5, "turned {d} rad");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(r["predator"].as_array().unwrap().len(), frames.len() - 1);
+}
+
+fn write_scene(dir: &Path, name: &str, v: &serde_json::Value) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, serde_json::to_string_pretty(v).unwrap()).unwrap();
+    p
+}
+
+fn u_scene() -> serde_json::Value {
+    serde_json::json!({
+        "schema": "herdfit.scene/1",
+        "world": {"width": 60, "height": 40, "cell_size": 2},
+        "obstacles": {"polygons": [
+            [[20, 28], [34, 28], [34, 30], [20, 30]],
+            [[20, 10], [34, 10], [34, 12], [20, 12]],
+            [[32, 10], [34, 10], [34, 30], [32, 30]]
+        ]},
+        "destination": {"point": [52, 20]},
+        "spawn": {"count": 60, "centre": [27, 20], "size": [6, 10], "heading_deg": 0},
+        "duration": 70, "fps": 25, "seed": 2
+    })
+}
+
+#[test]
+fn a_herd_behind_a_u_shaped_obstacle_reaches_its_destination() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path(), "u.json", &u_scene());
+    let out = dir.path().join("u");
+    ok(&["author", s(&scene), "--out", s(&out)]);
+    let frames = trajectories(&out);
+    let near = |a: &Vec<[f64; 2]>| {
+        a.iter()
+            .filter(|p| (p[0] - 52.0).hypot(p[1] - 20.0) <= 8.0)
+            .count() as f64
+            / a.len() as f64
+    };
+    assert!(near(&frames[0]) == 0.0);
+    let best = frames.iter().map(near).fold(0.0, f64::max);
+    assert!(
+        best >= 0.8,
+        "at best {best} of the herd within 8 BL of the goal"
+    );
+}
+
+#[test]
+fn bad_scenes_name_the_json_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    let cases: Vec<(serde_json::Value, &str)> = {
+        let mut v = Vec::new();
+        let mut x = u_scene();
+        x["colour"] = "red".into();
+        v.push((x, "colour"));
+        let mut x = u_scene();
+        x["obstacles"]["polygons"][1] = serde_json::json!([[1, 1], [2, 2]]);
+        v.push((x, "obstacles.polygons[1]"));
+        let mut x = u_scene();
+        x["spawn"]["centre"] = serde_json::json!([33, 20]);
+        v.push((x, "spawn.centre"));
+        let mut x = u_scene();
+        x["regions"] =
+            serde_json::json!([{"polygon": [[0, 0], [10, 0], [10, 10]], "params": "missing.json"}]);
+        v.push((x, "regions[0].params"));
+        let mut x = u_scene();
+        x["arrows"] = serde_json::json!([[[5, 5], [70, 5]]]);
+        v.push((x, "arrows[0][1]"));
+        let mut x = u_scene();
+        x["regions"] = serde_json::json!([{"polygon": [[0, 0], [10, 0]], "params": "p.json"}]);
+        v.push((x, "regions[0].polygon"));
+        let mut x = u_scene();
+        x["spawn"]["count"] = 0.into();
+        v.push((x, "spawn.count"));
+        v
+    };
+    for (k, (scene, needle)) in cases.into_iter().enumerate() {
+        let p = write_scene(d, &format!("bad{k}.json"), &scene);
+        let o = herdfit(&["author", s(&p), "--out", s(&out)]);
+        assert_eq!(o.status.code(), Some(1), "case {k}");
+        let e = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+        assert!(
+            e.contains(&format!("bad{k}.json")) && e.contains(needle),
+            "case {k}: {e}"
+        );
+        assert!(!out.exists());
+    }
+}
