@@ -234,3 +234,43 @@ fn bad_scenes_name_the_json_path() {
         assert!(!out.exists());
     }
 }
+
+#[cfg(feature = "video")]
+#[test]
+fn mask_obstacles_and_video_output() {
+    use opencv::prelude::MatTraitManual;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A 60×40 mask whose right third is an obstacle.
+    let mut m = opencv::core::Mat::new_rows_cols_with_default(
+        40,
+        60,
+        opencv::core::CV_8UC1,
+        opencv::core::Scalar::all(0.0),
+    )
+    .unwrap();
+    {
+        let data = m.data_bytes_mut().unwrap();
+        for y in 0..40 {
+            for x in 40..60 {
+                data[y * 60 + x] = 255;
+            }
+        }
+    }
+    opencv::imgcodecs::imwrite(s(&d.join("mask.png")), &m, &opencv::core::Vector::new()).unwrap();
+    let mut scene = u_scene();
+    scene["obstacles"] = serde_json::json!({"mask": "mask.png"});
+    scene["destination"] = serde_json::json!({"point": [30, 20]});
+    scene["spawn"] = serde_json::json!({"count": 30, "centre": [10, 20], "size": [6, 6]});
+    scene["duration"] = 2.into();
+    let p = write_scene(d, "mask.json", &scene);
+    let loaded = herdfit::author::Scene::load(&p).unwrap();
+    assert!(loaded.blocked([50.0, 20.0]) && !loaded.blocked([30.0, 20.0]));
+    assert_eq!(
+        loaded.obstacles.iter().filter(|&&v| v == 1).count(),
+        10 * 20
+    );
+    let out = d.join("out");
+    ok(&["author", s(&p), "--out", s(&out), "--video"]);
+    assert!(out.join("herd.avi").metadata().unwrap().len() > 1000);
+}

@@ -182,9 +182,13 @@ pub fn quietly<T>(f: impl FnOnce() -> T) -> T {
 }
 
 fn open(path: &Path) -> Result<Video> {
+    if path.is_dir() {
+        return Err(Error::file(path, "is a folder, not a video file"));
+    }
     if !path.is_file() {
         return Err(Error::file(path, "cannot read: no such file"));
     }
+    std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let _ = opencv::core::set_log_level(opencv::core::LogLevel::LOG_LEVEL_SILENT);
     let cap = quietly(|| videoio::VideoCapture::from_file(path.as_os_str(), videoio::CAP_FFMPEG))
         .map_err(cv(path))?;
