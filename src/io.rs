@@ -32,6 +32,26 @@ fn temp_builder() -> tempfile::Builder<'static, 'static> {
     b
 }
 
+/// A temporary sibling of `path` (same folder, ordinary permissions) for writers that need a file
+/// name of their own (PNG, AVI); [`persist`] renames it into place.
+pub fn temp_sibling(path: &Path, suffix: &str) -> Result<tempfile::NamedTempFile> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    temp_builder()
+        .suffix(suffix)
+        .tempfile_in(dir)
+        .map_err(|e| Error::file(path, format!("cannot write: {e}")))
+}
+
+/// Renames a finished [`temp_sibling`] into place.
+pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
+    tmp.persist(path)
+        .map(|_| ())
+        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)))
+}
+
 /// Checks early that `path` can be created (its folder exists and is writable), so long runs fail
 /// before they start rather than at the end.
 pub fn check_writable(path: &Path) -> Result<()> {

@@ -45,15 +45,7 @@ pub fn line_chart(
     series: &[Series],
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = tempfile::Builder::new()
-        .prefix(".herdfit-")
-        .suffix(".png")
-        .tempfile_in(
-            path.parent()
-                .filter(|p| !p.as_os_str().is_empty())
-                .unwrap_or(Path::new(".")),
-        )
-        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let tmp = crate::io::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
@@ -114,14 +106,7 @@ pub fn line_chart(
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    tmp.persist(path)
-        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)))?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644));
-    }
-    Ok(())
+    crate::io::persist(tmp, path)
 }
 
 /// A heat map of `values[row][col]` (row 0 at the bottom) written atomically as PNG.
@@ -136,15 +121,7 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max)
         .max(1e-12);
-    let tmp = tempfile::Builder::new()
-        .prefix(".herdfit-")
-        .suffix(".png")
-        .tempfile_in(
-            path.parent()
-                .filter(|p| !p.as_os_str().is_empty())
-                .unwrap_or(Path::new(".")),
-        )
-        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let tmp = crate::io::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     {
         let root = BitMapBackend::new(tmp.path(), (640, 560)).into_drawing_area();
@@ -187,14 +164,7 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    tmp.persist(path)
-        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)))?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644));
-    }
-    Ok(())
+    crate::io::persist(tmp, path)
 }
 
 /// A top view of a scene: obstacle cells (grey), optional per-cell vectors (a navigation field,
@@ -212,15 +182,7 @@ pub fn scene_plot(
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
     let size = grid.size();
-    let tmp = tempfile::Builder::new()
-        .prefix(".herdfit-")
-        .suffix(".png")
-        .tempfile_in(
-            path.parent()
-                .filter(|p| !p.as_os_str().is_empty())
-                .unwrap_or(Path::new(".")),
-        )
-        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let tmp = crate::io::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let wpx = 1000u32;
     let hpx = ((wpx as f64 - 80.0) * size[1] / size[0] + 90.0).clamp(200.0, 1400.0) as u32;
@@ -312,12 +274,5 @@ pub fn scene_plot(
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    tmp.persist(path)
-        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)))?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644));
-    }
-    Ok(())
+    crate::io::persist(tmp, path)
 }

@@ -1,28 +1,8 @@
 //! Authoring: the two example scenes, a destination behind a U-shaped obstacle, and bad scenes.
 
+mod common;
+use common::{herdfit, ok, s};
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn herdfit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_herdfit"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = herdfit(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 fn scenes() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")

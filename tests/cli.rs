@@ -1,53 +1,9 @@
 //! The `herdfit` binary end to end: simulate, gradcheck and bench, determinism, and bad input
 //! (one-line error naming the file, non-zero exit, no panic, no partial output).
 
+mod common;
+use common::{fails, fails_with, ok, s};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn herdfit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_herdfit"))
-        .args(args)
-        .output()
-        .expect("the herdfit binary runs")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = herdfit(args);
-    assert!(
-        out.status.success(),
-        "herdfit {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-/// Runs a command that must fail cleanly; returns its one-line message.
-fn fails(args: &[&str]) -> String {
-    fails_with(args, 1)
-}
-
-/// Like [`fails`], with the expected exit code (2 for command-line usage errors).
-fn fails_with(args: &[&str], code: i32) -> String {
-    let out = herdfit(args);
-    assert_eq!(
-        out.status.code(),
-        Some(code),
-        "herdfit {args:?} should exit {code}"
-    );
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "one line expected, got: {err}");
-    assert!(lines[0].starts_with("error: "), "{err}");
-    assert!(
-        !err.contains("panicked") && !err.contains("internal error"),
-        "{err}"
-    );
-    lines[0].to_string()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

@@ -2,32 +2,12 @@
 //! camera), on OpenCV's real sample video `vtest.avi`, and on bad input.
 #![cfg(feature = "video")]
 
+mod common;
+use common::{herdfit, ok, s};
 use herdfit::fields::{rasterise, ClipFields, Grid};
 use herdfit::io::AgentRow;
 use ndarray::Array2;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn herdfit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_herdfit"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = herdfit(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 fn read_traj(path: &Path) -> Vec<Vec<AgentRow>> {
     let text = std::fs::read_to_string(path).unwrap();

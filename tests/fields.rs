@@ -1,6 +1,8 @@
 //! Clip fields: the folder format (round trip, numpy), synthetic clips (mass conservation,
 //! determinism), the reference import (hand-computed values), fields-info, and bad input.
 
+mod common;
+use common::{fails, ok, s};
 use herdfit::backend::{cpu_device, Precision};
 use herdfit::fields::{import_reference, ClipFields, Grid};
 use herdfit::params::Params;
@@ -8,39 +10,6 @@ use herdfit::synth::{synthesise, SynthConfig};
 use ndarray::Array2;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn herdfit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_herdfit"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = herdfit(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn fails(args: &[&str]) -> String {
-    let o = herdfit(args);
-    assert_eq!(o.status.code(), Some(1), "{args:?} should exit 1");
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(
-        !err.contains("panicked") && !err.contains("internal"),
-        "{err}"
-    );
-    err
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 fn small_synth(seed: u64) -> (SynthConfig, herdfit::synth::Synth) {
     let mut obstacles = Array2::zeros((8, 12));

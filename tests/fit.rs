@@ -1,6 +1,8 @@
 //! The fit: loss terms and the target field on hand-made cases, a short fit that reduces the loss,
 //! kill-and-resume identity, the loss gradient check, and bad input. Runs in f64.
 
+mod common;
+use common::{herdfit, ok, s};
 use herdfit::backend::{cpu_device, Precision};
 use herdfit::fields::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
 use herdfit::params::Params;
@@ -176,27 +178,6 @@ fn splatting_is_bilinear_conserves_mass_and_is_differentiable() {
     let gx = read_vec(&x.grad(&s.backward()).unwrap()).unwrap()[0];
     let fd = (j(3.3 + 1e-6) - j(3.3 - 1e-6)) / 2e-6;
     assert!((gx - fd).abs() < 1e-7, "{gx} vs {fd}");
-}
-
-fn herdfit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_herdfit"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = herdfit(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 fn make_clip(dir: &Path, name: &str, agents: &str, frames: &str) -> std::path::PathBuf {

@@ -1,28 +1,7 @@
 //! `herdfit validate` and `herdfit demo`: the report's numbers, its files, and bad input.
 
-use std::path::Path;
-use std::process::Command;
-
-fn herdfit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_herdfit"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = herdfit(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+mod common;
+use common::{herdfit, ok, s};
 
 #[test]
 fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers() {

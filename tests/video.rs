@@ -2,23 +2,13 @@
 //! trajectories put them; the camera starts at the identity and then moves).
 #![cfg(feature = "video")]
 
+mod common;
+use common::ok;
 use opencv::core::{Mat, Vec3b};
 use opencv::prelude::*;
 use opencv::videoio::{self, VideoCapture};
 use std::path::Path;
 use std::process::Command;
-
-fn ok(args: &[&str]) {
-    let o = Command::new(env!("CARGO_BIN_EXE_herdfit"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
 
 fn frames(path: &Path) -> Vec<Mat> {
     let mut cap = VideoCapture::from_file(path.to_str().unwrap(), videoio::CAP_ANY).unwrap();

@@ -157,16 +157,7 @@ pub struct PendingVideo {
 impl PendingVideo {
     /// Renames the video into place.
     pub fn commit(self) -> Result<()> {
-        let path = self.path;
-        self.tmp
-            .persist(&path)
-            .map_err(|e| Error::file(&path, format!("cannot write: {}", e.error)))?;
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            let _ = std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644));
-        }
-        Ok(())
+        crate::io::persist(self.tmp, &self.path)
     }
 }
 
@@ -194,15 +185,7 @@ pub fn render_video(
             "a {w}×{h} video frame is too large"
         )));
     }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".herdfit-")
-        .suffix(".avi")
-        .tempfile_in(dir)
-        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let tmp = crate::io::temp_sibling(path, ".avi")?;
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
     let tmp_name = tmp.path().to_string_lossy().into_owned();
     let mut writer =
@@ -324,15 +307,7 @@ pub fn render_comparison(
     let size = g.size();
     let s = (400.0 / size[0].max(size[1])).max(2.0);
     let (w, h) = frame_size(&g, s);
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".herdfit-")
-        .suffix(".avi")
-        .tempfile_in(dir)
-        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    let tmp = crate::io::temp_sibling(path, ".avi")?;
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
     let name = tmp.path().to_string_lossy().into_owned();
     let mut writer = videoio::VideoWriter::new(
