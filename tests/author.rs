@@ -254,3 +254,21 @@ fn mask_obstacles_and_video_output() {
     ok(&["author", s(&p), "--out", s(&out), "--video"]);
     assert!(out.join("herd.avi").metadata().unwrap().len() > 1000);
 }
+
+#[test]
+fn same_scene_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = u_scene();
+    scene["duration"] = 3.into();
+    let p = write_scene(dir.path(), "u.json", &scene);
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    ok(&["author", s(&p), "--out", s(&a)]);
+    ok(&["author", s(&p), "--out", s(&b)]);
+    for f in ["trajectories.csv", "report.json"] {
+        assert_eq!(
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+}
