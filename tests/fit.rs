@@ -226,7 +226,7 @@ fn a_short_fit_reduces_the_loss() {
         .collect();
     let epoch_loss = |e: f64| -> f64 {
         let r: Vec<_> = rows.iter().filter(|r| r[0] == e).collect();
-        r.iter().map(|r| r[2] + r[3]).sum::<f64>() / r.len() as f64
+        r.iter().map(|r| r[2] + r[3]).sum::<f64>() / r.len() as f64 // e_mean + e_var
     };
     assert_eq!(rows.len(), 4 * 6, "4 epochs × 6 windows of 4 steps");
     assert!(epoch_loss(0.0) > 0.0);
@@ -242,6 +242,36 @@ fn a_short_fit_reduces_the_loss() {
     // Stage 2: the speed model comes from the clip.
     let c = ClipFields::load(&clip).unwrap();
     assert_eq!(p.speed.mean, c.meta.speed.mean);
+}
+
+#[test]
+fn a_field_matching_fit_reduces_its_loss() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = make_clip(dir.path(), "clip", "120", "25");
+    let out = dir.path().join("p.json");
+    ok(&[
+        "fit",
+        s(&clip),
+        "--out",
+        s(&out),
+        "--epochs",
+        "4",
+        "--window",
+        "8",
+        "--lr",
+        "0.05",
+        "--loss",
+        "fields",
+        "--seed",
+        "2",
+    ]);
+    let p = Params::load(&out).unwrap();
+    let l = &p.provenance.unwrap()["loss"];
+    // The objective of --loss fields: E_fields + λ_var E_var (λ_var = 1).
+    let f = |k: &str| l[k]["e_fields"].as_f64().unwrap() + l[k]["e_var"].as_f64().unwrap();
+    assert!(f("fitted") < f("start") - 1e-3, "{l}");
+    let log = std::fs::read_to_string(dir.path().join("p.log.csv")).unwrap();
+    assert!(log.starts_with("epoch,frame,e_mean,e_var,e_fields,"));
 }
 
 #[test]

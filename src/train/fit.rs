@@ -62,6 +62,22 @@ pub struct FitConfig {
     pub split_gradients: bool,
     /// E_mean on cell means rather than per agent (see [`StepTarget::cell_mean`]).
     pub cell_mean: bool,
+    /// The objective: the paper's E_mean + λ E_var, or field matching.
+    #[serde(default)]
+    pub loss: LossKind,
+}
+
+/// What the fit minimises.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum LossKind {
+    /// E_mean (eq. 7) + λ_var E_var (eq. 8) against the target field U (eq. 10–11).
+    #[default]
+    Paper,
+    /// Field matching: after every step, the simulated density and momentum fields (bilinear
+    /// splatting of the agents and of their velocities) against the clip's,
+    /// Σ(ρ' − ρ)² / Σρ² + Σ‖ρ'V' − ρV‖² / Σ‖ρV‖², plus λ_var E_var.
+    Fields,
 }
 
 /// Indices of the alignment parameters in the θ vector.
@@ -83,6 +99,7 @@ impl Default for FitConfig {
             precision: Precision::F32,
             split_gradients: true,
             cell_mean: false,
+            loss: LossKind::Paper,
         }
     }
 }
@@ -138,6 +155,9 @@ pub struct LogRow {
     pub frame: usize,
     pub e_mean: f64,
     pub e_var: f64,
+    /// The field-matching loss (the objective of `--loss fields`; logged in both modes).
+    #[serde(default)]
+    pub e_fields: f64,
     pub density_error: f64,
     pub velocity_error: f64,
     pub agents: usize,
@@ -146,7 +166,8 @@ pub struct LogRow {
 
 /// The log as CSV.
 pub fn log_csv(rows: &[LogRow]) -> String {
-    let mut s = String::from("epoch,frame,e_mean,e_var,density_error,velocity_error,agents");
+    let mut s =
+        String::from("epoch,frame,e_mean,e_var,e_fields,density_error,velocity_error,agents");
     for n in param_names() {
         s.push(',');
         s.push_str(&n);
@@ -154,8 +175,15 @@ pub fn log_csv(rows: &[LogRow]) -> String {
     s.push('\n');
     for r in rows {
         s.push_str(&format!(
-            "{},{},{},{},{},{},{}",
-            r.epoch, r.frame, r.e_mean, r.e_var, r.density_error, r.velocity_error, r.agents
+            "{},{},{},{},{},{},{},{}",
+            r.epoch,
+            r.frame,
+            r.e_mean,
+            r.e_var,
+            r.e_fields,
+            r.density_error,
+            r.velocity_error,
+            r.agents
         ));
         for v in r.theta {
             s.push_str(&format!(",{v}"));
@@ -589,9 +617,10 @@ pub fn fit(
 }
 
 /// The loss of a parameter set on a clip without learning: one epoch of the fit's schedule
-/// (epoch-0 herd and noise) with no updates; returns the mean E_mean and E_var over its windows.
-/// Comparing two parameter sets this way uses the same herd, noise and population control seed.
-pub fn loss_of(clip: &ClipFields, params: &Params, cfg: &FitConfig) -> Result<(f64, f64)> {
+/// (epoch-0 herd and noise) with no updates; returns the mean E_mean, E_var and field-matching
+/// loss over its windows. Comparing two parameter sets this way uses the same herd, noise and
+/// population control seed.
+pub fn loss_of(clip: &ClipFields, params: &Params, cfg: &FitConfig) -> Result<(f64, f64, f64)> {
     let one = FitConfig {
         epochs: 1,
         ..cfg.clone()
@@ -601,6 +630,7 @@ pub fn loss_of(clip: &ClipFields, params: &Params, cfg: &FitConfig) -> Result<(f
     Ok((
         r.log.iter().map(|x| x.e_mean).sum::<f64>() / n,
         r.log.iter().map(|x| x.e_var).sum::<f64>() / n,
+        r.log.iter().map(|x| x.e_fields).sum::<f64>() / n,
     ))
 }
 
@@ -690,7 +720,7 @@ fn fit_inner(
             let mut state = HerdState::from_rows(&rows, &ad);
             let mut plans = Vec::with_capacity(w);
             let mut total: Option<Tensor<1>> = None;
-            let (mut em, mut ev) = (0.0, 0.0);
+            let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
             let mean_weight = if cfg.split_gradients {
                 0.0
             } else {
@@ -719,6 +749,15 @@ fn fit_inner(
                 state = next;
                 em += e_m / w as f64;
                 ev += e_v / w as f64;
+                let fl = fields_loss(clip, &state, f + s + 1)?;
+                ef += crate::sim::read_vec(&fl.clone().detach())?[0] / w as f64;
+                let loss = if cfg.loss == LossKind::Fields {
+                    // Field matching replaces E_mean (still logged); E_var stays, weighted by λ.
+                    drop(loss);
+                    fl + step_var_only(cfg, &plans, &state)?
+                } else {
+                    loss
+                };
                 total = Some(match total {
                     None => loss,
                     Some(t) => t + loss,
@@ -739,7 +778,7 @@ fn fit_inner(
                 Ok(g)
             };
             let mut garr = grad_of(loss, &th)?;
-            if cfg.split_gradients {
+            if cfg.split_gradients && cfg.loss == LossKind::Paper {
                 // Pass 2 (§6.1): the alignment parameters learn from E_var alone, on the same
                 // (replayed) decisions and targets.
                 let th2 = theta_tensor(&theta, &ad).require_grad();
@@ -785,6 +824,7 @@ fn fit_inner(
                 frame: f,
                 e_mean: em,
                 e_var: ev,
+                e_fields: ef,
                 density_error: de,
                 velocity_error: ve,
                 agents: rows.len(),
@@ -862,4 +902,43 @@ pub fn evaluate(
 /// Writes the training log CSV atomically.
 pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
     write_atomic(path, log_csv(rows).as_bytes())
+}
+
+/// λ_var E_var of the last planned step on the current state (field-matching mode).
+fn step_var_only(
+    cfg: &FitConfig,
+    plans: &[(StepDecisions, StepTarget)],
+    state: &HerdState,
+) -> Result<Tensor<1>> {
+    let (_, tgt) = plans
+        .last()
+        .ok_or_else(|| Error::invalid("no planned step"))?;
+    Ok(step_loss(&state.hx, &state.hy, tgt)
+        .e_var
+        .mul_scalar(cfg.var_weight))
+}
+
+/// Field-matching loss of a state against frame `f` of the clip:
+/// Σ(ρ' − ρ)² / Σρ² + Σ‖ρ'V' − ρV‖² / Σ‖ρV‖² with ρ' and ρ'V' by bilinear splatting.
+pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
+    use super::target::{frame_tensors, splat};
+    let device = state.x.device();
+    let snap = state.snapshot()?;
+    let g = clip.grid();
+    let [rho, vx, vy, _] = frame_tensors(clip, f, &device);
+    let vx_a = state.hx.clone() * state.speed.clone();
+    let vy_a = state.hy.clone() * state.speed.clone();
+    let rho_s = splat(&state.x, &state.y, &snap.pos, &g, None);
+    let mx_s = splat(&state.x, &state.y, &snap.pos, &g, Some(&vx_a));
+    let my_s = splat(&state.x, &state.y, &snap.pos, &g, Some(&vy_a));
+    let mx = rho.clone() * vx;
+    let my = rho.clone() * vy;
+    let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
+    let norm_m =
+        crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);
+    let ed = (rho_s - rho).square().sum().div_scalar(norm_d);
+    let em = ((mx_s - mx).square() + (my_s - my).square())
+        .sum()
+        .div_scalar(norm_m);
+    Ok(ed + em)
 }

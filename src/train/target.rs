@@ -26,6 +26,17 @@ fn floats(v: Vec<f64>, device: &Device) -> Tensor<1> {
 /// weights linear in its position, so ρ' is differentiable in the positions. Mass falling outside
 /// the grid is dropped. `pos` are the same positions as plain values (for the cell indices).
 pub fn splat_density(x: &Tensor<1>, y: &Tensor<1>, pos: &[P2], grid: &Grid) -> Tensor<1> {
+    splat(x, y, pos, grid, None)
+}
+
+/// Bilinear splatting of per-agent `values` (unit mass when `None`) onto the grid, per unit area.
+pub fn splat(
+    x: &Tensor<1>,
+    y: &Tensor<1>,
+    pos: &[P2],
+    grid: &Grid,
+    values: Option<&Tensor<1>>,
+) -> Tensor<1> {
     let device = x.device();
     let (nx, ny) = (grid.nx as i64, grid.ny as i64);
     let c = grid.cell_size;
@@ -69,6 +80,10 @@ pub fn splat_density(x: &Tensor<1>, y: &Tensor<1>, pos: &[P2], grid: &Grid) -> T
         ],
         0,
     ) * floats(inside, &device);
+    let w = match values {
+        Some(v) => w * Tensor::cat(vec![v.clone(), v.clone(), v.clone(), v.clone()], 0),
+        None => w,
+    };
     let cells = (nx * ny) as usize;
     Tensor::<1>::zeros([cells], &device)
         .scatter(0, ints(idx, &device), w, IndexingUpdateOp::Add)
