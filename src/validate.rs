@@ -98,6 +98,49 @@ pub fn coarse_errors(
     )
 }
 
+/// The temporal window (frames) over which the clip's velocities were averaged: the extraction's
+/// `smooth` setting for clips extracted from video, 1 otherwise.
+pub fn velocity_window(clip: &ClipFields) -> usize {
+    let p = &clip.meta.provenance;
+    if p["source"] == "extract" {
+        p["settings"]["smooth"].as_u64().unwrap_or(9).max(1) as usize
+    } else {
+        1
+    }
+}
+
+/// Averages each cell's velocity over a centred window of `window` frames, weighted by density —
+/// what extraction does to the flow — so a simulation is compared with a clip like with like.
+pub fn smooth_velocity(c: &mut ClipFields, window: usize) {
+    if window <= 1 {
+        return;
+    }
+    let (nf, ny, nx) = c.density.dim();
+    let half = window / 2;
+    let src_v = c.velocity.clone();
+    for f in 0..nf {
+        let (lo, hi) = (f.saturating_sub(half), (f + half + 1).min(nf));
+        for iy in 0..ny {
+            for ix in 0..nx {
+                if c.density[[f, iy, ix]] <= 0.0 {
+                    continue;
+                }
+                let (mut sx, mut sy, mut w) = (0.0f64, 0.0f64, 0.0f64);
+                for g in lo..hi {
+                    let d = c.density[[g, iy, ix]] as f64;
+                    sx += d * src_v[[g, iy, ix, 0]] as f64;
+                    sy += d * src_v[[g, iy, ix, 1]] as f64;
+                    w += d;
+                }
+                if w > 0.0 {
+                    c.velocity[[f, iy, ix, 0]] = (sx / w) as f32;
+                    c.velocity[[f, iy, ix, 1]] = (sy / w) as f32;
+                }
+            }
+        }
+    }
+}
+
 /// A run of the model over frames `range` of a clip from the first frame's fields: the agents of
 /// every frame and their rasterisation on the clip's grid.
 pub struct SimRun {
@@ -144,13 +187,14 @@ pub fn simulate_clip(
         state = model.step(&f, &state, &dec)?;
         frames.push(state.rows(&ids)?);
     }
-    let fields = rasterise(
+    let mut fields = rasterise(
         &frames,
         g,
         clip.meta.fps,
         clip.obstacles.clone(),
         serde_json::json!({"source": "validate simulation", "seed": seed}),
     )?;
+    smooth_velocity(&mut fields, velocity_window(clip));
     Ok(SimRun { frames, fields })
 }
 
@@ -405,7 +449,7 @@ pub fn markdown(r: &Report) -> String {
         }
         s.push('\n');
     }
-    s.push_str("\nDensity and velocity errors are relative (Σ|n' − n| / Σn and Σn‖V' − V‖ / Σn‖V‖ over coarse cells); the other errors are |simulation − video| per frame. Measures come from the fields of the video and of the rasterised simulation (paper §7.1.2).\n\n");
+    s.push_str("\nThe simulation's velocities are averaged over the same window of frames as the clip's (the extraction's smoothing) before they are compared. Density and velocity errors are relative (Σ|n' − n| / Σn and Σn‖V' − V‖ / Σn‖V‖ over coarse cells); the other errors are |simulation − video| per frame. Measures come from the fields of the video and of the rasterised simulation (paper §7.1.2).\n\n");
     s.push_str("| parameter |");
     for set in &r.sets {
         s.push_str(&format!(" {} |", set.name));
@@ -424,4 +468,50 @@ pub fn markdown(r: &Report) -> String {
     }
     s.push_str("\nPlots: `metrics.png` (measures over time), `errors.png` (density and velocity errors over time), `error-map-*.png` (mean |ρ' − ρ| per coarse cell).\n");
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn velocity_smoothing_is_density_weighted_and_centred() {
+        let mut frames = Vec::new();
+        for (f, v) in [[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]].iter().enumerate() {
+            // Frame 2 has two agents in the cell: twice the weight.
+            let n = if f == 2 { 2 } else { 1 };
+            frames.push(
+                (0..n)
+                    .map(|i| AgentRow {
+                        id: i,
+                        x: 0.5,
+                        y: 0.5,
+                        vx: v[0],
+                        vy: v[1],
+                    })
+                    .collect::<Vec<_>>(),
+            );
+        }
+        let g = crate::fields::Grid {
+            origin: [0.0, 0.0],
+            cell_size: 1.0,
+            nx: 1,
+            ny: 1,
+        };
+        let mut c = rasterise(
+            &frames,
+            g,
+            10.0,
+            ndarray::Array2::zeros((1, 1)),
+            serde_json::Value::Null,
+        )
+        .unwrap();
+        smooth_velocity(&mut c, 3);
+        // Frame 0 averages frames 0–1 (weights 1, 1); frame 1 frames 0–2 (1, 1, 2).
+        assert_eq!(c.velocity[[0, 0, 0, 0]], 0.5);
+        assert_eq!(c.velocity[[0, 0, 0, 1]], 0.5);
+        assert_eq!(c.velocity[[1, 0, 0, 0]], 0.25);
+        assert_eq!(c.velocity[[1, 0, 0, 1]], 0.75);
+        assert_eq!(velocity_window(&c), 1);
+    }
 }
