@@ -407,3 +407,30 @@ fn bad_fit_input_fails_cleanly() {
         "no-dir",
     );
 }
+
+#[test]
+fn gradient_checkpointing_gives_the_same_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = make_clip(dir.path(), "clip", "80", "20");
+    let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
+    let base = [
+        "fit",
+        s(&clip),
+        "--window",
+        "8",
+        "--epochs",
+        "2",
+        "--loss",
+        "fields",
+    ];
+    let mut x = base.to_vec();
+    x.extend_from_slice(&["--out", s(&a)]);
+    ok(&x);
+    let mut y = base.to_vec();
+    y.extend_from_slice(&["--out", s(&b), "--checkpointing"]);
+    ok(&y);
+    assert_eq!(
+        Params::load(&a).unwrap().to_vec(),
+        Params::load(&b).unwrap().to_vec()
+    );
+}

@@ -161,6 +161,9 @@ pub struct FitArgs {
     /// Objective: the paper's losses, or matching the density and momentum fields.
     #[arg(long, value_enum, default_value_t = crate::train::fit::LossKind::Paper)]
     pub loss: crate::train::fit::LossKind,
+    /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
+    #[arg(long)]
+    pub checkpointing: bool,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Write a checkpoint into DIR after every epoch.
@@ -1111,6 +1114,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         split_gradients: !a.joint_gradients,
         cell_mean: a.cell_mean,
         loss: a.loss,
+        checkpointing: a.checkpointing,
     };
     cfg.check(&clip).map_err(|e| e.in_file(&a.clip))?;
     let log_path = a.log.clone().unwrap_or_else(|| sibling(&a.out, ".log.csv"));

@@ -65,6 +65,9 @@ pub struct FitConfig {
     /// The objective: the paper's E_mean + λ E_var, or field matching.
     #[serde(default)]
     pub loss: LossKind,
+    /// burn's balanced gradient checkpointing (less memory for long windows, more time).
+    #[serde(default)]
+    pub checkpointing: bool,
 }
 
 /// What the fit minimises.
@@ -100,6 +103,7 @@ impl Default for FitConfig {
             split_gradients: true,
             cell_mean: false,
             loss: LossKind::Paper,
+            checkpointing: false,
         }
     }
 }
@@ -645,7 +649,12 @@ fn fit_inner(
     cfg.check(clip)?;
     init.validate()?;
     let device = cpu_device(cfg.precision)?;
-    let ad: Device = device.autodiff();
+    // Long windows can trade time for memory with burn's balanced gradient checkpointing.
+    let ad: Device = if cfg.checkpointing {
+        device.autodiff().gradient_checkpointing()
+    } else {
+        device.autodiff()
+    };
     let mut params = init.clone();
     // Stage 2 (§6.2) first: the forces are learnt with the clip's own speeds.
     params.speed = clip.speed_model(&init.speed);
