@@ -35,16 +35,22 @@ def main():
     ap.add_argument("--agents", type=int, default=300)
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--extra", default="")
+    ap.add_argument("--cell", type=float, default=4.0, help="cell size (BL); the grid covers 56×40 BL")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="herdfit-recovery-")
     clip = os.path.join(tmp, "clip")
     cells = os.path.join(tmp, "cells.json")
+    nx, ny = int(round(56 / a.cell)), int(round(40 / a.cell))
+    k = 4.0 / a.cell
     with open(cells, "w") as f:
-        json.dump({"cells": [[8, 4], [8, 5], [3, 8]]}, f)
+        # The same three 4-BL obstacle squares whatever the cell size.
+        sq = [(8, 4), (8, 5), (3, 8)]
+        json.dump({"cells": [[int(x * k) + i, int(y * k) + j] for x, y in sq
+                             for i in range(int(k)) for j in range(int(k))]}, f)
     subprocess.run([a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames),
-                    "--grid", "14x10", "--cell-size", "4", "--obstacles", cells, "--seed", "11",
-                    "--out", clip], check=True, capture_output=True)
+                    "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells,
+                    "--seed", "11", "--out", clip], check=True, capture_output=True)
     truth = json.load(open(os.path.join(clip, "truth.json")))
     t = vec(truth)
     rng = random.Random(2026)
