@@ -11,8 +11,7 @@ use crate::fields::{rasterise, ClipFields};
 use crate::io::AgentRow;
 use crate::metrics::{angular_momentum, aspect_ratio, centroid, field_points, polarization};
 use crate::params::Params;
-use crate::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model, World};
-use crate::synth::obstacle_map;
+use crate::sim::{theta_tensor, ForceTensors, HerdState};
 use crate::train::fit::{guidance_field, init_herd};
 use rand::SeedableRng;
 use serde::Serialize;
@@ -160,14 +159,7 @@ pub fn simulate_clip(
     let g = clip.grid();
     let mut params = params.clone();
     params.speed = clip.speed_model(&params.speed);
-    let mut model = Model {
-        params,
-        world: World {
-            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
-            guidance: Guidance::None,
-        },
-        dt: 1.0 / clip.meta.fps,
-    };
+    let mut model = crate::train::fit::clip_model(params, clip);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let rows = init_herd(clip, range.start, &model.params.speed, &mut rng);
     if rows.is_empty() {

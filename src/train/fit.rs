@@ -197,6 +197,20 @@ pub fn log_csv(rows: &[LogRow]) -> String {
     s
 }
 
+/// The model of a clip: its obstacle cells, its frame rate, and `params` (the guidance is set per
+/// frame by the caller).
+pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
+    let g = clip.grid();
+    Model {
+        params,
+        world: World {
+            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
+            guidance: Guidance::None,
+        },
+        dt: 1.0 / clip.meta.fps,
+    }
+}
+
 /// The clip's velocity field of frame `f`, propagated into empty accessible cells (each empty cell
 /// takes the mean of its already-filled 4-neighbours, breadth first), as leader guidance.
 pub fn guidance_field(clip: &ClipFields, f: usize) -> Guidance {
@@ -658,15 +672,7 @@ fn fit_inner(
     let mut params = init.clone();
     // Stage 2 (§6.2) first: the forces are learnt with the clip's own speeds.
     params.speed = clip.speed_model(&init.speed);
-    let g = clip.grid();
-    let mut model = Model {
-        params: params.clone(),
-        world: World {
-            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
-            guidance: Guidance::None,
-        },
-        dt: 1.0 / clip.meta.fps,
-    };
+    let mut model = clip_model(params.clone(), clip);
     let guidance: Vec<Guidance> = (0..clip.frames())
         .map(|f| guidance_field(clip, f))
         .collect();
@@ -876,15 +882,7 @@ pub fn evaluate(
     precision: Precision,
 ) -> Result<(f64, f64)> {
     let device = cpu_device(precision)?;
-    let g = clip.grid();
-    let mut model = Model {
-        params: params.clone(),
-        world: World {
-            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
-            guidance: Guidance::None,
-        },
-        dt: 1.0 / clip.meta.fps,
-    };
+    let mut model = clip_model(params.clone(), clip);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rows = init_herd(clip, range.start, &params.speed, &mut rng);
     if rows.is_empty() {

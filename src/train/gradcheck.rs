@@ -272,15 +272,7 @@ impl LossScenario {
         }
         let mut params = params.clone();
         params.speed = clip.speed_model(&params.speed);
-        let g = clip.grid();
-        let mut model = Model {
-            params,
-            world: World {
-                obstacles: Some(crate::synth::obstacle_map(&g, &clip.obstacles)),
-                guidance: Guidance::None,
-            },
-            dt: 1.0 / clip.meta.fps,
-        };
+        let mut model = super::fit::clip_model(params, clip);
         let guidance: Vec<Guidance> = (0..clip.frames())
             .map(|f| guidance_field(clip, f))
             .collect();
