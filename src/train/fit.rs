@@ -508,14 +508,14 @@ pub fn plan_step(
     ))
 }
 
-/// Loss of one window: mean over its steps of E_mean + λ E_var. Returns the end state, the loss
+/// Loss of one window: mean over its steps of a·E_mean + b·E_var with `(a, b)` = `weights`. Returns the end state, the loss
 /// tensor and the mean E_mean and E_var values.
 pub fn window_loss(
     model: &Model,
     f: &ForceTensors,
     mut state: HerdState,
     plans: &[(StepDecisions, StepTarget)],
-    var_weight: f64,
+    (mean_weight, var_weight): (f64, f64),
 ) -> Result<(HerdState, Tensor<1>, f64, f64)> {
     let mut total: Option<Tensor<1>> = None;
     let (mut em, mut ev) = (0.0, 0.0);
@@ -524,7 +524,7 @@ pub fn window_loss(
         let l = step_loss(&state.hx, &state.hy, tgt);
         em += crate::sim::read_vec(&l.e_mean.clone().detach())?[0];
         ev += crate::sim::read_vec(&l.e_var.clone().detach())?[0];
-        let step = l.e_mean + l.e_var.mul_scalar(var_weight);
+        let step = l.e_mean.mul_scalar(mean_weight) + l.e_var.mul_scalar(var_weight);
         total = Some(match total {
             None => step,
             Some(t) => t + step,
@@ -736,10 +736,12 @@ fn fit_inner(
             let mut plans = Vec::with_capacity(w);
             let mut total: Option<Tensor<1>> = None;
             let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
-            let mean_weight = if cfg.split_gradients {
-                0.0
-            } else {
-                cfg.var_weight
+            // Weights of (E_mean, E_var) in the back-propagated loss: the paper's split takes
+            // E_var's gradient in a second pass; field matching replaces E_mean.
+            let weights = match (cfg.loss, cfg.split_gradients) {
+                (LossKind::Fields, _) => (0.0, cfg.var_weight),
+                (LossKind::Paper, true) => (1.0, 0.0),
+                (LossKind::Paper, false) => (1.0, cfg.var_weight),
             };
             for s in 0..w {
                 let plan = plan_step(
@@ -753,24 +755,20 @@ fn fit_inner(
                     f + s,
                     &mut rng,
                 )?;
-                let (next, loss, e_m, e_v) = window_loss(
-                    &model,
-                    &forces,
-                    state,
-                    std::slice::from_ref(&plan),
-                    mean_weight,
-                )?;
+                let (next, loss, e_m, e_v) =
+                    window_loss(&model, &forces, state, std::slice::from_ref(&plan), weights)?;
                 plans.push(plan);
                 state = next;
                 em += e_m / w as f64;
                 ev += e_v / w as f64;
-                let fl = fields_loss(clip, &state, f + s + 1)?;
-                ef += crate::sim::read_vec(&fl.clone().detach())?[0] / w as f64;
                 let loss = if cfg.loss == LossKind::Fields {
-                    // Field matching replaces E_mean (still logged); E_var stays, weighted by λ.
-                    drop(loss);
-                    fl + step_var_only(cfg, &plans, &state)?
+                    let fl = fields_loss(clip, &state, f + s + 1)?;
+                    ef += crate::sim::read_vec(&fl.clone().detach())?[0] / w as f64;
+                    loss + fl
                 } else {
+                    // Logged only: evaluated off the autodiff graph.
+                    let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
+                    ef += crate::sim::read_vec(&fl)?[0] / w as f64;
                     loss
                 };
                 total = Some(match total {
@@ -909,20 +907,6 @@ pub fn evaluate(
 /// Writes the training log CSV atomically.
 pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
     write_atomic(path, log_csv(rows).as_bytes())
-}
-
-/// λ_var E_var of the last planned step on the current state (field-matching mode).
-fn step_var_only(
-    cfg: &FitConfig,
-    plans: &[(StepDecisions, StepTarget)],
-    state: &HerdState,
-) -> Result<Tensor<1>> {
-    let (_, tgt) = plans
-        .last()
-        .ok_or_else(|| Error::invalid("no planned step"))?;
-    Ok(step_loss(&state.hx, &state.hy, tgt)
-        .e_var
-        .mul_scalar(cfg.var_weight))
 }
 
 /// Field-matching loss of a state against frame `f` of the clip:

@@ -321,7 +321,7 @@ impl LossScenario {
         let f = crate::sim::ForceTensors::new(&t, &self.model.params.constants);
         let state = HerdState::from_rows(&self.init, device);
         let (_, loss, _, _) =
-            super::fit::window_loss(&self.model, &f, state, &self.plans, self.var_weight)?;
+            super::fit::window_loss(&self.model, &f, state, &self.plans, (1.0, self.var_weight))?;
         Ok((loss, t))
     }
 
