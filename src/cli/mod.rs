@@ -180,19 +180,25 @@ pub struct FitArgs {
     pub plot: Option<PathBuf>,
 }
 
+/// Two values of type `T` from `s` cut in two by `split` (each trimmed); `form` names the
+/// expected shape and `what` one value in the messages.
+fn parse_two<'a, T: std::str::FromStr>(
+    s: &'a str,
+    split: impl Fn(&'a str) -> Option<(&'a str, &'a str)>,
+    form: &str,
+    what: &str,
+) -> std::result::Result<(T, T), String> {
+    let (a, b) = split(s).ok_or_else(|| format!("expected {form}, got '{s}'"))?;
+    let p = |t: &str| {
+        t.trim()
+            .parse::<T>()
+            .map_err(|_| format!("'{t}' is not {what}"))
+    };
+    Ok((p(a)?, p(b)?))
+}
+
 fn parse_range(s: &str) -> std::result::Result<(usize, usize), String> {
-    let (a, b) = s
-        .split_once("..")
-        .ok_or_else(|| format!("expected a..b, got '{s}'"))?;
-    let a: usize = a
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{a}' is not a frame index"))?;
-    let b: usize = b
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{b}' is not a frame index"))?;
-    Ok((a, b))
+    parse_two(s, |s| s.split_once(".."), "a..b", "a frame index")
 }
 
 fn sibling(out: &std::path::Path, suffix: &str) -> PathBuf {
@@ -317,17 +323,8 @@ pub struct FieldsInfoArgs {
 }
 
 fn parse_grid(s: &str) -> std::result::Result<(usize, usize), String> {
-    let (a, b) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("expected NXxNY, got '{s}'"))?;
-    let nx: usize = a
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{a}' is not a cell count"))?;
-    let ny: usize = b
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{b}' is not a cell count"))?;
+    let (nx, ny): (usize, usize) =
+        parse_two(s, |s| s.split_once(['x', 'X']), "NXxNY", "a cell count")?;
     if nx == 0 || ny == 0 {
         return Err("the grid needs at least one cell each way".into());
     }
@@ -453,17 +450,7 @@ pub struct BenchArgs {
 }
 
 fn parse_pair(s: &str) -> std::result::Result<(f64, f64), String> {
-    let (a, b) = s
-        .split_once(',')
-        .ok_or_else(|| format!("expected DX,DY, got '{s}'"))?;
-    let a: f64 = a
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{a}' is not a number"))?;
-    let b: f64 = b
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{b}' is not a number"))?;
+    let (a, b): (f64, f64) = parse_two(s, |s| s.split_once(','), "DX,DY", "a number")?;
     if !(a.is_finite() && b.is_finite()) || (a == 0.0 && b == 0.0) {
         return Err("the direction must be finite and non-zero".into());
     }
