@@ -4,7 +4,8 @@ losses E_mean and E_var (one epoch of the fit's schedule, no updates, same herd 
 parameter moves by ±0.2 from its true value. A parameter is identifiable by a loss only if both
 moves raise it.
 
-    python3 scripts/landscape.py [--herdfit target/release/herdfit] [--extra "--cell-mean"]
+    python3 scripts/landscape.py [--herdfit target/release/herdfit] [--scenario crossing|drift]
+        [--key e_mean,e_var|e_fields] [--extra "--loss ensemble --replicas 16"]
 """
 import argparse, json, os, subprocess, tempfile
 
@@ -14,14 +15,30 @@ NAMES = [f"{f}.{p}" for f in ("cohesion", "avoidance", "alignment", "obstacle")
 ap = argparse.ArgumentParser()
 ap.add_argument("--herdfit", default="target/release/herdfit")
 ap.add_argument("--extra", default="")
+ap.add_argument("--scenario", choices=["crossing", "drift"], default="crossing",
+                help="the clip of scripts/recovery.py")
+ap.add_argument("--key", default="e_mean,e_var",
+                help="logged losses to report (e_mean, e_var, e_fields)")
 a = ap.parse_args()
+keys = a.key.split(",")
 tmp = tempfile.mkdtemp(prefix="herdfit-landscape-")
 clip = os.path.join(tmp, "clip")
 cells = os.path.join(tmp, "cells.json")
-json.dump({"cells": [[8, 4], [8, 5], [3, 8]]}, open(cells, "w"))
-subprocess.run([a.herdfit, "synth", "--agents", "300", "--frames", "100", "--grid", "14x10",
-                "--cell-size", "4", "--obstacles", cells, "--seed", "11", "--out", clip],
-               check=True, capture_output=True)
+crossing = a.scenario == "crossing"
+json.dump({"cells": [[7, 4], [7, 5], [8, 4], [8, 5], [11, 2], [11, 7]] if crossing
+           else [[8, 4], [8, 5], [3, 8]]}, open(cells, "w"))
+cmd = [a.herdfit, "synth", "--agents", "300", "--frames", "200" if crossing else "100",
+       "--grid", "14x10", "--cell-size", "4", "--obstacles", cells, "--seed", "11", "--out", clip]
+if crossing:
+    subprocess.run([a.herdfit, "synth", "--agents", "2", "--frames", "1", "--grid", "1x1",
+                    "--cell-size", "1", "--out", os.path.join(tmp, "probe")],
+                   check=True, capture_output=True)
+    t = json.load(open(os.path.join(tmp, "probe", "truth.json")))
+    t.pop("physical", None)
+    t["speed"]["mean"], t["speed"]["std"] = 2.0, 0.3
+    json.dump(t, open(os.path.join(tmp, "truth-in.json"), "w"))
+    cmd += ["--params", os.path.join(tmp, "truth-in.json")]
+subprocess.run(cmd, check=True, capture_output=True)
 truth = json.load(open(os.path.join(clip, "truth.json")))
 
 
@@ -36,10 +53,10 @@ def loss(p):
 
 
 base, ev = loss(truth)
-print(f"truth: E_mean {base['e_mean']:.4f}, E_var {base['e_var']:.4f}, "
-      f"density error {ev['density_error']:.4f}, velocity error {ev['velocity_error']:.4f}")
-print("| parameter | truth | ΔE_mean (−0.2) | ΔE_mean (+0.2) | ΔE_var (−0.2) | ΔE_var (+0.2) |")
-print("|---|---:|---:|---:|---:|---:|")
+print(f"truth: " + ", ".join(f"{k} {base[k]:.4f}" for k in keys) +
+      f", density error {ev['density_error']:.4f}, velocity error {ev['velocity_error']:.4f}")
+print("| parameter | truth | " + " | ".join(f"Δ{k} (−0.2) | Δ{k} (+0.2)" for k in keys) + " |")
+print("|---|---:|" + "---:|---:|" * len(keys))
 for n in NAMES:
     f, k = n.split(".")
     cols = []
@@ -52,5 +69,5 @@ for n in NAMES:
         p["forces"][f][k] = round(v, 6)
         cols.append(loss(p)[0])
     fmt = lambda c, key: "—" if c is None else f"{c[key] - base[key]:+.4f}"
-    print(f"| {n} | {truth['forces'][f][k]} | {fmt(cols[0], 'e_mean')} | {fmt(cols[1], 'e_mean')} | "
-          f"{fmt(cols[0], 'e_var')} | {fmt(cols[1], 'e_var')} |")
+    print(f"| {n} | {truth['forces'][f][k]} | " +
+          " | ".join(f"{fmt(cols[0], key)} | {fmt(cols[1], key)}" for key in keys) + " |", flush=True)

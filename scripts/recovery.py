@@ -4,9 +4,11 @@ several random starts for each window size, and report the mean |θ − θ*| per
 errors before/after, and wall time. Uses only the herdfit CLI and the Python standard library.
 
     python3 scripts/recovery.py [--herdfit target/release/herdfit] [--starts 5] [--windows 1,4,16]
-        [--epochs 8] [--extra "--cell-mean"] [--out results.json]
+        [--epochs 8] [--scenario crossing|drift] [--jobs 2] [--extra "--loss ensemble --replicas 4"]
+        [--out results.json]
 """
 import argparse, json, os, random, subprocess, sys, tempfile, time
+from concurrent.futures import ThreadPoolExecutor
 
 NAMES = [f"{f}.{p}" for f in ("cohesion", "avoidance", "alignment", "obstacle")
          for p in ("weight", "radial", "angular")]
@@ -33,48 +35,74 @@ def main():
     ap.add_argument("--windows", default="1,4,16")
     ap.add_argument("--epochs", type=int, default=8)
     ap.add_argument("--agents", type=int, default=300)
-    ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--frames", type=int, default=0, help="0: 200 (crossing) or 100 (drift)")
     ap.add_argument("--extra", default="")
     ap.add_argument("--cell", type=float, default=4.0, help="cell size (BL); the grid covers 56×40 BL")
+    ap.add_argument("--scenario", choices=["crossing", "drift"], default="crossing",
+                    help="crossing: 2 BL/s through obstacle cells in the herd's path (default); "
+                         "drift: 1 BL/s, obstacles off the path (session-1 protocol)")
+    ap.add_argument("--jobs", type=int, default=1, help="fits run in parallel")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
+    if a.frames == 0:
+        a.frames = 200 if a.scenario == "crossing" else 100
     tmp = tempfile.mkdtemp(prefix="herdfit-recovery-")
     clip = os.path.join(tmp, "clip")
     cells = os.path.join(tmp, "cells.json")
     nx, ny = int(round(56 / a.cell)), int(round(40 / a.cell))
     k = 4.0 / a.cell
     with open(cells, "w") as f:
-        # The same three 4-BL obstacle squares whatever the cell size.
-        sq = [(8, 4), (8, 5), (3, 8)]
+        # The same 4-BL obstacle squares whatever the cell size.
+        sq = [(8, 4), (8, 5), (3, 8)] if a.scenario == "drift" else \
+            [(7, 4), (7, 5), (8, 4), (8, 5), (11, 2), (11, 7)]
         json.dump({"cells": [[int(x * k) + i, int(y * k) + j] for x, y in sq
                              for i in range(int(k)) for j in range(int(k))]}, f)
-    subprocess.run([a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames),
-                    "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells,
-                    "--seed", "11", "--out", clip], check=True, capture_output=True)
+    cmd = [a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames),
+           "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells,
+           "--seed", "11", "--out", clip]
+    if a.scenario == "crossing":
+        # The built-in set at 2 BL/s (speed STD 0.3): the herd crosses the obstacles in 8 s.
+        p = os.path.join(tmp, "truth-in.json")
+        subprocess.run([a.herdfit, "synth", "--agents", "2", "--frames", "1", "--grid", "1x1",
+                        "--cell-size", "1", "--out", os.path.join(tmp, "probe")],
+                       check=True, capture_output=True)
+        t = json.load(open(os.path.join(tmp, "probe", "truth.json")))
+        t.pop("physical", None)
+        t["speed"]["mean"], t["speed"]["std"] = 2.0, 0.3
+        json.dump(t, open(p, "w"))
+        cmd += ["--params", p]
+    subprocess.run(cmd, check=True, capture_output=True)
     truth = json.load(open(os.path.join(clip, "truth.json")))
     t = vec(truth)
     rng = random.Random(2026)
     starts = [[round(rng.uniform(0.05, 0.95), 4) for _ in NAMES] for _ in range(a.starts)]
-    rows = []
-    for w in [int(x) for x in a.windows.split(",")]:
-        for k, s in enumerate(starts):
-            init = os.path.join(tmp, f"init{k}.json")
-            with open(init, "w") as f:
-                json.dump(with_vec(truth, s), f)
-            out = os.path.join(tmp, f"fit-w{w}-{k}.json")
-            t0 = time.time()
-            subprocess.run([a.herdfit, "fit", clip, "--out", out, "--init", init, "--window", str(w),
-                            "--epochs", str(a.epochs), "--seed", str(k)] + a.extra.split(),
-                           check=True, capture_output=True)
-            wall = time.time() - t0
-            fitted = json.load(open(out))
-            prov = fitted["provenance"]
-            rows.append({"window": w, "start": k, "wall_s": wall,
-                         "err_start": [abs(x - y) for x, y in zip(s, t)],
-                         "err_fit": [abs(x - y) for x, y in zip(vec(fitted), t)],
-                         "evaluation": prov["evaluation"], "loss": prov["loss"]})
-            print(f"W={w} start {k}: mean |θ−θ*| {sum(rows[-1]['err_start'])/12:.3f} → "
-                  f"{sum(rows[-1]['err_fit'])/12:.3f}, {wall:.1f} s", file=sys.stderr)
+    for k, s in enumerate(starts):
+        with open(os.path.join(tmp, f"init{k}.json"), "w") as f:
+            json.dump(with_vec(truth, s), f)
+
+    def one(job):
+        w, k = job
+        out = os.path.join(tmp, f"fit-w{w}-{k}.json")
+        t0 = time.time()
+        subprocess.run([a.herdfit, "fit", clip, "--out", out, "--init",
+                        os.path.join(tmp, f"init{k}.json"), "--window", str(w),
+                        "--epochs", str(a.epochs), "--seed", str(k)] + a.extra.split(),
+                       check=True, capture_output=True)
+        wall = time.time() - t0
+        fitted = json.load(open(out))
+        prov = fitted["provenance"]
+        row = {"window": w, "start": k, "wall_s": wall,
+               "err_start": [abs(x - y) for x, y in zip(starts[k], t)],
+               "err_fit": [abs(x - y) for x, y in zip(vec(fitted), t)],
+               "fitted": vec(fitted),
+               "evaluation": prov["evaluation"], "loss": prov["loss"]}
+        print(f"W={w} start {k}: mean |θ−θ*| {sum(row['err_start'])/12:.3f} → "
+              f"{sum(row['err_fit'])/12:.3f}, {wall:.1f} s", file=sys.stderr)
+        return row
+
+    jobs = [(w, k) for w in [int(x) for x in a.windows.split(",")] for k in range(len(starts))]
+    with ThreadPoolExecutor(a.jobs) as ex:
+        rows = list(ex.map(one, jobs))
     res = {"truth": t, "names": NAMES, "starts": starts, "runs": rows,
            "settings": vars(a)}
     if a.out:

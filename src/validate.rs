@@ -12,7 +12,7 @@ use crate::io::AgentRow;
 use crate::metrics::{angular_momentum, aspect_ratio, centroid, field_points, polarization};
 use crate::params::Params;
 use crate::sim::{theta_tensor, ForceTensors, HerdState};
-use crate::train::fit::{guidance_field, init_herd};
+use crate::train::fit::{guidance_field, start_herd, Settle};
 use rand::SeedableRng;
 use serde::Serialize;
 
@@ -148,12 +148,13 @@ pub struct SimRun {
 }
 
 /// Simulates `range` of the clip from its first frame's fields (leaders follow the clip's velocity
-/// field, no population control) with `params` and seed `seed`.
+/// field, no population control) with `params` and seed `seed`, the herd settled by `settle`.
 pub fn simulate_clip(
     clip: &ClipFields,
     params: &Params,
     range: std::ops::Range<usize>,
     seed: u64,
+    settle: &Settle,
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
     let g = clip.grid();
@@ -161,7 +162,7 @@ pub fn simulate_clip(
     params.speed = clip.speed_model(&params.speed);
     let mut model = crate::train::fit::clip_model(params, clip);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let rows = init_herd(clip, range.start, &model.params.speed, &mut rng);
+    let rows = start_herd(&model, clip, range.start, settle, &mut rng, device)?;
     if rows.is_empty() {
         return Err(Error::invalid(format!(
             "frame {} of the clip holds no agents: nothing to start from",
@@ -257,16 +258,28 @@ pub struct Report {
     pub sets: Vec<SetReport>,
 }
 
+/// Settings of a validation (the `validate` command's flags).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidateConfig {
+    /// Fraction of the clip before the held-out part.
+    pub split: f64,
+    /// Coarse grid (cells per side) of the density and velocity errors.
+    pub grid: usize,
+    /// Simulations per parameter set.
+    pub seeds: usize,
+    /// How the starting herd is settled.
+    pub settle: Settle,
+}
+
 /// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
 pub fn validate(
     clip: &ClipFields,
     clip_name: &str,
     sets: &[(String, Params)],
-    split: f64,
-    grid: usize,
-    seeds: usize,
+    cfg: &ValidateConfig,
     mut progress: impl FnMut(),
 ) -> Result<(Report, Vec<Vec<SimRun>>)> {
+    let (split, grid, seeds, settle) = (cfg.split, cfg.grid, cfg.seeds, &cfg.settle);
     if !(split.is_finite() && (0.0..1.0).contains(&split)) {
         return Err(Error::invalid(format!("--split {split} must be in [0, 1)")));
     }
@@ -293,7 +306,7 @@ pub fn validate(
         let mut map = vec![vec![0.0f64; kx]; ky];
         let mut runs = Vec::new();
         for seed in 0..seeds {
-            let run = simulate_clip(clip, params, start..nf, seed as u64, &device)?;
+            let run = simulate_clip(clip, params, start..nf, seed as u64, settle, &device)?;
             for (k, f) in (start..nf).enumerate() {
                 // The simulation's fields are indexed from the first held-out frame.
                 let (de, ve) = coarse_errors(clip, f, &run.fields, f - start, grid);

@@ -391,6 +391,14 @@ fn bad_fit_input_fails_cleanly() {
         "bad.json",
     );
     fails(&["fit", s(&clip), "--out", s(&out), "--lr", "5"], "--lr");
+    fails(
+        &["fit", s(&clip), "--out", s(&out), "--loss", "ensemble"],
+        "--replicas",
+    );
+    fails(
+        &["fit", s(&clip), "--out", s(&out), "--replicas", "0"],
+        "--replicas",
+    );
     // A clip with zero density everywhere.
     let mut c = ClipFields::load(&clip).unwrap();
     c.density.fill(0.0);
@@ -432,5 +440,143 @@ fn gradient_checkpointing_gives_the_same_fit() {
     assert_eq!(
         Params::load(&a).unwrap().to_vec(),
         Params::load(&b).unwrap().to_vec()
+    );
+}
+
+#[test]
+fn ensemble_loss_subtracts_the_replicas_own_spread() {
+    use herdfit::io::AgentRow;
+    use herdfit::sim::HerdState;
+    use herdfit::train::fit::{ensemble_loss, fields_loss};
+    // Clip frame 1: two agents' worth of density in cell 1, velocity +x everywhere.
+    let mut clip = line_clip([0.0; 5], [1.0, 0.0]);
+    clip.density[[1, 0, 1]] = 2.0;
+    // Agents at cell centres splat wholly into their cell.
+    let at = |cells: [usize; 2]| -> HerdState {
+        let rows: Vec<AgentRow> = cells
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| AgentRow {
+                id: i as u64,
+                x: c as f64 + 0.5,
+                y: 0.5,
+                vx: 1.0,
+                vy: 0.0,
+            })
+            .collect();
+        HerdState::from_rows(&rows, &dev())
+    };
+    let (a, b) = (at([1, 1]), at([1, 3]));
+    let e = |v: Vec<HerdState>| val(ensemble_loss(&clip, &v, 1).unwrap());
+    // A matches the clip exactly; B misplaces one agent: ‖ρ_B − ρ‖² = 2, Σρ² = 4, and the same
+    // for momentum, so matching B alone costs 2/4 + 2/4 = 1.
+    assert!(val(fields_loss(&clip, &a, 1).unwrap()).abs() < 1e-12);
+    assert!((val(fields_loss(&clip, &b, 1).unwrap()) - 1.0).abs() < 1e-12);
+    // Identical replicas: no spread to subtract, the plain field loss.
+    assert!(e(vec![a.clone(), a.clone()]).abs() < 1e-12);
+    assert!((e(vec![b.clone(), b.clone()]) - 1.0).abs() < 1e-12);
+    // A and B: the mean [0, 1.5, 0, 0.5, 0] is 0.5 away (squared) from the clip, which is exactly
+    // the spread term S/K = ((0.25 + 0.25) · 2 / 1) / 2, so the estimate of ‖E ρ' − ρ‖² is 0,
+    // whereas the mean of the two plain losses is 0.5: spread is not rewarded.
+    assert!(e(vec![a.clone(), b.clone()]).abs() < 1e-12);
+    // One replica is refused.
+    assert!(ensemble_loss(&clip, &[a], 1).is_err());
+}
+
+#[test]
+fn an_ensemble_fit_is_deterministic_and_logs_its_objective() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = make_clip(dir.path(), "clip", "80", "17");
+    let run = |name: &str| {
+        let out = dir.path().join(name);
+        ok(&[
+            "fit",
+            s(&clip),
+            "--out",
+            s(&out),
+            "--epochs",
+            "2",
+            "--window",
+            "8",
+            "--loss",
+            "ensemble",
+            "--replicas",
+            "3",
+            "--seed",
+            "5",
+        ]);
+        (
+            std::fs::read_to_string(&out).unwrap(),
+            std::fs::read_to_string(dir.path().join(name.replace(".json", ".log.csv"))).unwrap(),
+        )
+    };
+    let (p1, log1) = run("a.json");
+    let (p2, log2) = run("b.json");
+    // Same bytes apart from the output path in the recorded command.
+    assert_eq!(p1.replace("a.json", "X"), p2.replace("b.json", "X"));
+    assert_eq!(log1, log2);
+    // The logged objective (e_fields column) is finite; the estimate of ‖E ρ' − ρ‖² may dip
+    // below 0 only by its own noise, never by more than the plain loss.
+    let rows: Vec<Vec<f64>> = log1
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 2 * 2, "2 epochs of 2 windows");
+    for r in &rows {
+        assert!(r[4].is_finite() && r[4] > -1.0 && r[4] < 10.0, "{r:?}");
+    }
+    assert!(rows.iter().any(|r| r[4] != rows[0][4]));
+}
+
+#[test]
+fn settling_keeps_cells_and_headings_and_separates_close_pairs() {
+    use herdfit::train::fit::{clip_model, init_herd, settle, Settle};
+    use rand::SeedableRng;
+    let dir = tempfile::tempdir().unwrap();
+    let clip = ClipFields::load(&make_clip(dir.path(), "clip", "120", "3")).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let params = Params::default();
+    let rows = init_herd(&clip, 0, &params.speed, &mut rng);
+    let model = clip_model(params, &clip);
+    let g = clip.grid();
+    let settled = |n: usize| {
+        let mut r = rows.clone();
+        let cfg = Settle {
+            iterations: n,
+            ..Default::default()
+        };
+        settle(&model, &clip, &mut r, &cfg, &dev()).unwrap();
+        r
+    };
+    // Agents whose nearest neighbour is closer than 0.4 BL.
+    let crowded = |r: &[herdfit::io::AgentRow]| {
+        (0..r.len())
+            .filter(|&i| {
+                (0..r.len()).any(|j| {
+                    j != i && ((r[i].x - r[j].x).powi(2) + (r[i].y - r[j].y).powi(2)).sqrt() < 0.4
+                })
+            })
+            .count()
+    };
+    assert_eq!(settled(0), rows);
+    let a = settled(200);
+    assert_eq!(a, settled(200), "deterministic");
+    for (p, q) in rows.iter().zip(&a) {
+        assert_eq!(g.cell_of([p.x, p.y]), g.cell_of([q.x, q.y]));
+        assert_eq!((p.vx, p.vy, p.id), (q.vx, q.vy, q.id));
+    }
+    let moved = rows
+        .iter()
+        .zip(&a)
+        .filter(|(p, q)| (p.x - q.x).abs() + (p.y - q.y).abs() > 1e-6)
+        .count();
+    assert!(moved > rows.len() / 2, "{moved} of {} moved", rows.len());
+    // Avoidance (0.8 BL range) pushes apart the near-coincident pairs uniform sampling makes.
+    assert!(
+        2 * crowded(&a) < crowded(&rows),
+        "{} → {}",
+        crowded(&rows),
+        crowded(&a)
     );
 }

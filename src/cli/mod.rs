@@ -164,6 +164,13 @@ pub struct FitArgs {
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
+    /// Iterations settling each epoch's starting herd into the model's spacing (0: none).
+    #[arg(long, value_name = "N", default_value_t = crate::train::fit::Settle::default().iterations)]
+    pub settle: usize,
+    /// Herds simulated side by side from the same fields (losses averaged; `--loss ensemble`
+    /// compares their mean fields with the clip's).
+    #[arg(long, value_name = "K", default_value_t = 1)]
+    pub replicas: usize,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Write a checkpoint into DIR after every epoch.
@@ -280,6 +287,9 @@ pub struct ValidateArgs {
     /// Simulations per parameter set (averaged).
     #[arg(long, value_name = "K", default_value_t = 3)]
     pub seeds: usize,
+    /// Iterations settling the starting herd into the model's spacing (0: none).
+    #[arg(long, value_name = "N", default_value_t = crate::train::fit::Settle::default().iterations)]
+    pub settle: usize,
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
@@ -796,6 +806,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         split: 0.5,
         grid: 10,
         seeds: 3,
+        settle: crate::train::fit::Settle::default().iterations,
         no_video: false,
         out: report_dir.clone(),
     })?;
@@ -1102,6 +1113,11 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         cell_mean: a.cell_mean,
         loss: a.loss,
         checkpointing: a.checkpointing,
+        settle: crate::train::fit::Settle {
+            iterations: a.settle,
+            ..Default::default()
+        },
+        replicas: a.replicas,
     };
     cfg.check(&clip).map_err(|e| e.in_file(&a.clip))?;
     let log_path = a.log.clone().unwrap_or_else(|| sibling(&a.out, ".log.csv"));
@@ -1151,8 +1167,22 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     start_params.speed = res.params.speed.clone();
     let loss_before = crate::train::fit::loss_of(&clip, &start_params, &cfg)?;
     let loss_after = crate::train::fit::loss_of(&clip, &res.params, &cfg)?;
-    let before = evaluate(&clip, &start_params, frames.clone(), a.seed, a.precision)?;
-    let after = evaluate(&clip, &res.params, frames.clone(), a.seed, a.precision)?;
+    let before = evaluate(
+        &clip,
+        &start_params,
+        frames.clone(),
+        a.seed,
+        a.precision,
+        &cfg.settle,
+    )?;
+    let after = evaluate(
+        &clip,
+        &res.params,
+        frames.clone(),
+        a.seed,
+        a.precision,
+        &cfg.settle,
+    )?;
     let last_epoch = res.log.last().map_or(0, |r| r.epoch);
     let last: Vec<&crate::train::fit::LogRow> =
         res.log.iter().filter(|r| r.epoch == last_epoch).collect();
@@ -1414,9 +1444,15 @@ fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
         &clip,
         &a.clip.display().to_string(),
         &sets,
-        a.split,
-        a.grid,
-        a.seeds,
+        &crate::validate::ValidateConfig {
+            split: a.split,
+            grid: a.grid,
+            seeds: a.seeds,
+            settle: crate::train::fit::Settle {
+                iterations: a.settle,
+                ..Default::default()
+            },
+        },
         || pb.inc(1),
     )
     .map_err(|e| e.in_file(&a.clip))?;

@@ -68,6 +68,17 @@ pub struct FitConfig {
     /// burn's balanced gradient checkpointing (less memory for long windows, more time).
     #[serde(default)]
     pub checkpointing: bool,
+    /// How each epoch's starting herd is settled (see [`settle`]).
+    #[serde(default)]
+    pub settle: Settle,
+    /// Independent herds simulated side by side from the same fields (each its own sampling and
+    /// noise); the losses are averaged over them, and `--loss ensemble` compares their mean.
+    #[serde(default = "one_replica")]
+    pub replicas: usize,
+}
+
+fn one_replica() -> usize {
+    1
 }
 
 /// What the fit minimises.
@@ -81,6 +92,10 @@ pub enum LossKind {
     /// splatting of the agents and of their velocities) against the clip's,
     /// Σ(ρ' − ρ)² / Σρ² + Σ‖ρ'V' − ρV‖² / Σ‖ρV‖², plus λ_var E_var.
     Fields,
+    /// Field matching of the *expected* simulated fields: the replicas' mean fields against the
+    /// clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖², see
+    /// [`ensemble_loss`]), plus λ_var E_var. Needs `replicas` ≥ 2.
+    Ensemble,
 }
 
 /// Indices of the alignment parameters in the θ vector.
@@ -104,6 +119,8 @@ impl Default for FitConfig {
             cell_mean: false,
             loss: LossKind::Paper,
             checkpointing: false,
+            settle: Settle::default(),
+            replicas: 1,
         }
     }
 }
@@ -120,6 +137,17 @@ impl FitConfig {
         }
         if self.frames.end - self.frames.start < 2 {
             return Err(Error::invalid("--frames must span at least 2 frames"));
+        }
+        if self.loss == LossKind::Ensemble && self.replicas < 2 {
+            return Err(Error::invalid(
+                "--loss ensemble compares several herds: set --replicas to 2 or more",
+            ));
+        }
+        if self.replicas == 0 || self.replicas > 64 {
+            return Err(Error::invalid(format!(
+                "--replicas {} is out of range 1..=64",
+                self.replicas
+            )));
         }
         if self.window == 0 || self.epochs == 0 {
             return Err(Error::invalid("--window and --epochs must be ≥ 1"));
@@ -159,7 +187,8 @@ pub struct LogRow {
     pub frame: usize,
     pub e_mean: f64,
     pub e_var: f64,
-    /// The field-matching loss (the objective of `--loss fields`; logged in both modes).
+    /// The field-matching loss: the objective of `--loss fields` (logged with `--loss paper`), or
+    /// the ensemble objective with `--loss ensemble`.
     #[serde(default)]
     pub e_fields: f64,
     pub density_error: f64,
@@ -665,9 +694,9 @@ fn fit_inner(
     let device = cpu_device(cfg.precision)?;
     // Long windows can trade time for memory with burn's balanced gradient checkpointing.
     let ad: Device = if cfg.checkpointing {
-        device.autodiff().gradient_checkpointing()
+        device.clone().autodiff().gradient_checkpointing()
     } else {
-        device.autodiff()
+        device.clone().autodiff()
     };
     let mut params = init.clone();
     // Stage 2 (§6.2) first: the forces are learnt with the clip's own speeds.
@@ -705,76 +734,108 @@ fn fit_inner(
         ),
     };
     let (a, b) = (cfg.frames.start, cfg.frames.end);
+    let replicas = cfg.replicas.max(1);
     for epoch in first_epoch..cfg.epochs {
         let mut rng = epoch_rng(cfg.seed, epoch);
-        let mut rows = init_herd(clip, a, &model.params.speed, &mut rng);
-        let mut next_id = rows.len() as u64;
+        // K independent herds (replicas) from the same fields, side by side.
+        let mut herds: Vec<Vec<AgentRow>> = Vec::with_capacity(replicas);
+        for _ in 0..replicas {
+            herds.push(start_herd(&model, clip, a, &cfg.settle, &mut rng, &device)?);
+        }
+        let mut next_ids: Vec<u64> = herds.iter().map(|h| h.len() as u64).collect();
         let mut f = a;
         while f + 1 < b {
             let w = cfg.window.min(b - 1 - f);
             let t0 = std::time::Instant::now();
-            if rows.is_empty() {
-                rows = population_control(
-                    clip,
-                    f,
-                    rows,
-                    0.0,
-                    &model.params.speed,
-                    &mut next_id,
-                    &mut rng,
-                );
+            for (rows, next_id) in herds.iter_mut().zip(next_ids.iter_mut()) {
                 if rows.is_empty() {
-                    f += w;
-                    continue;
+                    *rows = population_control(
+                        clip,
+                        f,
+                        std::mem::take(rows),
+                        0.0,
+                        &model.params.speed,
+                        next_id,
+                        &mut rng,
+                    );
                 }
             }
-            let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
-            // Pass 1: plan each step on the live state and evaluate E_mean (+ λ E_var).
-            let th = theta_tensor(&theta, &ad).require_grad();
-            let forces = ForceTensors::new(&th, &model.params.constants);
-            let mut state = HerdState::from_rows(&rows, &ad);
-            let mut plans = Vec::with_capacity(w);
-            let mut total: Option<Tensor<1>> = None;
-            let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
+            if herds.iter().all(|h| h.is_empty()) {
+                f += w;
+                continue;
+            }
             // Weights of (E_mean, E_var) in the back-propagated loss: the paper's split takes
             // E_var's gradient in a second pass; field matching replaces E_mean.
             let weights = match (cfg.loss, cfg.split_gradients) {
-                (LossKind::Fields, _) => (0.0, cfg.var_weight),
+                (LossKind::Fields | LossKind::Ensemble, _) => (0.0, cfg.var_weight),
                 (LossKind::Paper, true) => (1.0, 0.0),
                 (LossKind::Paper, false) => (1.0, cfg.var_weight),
             };
-            for s in 0..w {
-                let plan = plan_step(
-                    &mut model,
-                    clip,
-                    &guidance,
-                    &stencil,
-                    cfg.beta,
-                    cfg.cell_mean,
-                    &state,
-                    f + s,
-                    &mut rng,
-                )?;
-                let (next, loss, e_m, e_v) =
-                    window_loss(&model, &forces, state, std::slice::from_ref(&plan), weights)?;
-                plans.push(plan);
-                state = next;
-                em += e_m / w as f64;
-                ev += e_v / w as f64;
-                let loss = if cfg.loss == LossKind::Fields {
-                    let fl = fields_loss(clip, &state, f + s + 1)?;
-                    ef += crate::sim::read_vec(&fl.clone().detach())?[0] / w as f64;
-                    loss + fl
-                } else {
-                    // Logged only: evaluated off the autodiff graph.
-                    let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
-                    ef += crate::sim::read_vec(&fl)?[0] / w as f64;
-                    loss
-                };
-                total = Some(match total {
-                    None => loss,
-                    Some(t) => t + loss,
+            let th = theta_tensor(&theta, &ad).require_grad();
+            let forces = ForceTensors::new(&th, &model.params.constants);
+            let mut total: Option<Tensor<1>> = None;
+            let add = |total: &mut Option<Tensor<1>>, l: Tensor<1>| {
+                *total = Some(match total.take() {
+                    None => l,
+                    Some(t) => t + l,
                 });
+            };
+            let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
+            let mut all_plans = Vec::with_capacity(replicas);
+            let mut ends = Vec::with_capacity(replicas);
+            // Per step, each replica's end-of-step state (for the ensemble loss).
+            let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); w];
+            let live: Vec<usize> = (0..replicas).filter(|&r| !herds[r].is_empty()).collect();
+            let kr = live.len() as f64;
+            for &r in &live {
+                let mut state = HerdState::from_rows(&herds[r], &ad);
+                let mut plans = Vec::with_capacity(w);
+                for (s, slot) in per_step.iter_mut().enumerate() {
+                    let plan = plan_step(
+                        &mut model,
+                        clip,
+                        &guidance,
+                        &stencil,
+                        cfg.beta,
+                        cfg.cell_mean,
+                        &state,
+                        f + s,
+                        &mut rng,
+                    )?;
+                    let (next, loss, e_m, e_v) =
+                        window_loss(&model, &forces, state, std::slice::from_ref(&plan), weights)?;
+                    plans.push(plan);
+                    state = next;
+                    em += e_m / (w as f64 * kr);
+                    ev += e_v / (w as f64 * kr);
+                    let loss = match cfg.loss {
+                        LossKind::Fields => {
+                            let fl = fields_loss(clip, &state, f + s + 1)?;
+                            ef += crate::sim::read_vec(&fl.clone().detach())?[0] / (w as f64 * kr);
+                            loss + fl
+                        }
+                        LossKind::Ensemble => {
+                            slot.push(state.clone());
+                            loss
+                        }
+                        LossKind::Paper => {
+                            // Logged only: evaluated off the autodiff graph.
+                            let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
+                            ef += crate::sim::read_vec(&fl)?[0] / (w as f64 * kr);
+                            loss
+                        }
+                    };
+                    add(&mut total, loss.div_scalar(kr));
+                }
+                all_plans.push(plans);
+                ends.push(state);
+            }
+            if cfg.loss == LossKind::Ensemble {
+                for (s, states) in per_step.iter().enumerate() {
+                    let l = ensemble_loss(clip, states, f + s + 1)?;
+                    ef += crate::sim::read_vec(&l.clone().detach())?[0] / w as f64;
+                    add(&mut total, l);
+                }
             }
             let loss = total
                 .ok_or_else(|| Error::invalid("empty window"))?
@@ -796,15 +857,14 @@ fn fit_inner(
                 // (replayed) decisions and targets.
                 let th2 = theta_tensor(&theta, &ad).require_grad();
                 let forces2 = ForceTensors::new(&th2, &model.params.constants);
-                let mut s2 = HerdState::from_rows(&rows, &ad);
                 let mut total2: Option<Tensor<1>> = None;
-                for (dec, tgt) in &plans {
-                    s2 = model.step(&forces2, &s2, dec)?;
-                    let l = step_loss(&s2.hx, &s2.hy, tgt).e_var;
-                    total2 = Some(match total2 {
-                        None => l,
-                        Some(t) => t + l,
-                    });
+                for (k, &r) in live.iter().enumerate() {
+                    let mut s2 = HerdState::from_rows(&herds[r], &ad);
+                    for (dec, tgt) in &all_plans[k] {
+                        s2 = model.step(&forces2, &s2, dec)?;
+                        let l = step_loss(&s2.hx, &s2.hy, tgt).e_var;
+                        add(&mut total2, l.div_scalar(kr));
+                    }
                 }
                 let loss2 = total2
                     .ok_or_else(|| Error::invalid("empty window"))?
@@ -820,18 +880,25 @@ fn fit_inner(
                 update(&mut theta, &garr, &mut opt, cfg, lr, &mut rng);
             }
             model.params = model.params.with_vec(&theta);
-            rows = state.detach().rows(&ids)?;
             f += w;
-            rows = population_control(
-                clip,
-                f,
-                rows,
-                cfg.density_threshold,
-                &model.params.speed,
-                &mut next_id,
-                &mut rng,
-            );
-            let (de, ve) = field_errors(clip, f, &rows);
+            let (mut de, mut ve, mut agents) = (0.0, 0.0, 0usize);
+            for (k, &r) in live.iter().enumerate() {
+                let ids: Vec<u64> = herds[r].iter().map(|x| x.id).collect();
+                let rows = ends[k].clone().detach().rows(&ids)?;
+                herds[r] = population_control(
+                    clip,
+                    f,
+                    rows,
+                    cfg.density_threshold,
+                    &model.params.speed,
+                    &mut next_ids[r],
+                    &mut rng,
+                );
+                let (d, v) = field_errors(clip, f, &herds[r]);
+                de += d / kr;
+                ve += v / kr;
+                agents += herds[r].len();
+            }
             log.push(LogRow {
                 epoch,
                 frame: f,
@@ -840,7 +907,7 @@ fn fit_inner(
                 e_fields: ef,
                 density_error: de,
                 velocity_error: ve,
-                agents: rows.len(),
+                agents: agents / live.len(),
                 theta,
             });
             progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
@@ -878,11 +945,12 @@ pub fn evaluate(
     range: Range<usize>,
     seed: u64,
     precision: Precision,
+    settle: &Settle,
 ) -> Result<(f64, f64)> {
     let device = cpu_device(precision)?;
     let mut model = clip_model(params.clone(), clip);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let rows = init_herd(clip, range.start, &params.speed, &mut rng);
+    let rows = start_herd(&model, clip, range.start, settle, &mut rng, &device)?;
     if rows.is_empty() {
         return Err(Error::invalid("the first frame holds no agents"));
     }
@@ -931,5 +999,170 @@ pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Ten
     let em = ((mx_s - mx).square() + (my_s - my).square())
         .sum()
         .div_scalar(norm_m);
+    Ok(ed + em)
+}
+
+/// How a herd initialised from fields is settled (see [`settle`]; off by default).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Settle {
+    /// Iterations (0: no settling).
+    pub iterations: usize,
+    /// Step per unit force (s²): an agent moves by `eta · |F|` BL …
+    pub eta: f64,
+    /// … at most this many BL per iteration.
+    pub max_move: f64,
+}
+
+impl Default for Settle {
+    fn default() -> Self {
+        Settle {
+            iterations: 0,
+            eta: 0.01,
+            max_move: 0.1,
+        }
+    }
+}
+
+/// Settles a herd initialised from fields into the model's own spacing before it is simulated:
+/// each iteration moves every agent along its cohesion + avoidance + obstacle force F of eq. 3
+/// (alignment left out: it turns headings, it does not place agents) by `eta·|F|`, at most
+/// `max_move`, keeping it inside its grid cell (cell counts unchanged), headings unchanged. No
+/// gradient: this chooses the starting positions, as perception chooses neighbour lists.
+///
+/// Fields say how many agents a cell holds, not where in the cell they stand. Sampled uniformly,
+/// neighbours sit far from the balance of cohesion and avoidance that a moving herd keeps, and
+/// the first steps of a simulation turn their headings whatever the parameters: on the demo's
+/// synthetic clip, the true parameters started from the fields of frame 60 lose polarization
+/// (0.973 → 0.949 in 10 frames) while the clip keeps 0.975, and started from the clip's own
+/// positions they do not; settled (200 iterations) the run stays at 0.971–0.974
+/// (`cargo run --release --example init_bias -- out/demo/synthetic 60 200`). The price: a static
+/// balance packs agents tighter than a moving herd does, and the held-out density error of the
+/// true parameters rises (0.24 → 0.44, RESULTS.md §3). Off by default.
+pub fn settle(
+    model: &Model,
+    clip: &ClipFields,
+    rows: &mut [AgentRow],
+    cfg: &Settle,
+    device: &Device,
+) -> Result<()> {
+    if rows.is_empty() || cfg.iterations == 0 {
+        return Ok(());
+    }
+    let g = clip.grid();
+    let h = g.cell_size / 2.0 * 0.999;
+    let bounds: Vec<[f64; 4]> = rows
+        .iter()
+        .map(|r| match g.cell_of([r.x, r.y]) {
+            Some((ix, iy)) => {
+                let c = g.centre(ix, iy);
+                [c[0] - h, c[1] - h, c[0] + h, c[1] + h]
+            }
+            None => [r.x, r.y, r.x, r.y],
+        })
+        .collect();
+    let mut theta = model.params.to_vec();
+    theta[ALIGNMENT[0]] = 0.0;
+    let th = theta_tensor(&theta, device);
+    let forces = ForceTensors::new(&th, &model.params.constants);
+    let mut quiet = model.clone();
+    quiet.world.guidance = Guidance::None;
+    // Perception draws no random numbers that matter here (ξ is unused).
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let n = rows.len();
+    for _ in 0..cfg.iterations {
+        let state = HerdState::from_rows(rows, device);
+        let dec = quiet.decide(&state.snapshot()?, &mut rng);
+        let (fx, fy) = quiet.forces(&forces, &state, &dec);
+        let fx = crate::sim::read_vec(&fx.reshape([n]))?;
+        let fy = crate::sim::read_vec(&fy.reshape([n]))?;
+        for (i, r) in rows.iter_mut().enumerate() {
+            let b = bounds[i];
+            let fl = (fx[i] * fx[i] + fy[i] * fy[i]).sqrt();
+            if !(fl > 1e-12 && fl.is_finite()) {
+                continue;
+            }
+            let k = (cfg.eta * fl).min(cfg.max_move) / fl;
+            r.x = (r.x + k * fx[i]).clamp(b[0], b[2]);
+            r.y = (r.y + k * fy[i]).clamp(b[1], b[3]);
+        }
+    }
+    Ok(())
+}
+
+/// The herd a simulation of frame `f` starts from: [`init_herd`] then [`settle`] with `model`.
+pub fn start_herd(
+    model: &Model,
+    clip: &ClipFields,
+    f: usize,
+    settle_cfg: &Settle,
+    rng: &mut impl Rng,
+    device: &Device,
+) -> Result<Vec<AgentRow>> {
+    let mut rows = init_herd(clip, f, &model.params.speed, rng);
+    settle(model, clip, &mut rows, settle_cfg, device)?;
+    Ok(rows)
+}
+
+/// The ensemble objective for one frame: with ρ_k, m_k the density and momentum fields splatted
+/// from replica k (k = 1..K) and ρ̄, m̄ their means,
+///
+/// L = [‖ρ̄ − ρ‖² − S_ρ / K] / Σρ² + [‖m̄ − m‖² − S_m / K] / Σ‖m‖²,
+/// S = Σ_k ‖x_k − x̄‖² / (K − 1),
+///
+/// an unbiased estimate of ‖E[ρ'] − ρ‖² / Σρ² + … : the replicas' own spread is subtracted, so a
+/// parameter set is not rewarded for making the herd less variable (which matching one
+/// simulated herd to one clip does: E‖ρ' − ρ‖² = ‖E ρ' − ρ‖² + Var ρ' + …; RESULTS.md §1).
+pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Result<Tensor<1>> {
+    use super::target::{frame_tensors, splat};
+    let k = states.len();
+    if k < 2 {
+        return Err(Error::invalid(
+            "the ensemble loss needs at least 2 replicas",
+        ));
+    }
+    let device = states[0].x.device();
+    let g = clip.grid();
+    let [rho, vx, vy, _] = frame_tensors(clip, f, &device);
+    let mx = rho.clone() * vx;
+    let my = rho.clone() * vy;
+    let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
+    let norm_m =
+        crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);
+    let mut fields = Vec::with_capacity(k);
+    for st in states {
+        let snap = st.snapshot()?;
+        let vxa = st.hx.clone() * st.speed.clone();
+        let vya = st.hy.clone() * st.speed.clone();
+        fields.push([
+            splat(&st.x, &st.y, &snap.pos, &g, None),
+            splat(&st.x, &st.y, &snap.pos, &g, Some(&vxa)),
+            splat(&st.x, &st.y, &snap.pos, &g, Some(&vya)),
+        ]);
+    }
+    let kf = k as f64;
+    let mean = |i: usize| {
+        fields
+            .iter()
+            .map(|x| x[i].clone())
+            .reduce(|a, b| a + b)
+            .map(|t| t.div_scalar(kf))
+    };
+    let (rb, mxb, myb) = (
+        mean(0).ok_or_else(|| Error::Internal("no replica".into()))?,
+        mean(1).ok_or_else(|| Error::Internal("no replica".into()))?,
+        mean(2).ok_or_else(|| Error::Internal("no replica".into()))?,
+    );
+    let spread = |i: usize, m: &Tensor<1>| {
+        fields
+            .iter()
+            .map(|x| (x[i].clone() - m.clone()).square().sum())
+            .reduce(|a, b| a + b)
+            .map(|t| t.div_scalar((kf - 1.0) * kf))
+    };
+    let sd = spread(0, &rb).ok_or_else(|| Error::Internal("no replica".into()))?;
+    let sm = spread(1, &mxb).ok_or_else(|| Error::Internal("no replica".into()))?
+        + spread(2, &myb).ok_or_else(|| Error::Internal("no replica".into()))?;
+    let ed = ((rb - rho).square().sum() - sd).div_scalar(norm_d);
+    let em = ((mxb - mx).square().sum() + (myb - my).square().sum() - sm).div_scalar(norm_m);
     Ok(ed + em)
 }
