@@ -147,12 +147,17 @@ pub struct SimRun {
     pub fields: ClipFields,
 }
 
-/// Simulates `range` of the clip from its first frame's fields (leaders follow the clip's velocity
-/// field, no population control) with `params` and seed `seed`, the herd settled by `settle`.
+/// Simulates `range` of the clip with `params` and seed `seed` (leaders follow the clip's
+/// velocity field, no population control). The herd starts from the fields of frame
+/// `range.start − warmup` (settled by `settle`) and runs through the `warmup` frames before
+/// `range` unrecorded, so that it reaches `range.start` in an arrangement of its own making rather
+/// than the one sampled from fields (RESULTS.md §1, held-out validation); the returned frames and
+/// fields start at `range.start`.
 pub fn simulate_clip(
     clip: &ClipFields,
     params: &Params,
     range: std::ops::Range<usize>,
+    warmup: usize,
     seed: u64,
     settle: &Settle,
     device: &burn::tensor::Device,
@@ -162,23 +167,28 @@ pub fn simulate_clip(
     params.speed = clip.speed_model(&params.speed);
     let mut model = crate::train::fit::clip_model(params, clip);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let rows = start_herd(&model, clip, range.start, settle, &mut rng, device)?;
+    let first = range.start - warmup.min(range.start);
+    let rows = start_herd(&model, clip, first, settle, &mut rng, device)?;
     if rows.is_empty() {
         return Err(Error::invalid(format!(
-            "frame {} of the clip holds no agents: nothing to start from",
-            range.start
+            "frame {first} of the clip holds no agents: nothing to start from"
         )));
     }
     let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
     let theta = theta_tensor(&model.params.to_vec(), device);
     let f = ForceTensors::new(&theta, &model.params.constants);
     let mut state = HerdState::from_rows(&rows, device);
-    let mut frames = vec![rows];
-    for fr in range.start..range.end.saturating_sub(1) {
+    let mut frames = Vec::with_capacity(range.len());
+    if first == range.start {
+        frames.push(rows);
+    }
+    for fr in first..range.end.saturating_sub(1) {
         model.world.guidance = guidance_field(clip, fr);
         let dec = model.decide(&state.snapshot()?, &mut rng);
         state = model.step(&f, &state, &dec)?;
-        frames.push(state.rows(&ids)?);
+        if fr + 1 >= range.start {
+            frames.push(state.rows(&ids)?);
+        }
     }
     let mut fields = rasterise(
         &frames,
@@ -269,6 +279,9 @@ pub struct ValidateConfig {
     pub seeds: usize,
     /// How the starting herd is settled.
     pub settle: Settle,
+    /// Frames before the held-out part that the herd is simulated through first (0: it starts
+    /// from the fields of the first held-out frame).
+    pub warmup: usize,
 }
 
 /// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
@@ -306,7 +319,15 @@ pub fn validate(
         let mut map = vec![vec![0.0f64; kx]; ky];
         let mut runs = Vec::new();
         for seed in 0..seeds {
-            let run = simulate_clip(clip, params, start..nf, seed as u64, settle, &device)?;
+            let run = simulate_clip(
+                clip,
+                params,
+                start..nf,
+                cfg.warmup,
+                seed as u64,
+                settle,
+                &device,
+            )?;
             for (k, f) in (start..nf).enumerate() {
                 // The simulation's fields are indexed from the first held-out frame.
                 let (de, ve) = coarse_errors(clip, f, &run.fields, f - start, grid);

@@ -180,3 +180,51 @@ fn demo_runs_the_whole_chain() {
     }
     herdfit::params::Params::load(&out.join("params.json")).unwrap();
 }
+
+#[test]
+fn a_warm_up_starts_earlier_and_reports_the_same_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = d.join("clip");
+    ok(&[
+        "synth",
+        "--agents",
+        "80",
+        "--frames",
+        "24",
+        "--grid",
+        "8x6",
+        "--cell-size",
+        "3",
+        "--seed",
+        "5",
+        "--out",
+        s(&clip),
+    ]);
+    let run = |warmup: &str| -> serde_json::Value {
+        let out = d.join(format!("r{warmup}"));
+        ok(&[
+            "validate",
+            s(&clip),
+            "--params",
+            s(&clip.join("truth.json")),
+            "--seeds",
+            "1",
+            "--warmup",
+            warmup,
+            "--no-video",
+            "--out",
+            s(&out),
+        ]);
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+    };
+    let (a, b, c) = (run("0"), run("6"), run("500"));
+    for r in [&a, &b, &c] {
+        assert_eq!(r["frames"], serde_json::json!([12, 24]));
+        assert_eq!(r["sets"][0]["per_frame"].as_array().unwrap().len(), 12);
+    }
+    // Another start, another herd; a warm-up longer than the training part starts at frame 0.
+    assert_ne!(a["sets"][0]["per_frame"], b["sets"][0]["per_frame"]);
+    assert_ne!(b["sets"][0]["per_frame"], c["sets"][0]["per_frame"]);
+    assert_eq!(c["sets"][0]["per_frame"], run("12")["sets"][0]["per_frame"]);
+}

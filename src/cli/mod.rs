@@ -290,6 +290,10 @@ pub struct ValidateArgs {
     /// Iterations settling the starting herd into the model's spacing (0: none).
     #[arg(long, value_name = "N", default_value_t = crate::train::fit::Settle::default().iterations)]
     pub settle: usize,
+    /// Start the herd this many frames before the held-out part (from those fields) and simulate
+    /// through them unrecorded (0: start from the fields of the first held-out frame).
+    #[arg(long, value_name = "F", default_value_t = 0)]
+    pub warmup: usize,
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
@@ -807,6 +811,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         grid: 10,
         seeds: 3,
         settle: crate::train::fit::Settle::default().iterations,
+        warmup: 0,
         no_video: false,
         out: report_dir.clone(),
     })?;
@@ -1452,6 +1457,7 @@ fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
                 iterations: a.settle,
                 ..Default::default()
             },
+            warmup: a.warmup,
         },
         || pb.inc(1),
     )
