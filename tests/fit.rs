@@ -344,21 +344,30 @@ fn loss_gradcheck_passes() {
     let dir = tempfile::tempdir().unwrap();
     let clip = make_clip(dir.path(), "clip", "120", "20");
     let json = dir.path().join("g.json");
-    ok(&[
-        "gradcheck",
-        "--objective",
-        "loss",
-        "--clip",
-        s(&clip),
-        "--steps",
-        "8",
-        "--json",
-        s(&json),
-    ]);
-    let g: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
-    assert!(g["max_rel_err"].as_f64().unwrap() <= 1e-6, "{g}");
-    assert_eq!(g["steps"], 8);
+    // The paper's loss, field matching, and the ensemble objective over 2 herds.
+    for extra in [
+        &["--loss", "paper"][..],
+        &["--loss", "fields"][..],
+        &["--loss", "ensemble", "--replicas", "2"][..],
+    ] {
+        let mut args = vec![
+            "gradcheck",
+            "--objective",
+            "loss",
+            "--clip",
+            s(&clip),
+            "--steps",
+            "8",
+            "--json",
+            s(&json),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        let g: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert!(g["max_rel_err"].as_f64().unwrap() <= 1e-6, "{extra:?}: {g}");
+        assert_eq!(g["steps"], 8);
+    }
 }
 
 #[test]

@@ -428,6 +428,12 @@ pub struct GradcheckArgs {
     /// Clip for `--objective loss` (the herd starts from its first frame's fields).
     #[arg(long, value_name = "CLIP/", required_if_eq("objective", "loss"))]
     pub clip: Option<PathBuf>,
+    /// Which of the fit's losses `--objective loss` checks.
+    #[arg(long, value_enum, default_value_t = crate::train::fit::LossKind::Paper)]
+    pub loss: crate::train::fit::LossKind,
+    /// Herds for `--loss ensemble`.
+    #[arg(long, value_name = "K", default_value_t = 1)]
+    pub replicas: usize,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: PathBuf,
@@ -438,7 +444,8 @@ pub struct GradcheckArgs {
 pub enum Objective {
     /// Spread + mean heading of the default scenario's herd after T steps.
     Herd,
-    /// The fit's loss E_mean + λ E_var (eq. 7–8) over T steps on a clip.
+    /// The fit's loss (`--loss`: E_mean + λ E_var, eq. 7–8, or field matching, or the ensemble
+    /// objective) over T steps on a clip.
     Loss,
 }
 
@@ -617,7 +624,15 @@ fn gradcheck_cmd(a: GradcheckArgs) -> Result<()> {
         check_writable(&a.json)?;
         let device = cpu_device(a.precision)?;
         let sc = crate::train::gradcheck::LossScenario::record(
-            &clip, &params, 0, a.steps, 0.7, 1.0, a.seed, &device,
+            &clip,
+            &params,
+            0,
+            a.steps,
+            0.7,
+            1.0,
+            (a.loss, a.replicas),
+            a.seed,
+            &device,
         )
         .map_err(|e| e.in_file(&path))?;
         let h = a.fd_step.unwrap_or(match a.precision {

@@ -239,18 +239,25 @@ pub fn gradcheck(
     })
 }
 
-/// The fit's loss as the objective: the mean over `steps` steps of E_mean + λ E_var (eq. 7–8)
-/// from a herd initialised from the clip's frame `start`, with the planned decisions and targets
-/// (perception, roles, noise, cells, U) recorded once and replayed for every evaluation.
+/// The fit's loss as the objective: the mean over `steps` steps of the loss of `kind` — E_mean +
+/// λ E_var (eq. 7–8), field matching + λ E_var, or the ensemble objective + λ E_var over
+/// `replicas` herds — from herds initialised from the clip's frame `start`, with the planned
+/// decisions and targets (perception, roles, noise, cells, U) recorded once per herd and replayed
+/// for every evaluation.
 pub struct LossScenario {
     pub model: Model,
-    pub init: Vec<AgentRow>,
-    pub plans: Vec<(crate::sim::StepDecisions, super::loss::StepTarget)>,
+    pub clip: crate::fields::ClipFields,
+    pub start: usize,
+    pub kind: super::fit::LossKind,
+    /// One initial herd and one plan per replica.
+    pub init: Vec<Vec<AgentRow>>,
+    pub plans: Vec<Vec<(crate::sim::StepDecisions, super::loss::StepTarget)>>,
     pub var_weight: f64,
 }
 
 impl LossScenario {
-    /// Plans `steps` steps from frame `start` of `clip` with the parameters `params`.
+    /// Plans `steps` steps from frame `start` of `clip` with the parameters `params`, for
+    /// `replicas` herds (1 unless `kind` is the ensemble objective).
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         clip: &crate::fields::ClipFields,
@@ -259,16 +266,22 @@ impl LossScenario {
         steps: usize,
         beta: f64,
         var_weight: f64,
+        (kind, replicas): (super::fit::LossKind, usize),
         seed: u64,
         device: &Device,
     ) -> Result<Self> {
-        use super::fit::{guidance_field, init_herd, plan_step};
+        use super::fit::{guidance_field, init_herd, plan_step, LossKind};
         if start + steps >= clip.frames() {
             return Err(Error::invalid(format!(
                 "{steps} steps from frame {start} need {} frames; the clip has {}",
                 start + steps + 1,
                 clip.frames()
             )));
+        }
+        if (kind == LossKind::Ensemble) != (replicas >= 2) || replicas == 0 {
+            return Err(Error::invalid(
+                "the ensemble objective needs --replicas ≥ 2, the others one herd",
+            ));
         }
         let mut params = params.clone();
         params.speed = clip.speed_model(&params.speed);
@@ -278,40 +291,49 @@ impl LossScenario {
             .collect();
         let stencil = super::target::Stencil::new(clip);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let init = init_herd(clip, start, &model.params.speed, &mut rng);
-        if init.is_empty() {
-            return Err(Error::invalid(format!(
-                "frame {start} of the clip holds no agents"
-            )));
-        }
         let theta = theta_tensor(&model.params.to_vec(), device);
         let f = crate::sim::ForceTensors::new(&theta, &model.params.constants);
-        let mut state = HerdState::from_rows(&init, device);
-        let mut plans = Vec::with_capacity(steps);
-        for s in 0..steps {
-            let plan = plan_step(
-                &mut model,
-                clip,
-                &guidance,
-                &stencil,
-                beta,
-                false,
-                &state,
-                start + s,
-                &mut rng,
-            )?;
-            state = model.step(&f, &state, &plan.0)?;
-            plans.push(plan);
+        let (mut inits, mut all_plans) = (Vec::new(), Vec::new());
+        for _ in 0..replicas {
+            let init = init_herd(clip, start, &model.params.speed, &mut rng);
+            if init.is_empty() {
+                return Err(Error::invalid(format!(
+                    "frame {start} of the clip holds no agents"
+                )));
+            }
+            let mut state = HerdState::from_rows(&init, device);
+            let mut plans = Vec::with_capacity(steps);
+            for s in 0..steps {
+                let plan = plan_step(
+                    &mut model,
+                    clip,
+                    &guidance,
+                    &stencil,
+                    beta,
+                    false,
+                    &state,
+                    start + s,
+                    &mut rng,
+                )?;
+                state = model.step(&f, &state, &plan.0)?;
+                plans.push(plan);
+            }
+            inits.push(init);
+            all_plans.push(plans);
         }
         Ok(LossScenario {
             model,
-            init,
-            plans,
+            clip: clip.clone(),
+            start,
+            kind,
+            init: inits,
+            plans: all_plans,
             var_weight,
         })
     }
 
     fn loss(&self, theta: &[f64; N_PARAMS], device: &Device) -> Result<(Tensor<1>, Tensor<1>)> {
+        use super::fit::{ensemble_loss, fields_loss, window_loss, LossKind};
         let t = theta_tensor(theta, device);
         let t = if device.is_autodiff() {
             t.require_grad()
@@ -319,9 +341,47 @@ impl LossScenario {
             t
         };
         let f = crate::sim::ForceTensors::new(&t, &self.model.params.constants);
-        let state = HerdState::from_rows(&self.init, device);
-        let (_, loss, _, _) =
-            super::fit::window_loss(&self.model, &f, state, &self.plans, (1.0, self.var_weight))?;
+        let k = self.init.len() as f64;
+        let steps = self.plans[0].len();
+        let mean_weight = if self.kind == LossKind::Paper {
+            1.0
+        } else {
+            0.0
+        };
+        let mut total: Option<Tensor<1>> = None;
+        let mut add = |l: Tensor<1>| {
+            total = Some(match total.take() {
+                None => l,
+                Some(x) => x + l,
+            })
+        };
+        let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); steps];
+        for (init, plans) in self.init.iter().zip(&self.plans) {
+            let mut state = HerdState::from_rows(init, device);
+            for (s, plan) in plans.iter().enumerate() {
+                let (next, l, _, _) = window_loss(
+                    &self.model,
+                    &f,
+                    state,
+                    std::slice::from_ref(plan),
+                    (mean_weight, self.var_weight),
+                )?;
+                state = next;
+                add(l.div_scalar(k * steps as f64));
+                match self.kind {
+                    LossKind::Fields => add(fields_loss(&self.clip, &state, self.start + s + 1)?
+                        .div_scalar(steps as f64)),
+                    LossKind::Ensemble => per_step[s].push(state.clone()),
+                    LossKind::Paper => {}
+                }
+            }
+        }
+        if self.kind == LossKind::Ensemble {
+            for (s, states) in per_step.iter().enumerate() {
+                add(ensemble_loss(&self.clip, states, self.start + s + 1)?.div_scalar(steps as f64));
+            }
+        }
+        let loss = total.ok_or_else(|| Error::invalid("no steps"))?;
         Ok((loss, t))
     }
 
@@ -361,8 +421,8 @@ impl LossScenario {
         }
         let max_rel_err = parameters.iter().map(|r| r.rel_err).fold(0.0, f64::max);
         Ok(GradReport {
-            steps: self.plans.len(),
-            agents: self.init.len(),
+            steps: self.plans[0].len(),
+            agents: self.init[0].len(),
             precision,
             objective: value,
             fd_step: h,
