@@ -589,3 +589,57 @@ fn settling_keeps_cells_and_headings_and_separates_close_pairs() {
         crowded(&a)
     );
 }
+
+#[test]
+fn several_clips_are_fitted_jointly() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = make_clip(dir.path(), "a", "80", "13");
+    let b = dir.path().join("b");
+    ok(&[
+        "synth",
+        "--agents",
+        "60",
+        "--frames",
+        "9",
+        "--grid",
+        "10x6",
+        "--cell-size",
+        "3",
+        "--seed",
+        "8",
+        "--out",
+        s(&b),
+    ]);
+    let out = dir.path().join("p.json");
+    ok(&[
+        "fit",
+        s(&a),
+        s(&b),
+        "--out",
+        s(&out),
+        "--epochs",
+        "2",
+        "--window",
+        "4",
+        "--seed",
+        "1",
+    ]);
+    let p = Params::load(&out).unwrap();
+    let prov = p.provenance.unwrap();
+    assert_eq!(prov["clips"].as_array().unwrap().len(), 2);
+    // The shortest clip sets the frames: 0..9, i.e. 2 windows of 4 steps per clip and epoch.
+    assert_eq!(prov["frames"], serde_json::json!([0, 9]));
+    let log = std::fs::read_to_string(dir.path().join("p.log.csv")).unwrap();
+    assert!(log.lines().next().unwrap().ends_with(",clip"));
+    let clips: Vec<&str> = log
+        .lines()
+        .skip(1)
+        .map(|l| l.rsplit(',').next().unwrap())
+        .collect();
+    assert_eq!(clips, ["0", "0", "1", "1", "0", "0", "1", "1"]);
+    // --frames beyond the shorter clip names it.
+    let o = herdfit(&["fit", s(&a), s(&b), "--out", s(&out), "--frames", "0..12"]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains(s(&b)) && e.contains("out of range"), "{e}");
+}

@@ -120,8 +120,9 @@ fn parse_rgb(s: &str) -> std::result::Result<[u8; 3], String> {
 
 #[derive(Args, Debug)]
 pub struct FitArgs {
-    #[arg(value_name = "CLIP/")]
-    pub clip: PathBuf,
+    /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
+    #[arg(value_name = "CLIP/", num_args = 1.., required = true)]
+    pub clips: Vec<PathBuf>,
     /// Output parameter set (herdfit.params/1).
     #[arg(long, value_name = "PARAMS.json")]
     pub out: PathBuf,
@@ -1110,13 +1111,20 @@ fn commit_video(_p: Pending) -> Result<()> {
 }
 
 fn fit_cmd(a: FitArgs) -> Result<()> {
-    use crate::train::fit::{evaluate, fit, write_log, CheckpointDir, FitConfig};
-    let clip = crate::fields::ClipFields::load(&a.clip)?;
+    use crate::train::fit::{evaluate, fit_clips, write_log, CheckpointDir, FitConfig};
+    let loaded = a
+        .clips
+        .iter()
+        .map(|p| crate::fields::ClipFields::load(p))
+        .collect::<Result<Vec<_>>>()?;
+    let clips: Vec<&crate::fields::ClipFields> = loaded.iter().collect();
     let init = match &a.init {
         Some(p) => Params::load(p)?,
         None => Params::neutral(),
     };
-    let frames = a.frames.map_or(0..clip.frames(), |(x, y)| x..y);
+    // All frames of the shortest clip unless --frames says otherwise.
+    let shortest = clips.iter().map(|c| c.frames()).min().unwrap_or(0);
+    let frames = a.frames.map_or(0..shortest, |(x, y)| x..y);
     let cfg = FitConfig {
         window: a.window,
         epochs: a.epochs,
@@ -1139,7 +1147,9 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         },
         replicas: a.replicas,
     };
-    cfg.check(&clip).map_err(|e| e.in_file(&a.clip))?;
+    for (c, p) in clips.iter().zip(&a.clips) {
+        cfg.check(c).map_err(|e| e.in_file(p))?;
+    }
     let log_path = a.log.clone().unwrap_or_else(|| sibling(&a.out, ".log.csv"));
     let plot_path = a
         .plot
@@ -1159,7 +1169,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         }
         None => None,
     };
-    let windows_per_epoch = (frames.end - frames.start - 1).div_ceil(a.window);
+    let windows_per_epoch = (frames.end - frames.start - 1).div_ceil(a.window) * clips.len();
     let pb = progress_bar((windows_per_epoch * a.epochs) as u64, "fit");
     if let Some(c) = &ckpt {
         if c.resume {
@@ -1170,8 +1180,8 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
             }
         }
     }
-    let res = fit(
-        &clip,
+    let res = fit_clips(
+        &clips,
         &init,
         &cfg,
         ckpt.as_ref(),
@@ -1185,24 +1195,22 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     pb.finish_and_clear();
     let mut start_params = init.clone();
     start_params.speed = res.params.speed.clone();
-    let loss_before = crate::train::fit::loss_of(&clip, &start_params, &cfg)?;
-    let loss_after = crate::train::fit::loss_of(&clip, &res.params, &cfg)?;
-    let before = evaluate(
-        &clip,
-        &start_params,
-        frames.clone(),
-        a.seed,
-        a.precision,
-        &cfg.settle,
-    )?;
-    let after = evaluate(
-        &clip,
-        &res.params,
-        frames.clone(),
-        a.seed,
-        a.precision,
-        &cfg.settle,
-    )?;
+    let loss_before = crate::train::fit::loss_of(&clips, &start_params, &cfg)?;
+    let loss_after = crate::train::fit::loss_of(&clips, &res.params, &cfg)?;
+    // Density and velocity errors, averaged over the clips (each simulated with its own speeds).
+    let errors = |p: &Params| -> Result<(f64, f64)> {
+        let (mut d, mut v) = (0.0, 0.0);
+        for c in &clips {
+            let mut q = p.clone();
+            q.speed = c.speed_model(&init.speed);
+            let (x, y) = evaluate(c, &q, frames.clone(), a.seed, a.precision, &cfg.settle)?;
+            d += x / clips.len() as f64;
+            v += y / clips.len() as f64;
+        }
+        Ok((d, v))
+    };
+    let before = errors(&start_params)?;
+    let after = errors(&res.params)?;
     let last_epoch = res.log.last().map_or(0, |r| r.epoch);
     let last: Vec<&crate::train::fit::LogRow> =
         res.log.iter().filter(|r| r.epoch == last_epoch).collect();
@@ -1212,7 +1220,8 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     let mut out = res.params.clone();
     out.provenance = Some(serde_json::json!({
         "source": "fit",
-        "clip": a.clip.display().to_string(),
+        "clip": a.clips[0].display().to_string(),
+        "clips": a.clips.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         "frames": [frames.start, frames.end],
         "settings": cfg,
         "start": res.start,
@@ -1287,7 +1296,11 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         a.window,
         frames.start,
         frames.end,
-        a.clip.display()
+        a.clips
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     println!("{:<20} {:>8} {:>8}", "parameter", "start", "fitted");
     for (n, (s0, s1)) in crate::params::param_names()

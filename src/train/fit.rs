@@ -195,6 +195,9 @@ pub struct LogRow {
     pub velocity_error: f64,
     pub agents: usize,
     pub theta: [f64; N_PARAMS],
+    /// Index of the clip (in the order given) the window belongs to.
+    #[serde(default)]
+    pub clip: usize,
 }
 
 /// The log as CSV.
@@ -205,7 +208,7 @@ pub fn log_csv(rows: &[LogRow]) -> String {
         s.push(',');
         s.push_str(&n);
     }
-    s.push('\n');
+    s.push_str(",clip\n");
     for r in rows {
         s.push_str(&format!(
             "{},{},{},{},{},{},{},{}",
@@ -221,6 +224,7 @@ pub fn log_csv(rows: &[LogRow]) -> String {
         for v in r.theta {
             s.push_str(&format!(",{v}"));
         }
+        s.push_str(&format!(",{}", r.clip));
         s.push('\n');
     }
     s
@@ -660,19 +664,33 @@ pub fn fit(
     ckpt: Option<&CheckpointDir>,
     progress: impl FnMut(usize, usize, f64, f64),
 ) -> Result<FitResult> {
-    fit_inner(clip, init, cfg, ckpt, true, progress)
+    fit_inner(&[clip], init, cfg, ckpt, true, progress)
+}
+
+/// [`fit`] to several clips of one kind of herd at once (paper §7.6): every epoch walks through
+/// the clips in turn, each with its own herds, obstacles, frame rate and speed model, and one set
+/// of 12 parameters learns from all of them. `cfg.frames` applies to every clip. The exported
+/// speed model is the first clip's.
+pub fn fit_clips(
+    clips: &[&ClipFields],
+    init: &Params,
+    cfg: &FitConfig,
+    ckpt: Option<&CheckpointDir>,
+    progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<FitResult> {
+    fit_inner(clips, init, cfg, ckpt, true, progress)
 }
 
 /// The loss of a parameter set on a clip without learning: one epoch of the fit's schedule
 /// (epoch-0 herd and noise) with no updates; returns the mean E_mean, E_var and field-matching
 /// loss over its windows. Comparing two parameter sets this way uses the same herd, noise and
 /// population control seed.
-pub fn loss_of(clip: &ClipFields, params: &Params, cfg: &FitConfig) -> Result<(f64, f64, f64)> {
+pub fn loss_of(clips: &[&ClipFields], params: &Params, cfg: &FitConfig) -> Result<(f64, f64, f64)> {
     let one = FitConfig {
         epochs: 1,
         ..cfg.clone()
     };
-    let r = fit_inner(clip, params, &one, None, false, |_, _, _, _| {})?;
+    let r = fit_inner(clips, params, &one, None, false, |_, _, _, _| {})?;
     let n = r.log.len().max(1) as f64;
     Ok((
         r.log.iter().map(|x| x.e_mean).sum::<f64>() / n,
@@ -682,14 +700,19 @@ pub fn loss_of(clip: &ClipFields, params: &Params, cfg: &FitConfig) -> Result<(f
 }
 
 fn fit_inner(
-    clip: &ClipFields,
+    clips: &[&ClipFields],
     init: &Params,
     cfg: &FitConfig,
     ckpt: Option<&CheckpointDir>,
     learn: bool,
     mut progress: impl FnMut(usize, usize, f64, f64),
 ) -> Result<FitResult> {
-    cfg.check(clip)?;
+    if clips.is_empty() {
+        return Err(Error::invalid("no clip to fit"));
+    }
+    for clip in clips {
+        cfg.check(clip)?;
+    }
     init.validate()?;
     let device = cpu_device(cfg.precision)?;
     // Long windows can trade time for memory with burn's balanced gradient checkpointing.
@@ -699,13 +722,20 @@ fn fit_inner(
         device.clone().autodiff()
     };
     let mut params = init.clone();
-    // Stage 2 (§6.2) first: the forces are learnt with the clip's own speeds.
-    params.speed = clip.speed_model(&init.speed);
-    let mut model = clip_model(params.clone(), clip);
-    let guidance: Vec<Guidance> = (0..clip.frames())
-        .map(|f| guidance_field(clip, f))
+    // Stage 2 (§6.2) first: the forces are learnt with each clip's own speeds; the exported speed
+    // model is the first clip's.
+    params.speed = clips[0].speed_model(&init.speed);
+    let per_clip: Vec<(Vec<Guidance>, Stencil)> = clips
+        .iter()
+        .map(|clip| {
+            (
+                (0..clip.frames())
+                    .map(|f| guidance_field(clip, f))
+                    .collect(),
+                Stencil::new(clip),
+            )
+        })
         .collect();
-    let stencil = Stencil::new(clip);
     let start = init.to_vec();
     let (mut theta, mut opt, mut log, first_epoch) = match ckpt {
         Some(c) if c.resume && c.file().exists() => {
@@ -737,180 +767,192 @@ fn fit_inner(
     let replicas = cfg.replicas.max(1);
     for epoch in first_epoch..cfg.epochs {
         let mut rng = epoch_rng(cfg.seed, epoch);
-        // K independent herds (replicas) from the same fields, side by side.
-        let mut herds: Vec<Vec<AgentRow>> = Vec::with_capacity(replicas);
-        for _ in 0..replicas {
-            herds.push(start_herd(&model, clip, a, &cfg.settle, &mut rng, &device)?);
-        }
-        let mut next_ids: Vec<u64> = herds.iter().map(|h| h.len() as u64).collect();
-        let mut f = a;
-        while f + 1 < b {
-            let w = cfg.window.min(b - 1 - f);
-            let t0 = std::time::Instant::now();
-            for (rows, next_id) in herds.iter_mut().zip(next_ids.iter_mut()) {
-                if rows.is_empty() {
-                    *rows = population_control(
-                        clip,
-                        f,
-                        std::mem::take(rows),
-                        0.0,
-                        &model.params.speed,
-                        next_id,
-                        &mut rng,
-                    );
-                }
+        for (ci, (clip, (guidance, stencil))) in clips.iter().zip(&per_clip).enumerate() {
+            let mut speed_params = params.clone();
+            speed_params.speed = clip.speed_model(&init.speed);
+            let mut model = clip_model(speed_params.with_vec(&theta), clip);
+            // K independent herds (replicas) from the same fields, side by side.
+            let mut herds: Vec<Vec<AgentRow>> = Vec::with_capacity(replicas);
+            for _ in 0..replicas {
+                herds.push(start_herd(&model, clip, a, &cfg.settle, &mut rng, &device)?);
             }
-            if herds.iter().all(|h| h.is_empty()) {
-                f += w;
-                continue;
-            }
-            // Weights of (E_mean, E_var) in the back-propagated loss: the paper's split takes
-            // E_var's gradient in a second pass; field matching replaces E_mean.
-            let weights = match (cfg.loss, cfg.split_gradients) {
-                (LossKind::Fields | LossKind::Ensemble, _) => (0.0, cfg.var_weight),
-                (LossKind::Paper, true) => (1.0, 0.0),
-                (LossKind::Paper, false) => (1.0, cfg.var_weight),
-            };
-            let th = theta_tensor(&theta, &ad).require_grad();
-            let forces = ForceTensors::new(&th, &model.params.constants);
-            let mut total: Option<Tensor<1>> = None;
-            let add = |total: &mut Option<Tensor<1>>, l: Tensor<1>| {
-                *total = Some(match total.take() {
-                    None => l,
-                    Some(t) => t + l,
-                });
-            };
-            let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
-            let mut all_plans = Vec::with_capacity(replicas);
-            let mut ends = Vec::with_capacity(replicas);
-            // Per step, each replica's end-of-step state (for the ensemble loss).
-            let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); w];
-            let live: Vec<usize> = (0..replicas).filter(|&r| !herds[r].is_empty()).collect();
-            let kr = live.len() as f64;
-            for &r in &live {
-                let mut state = HerdState::from_rows(&herds[r], &ad);
-                let mut plans = Vec::with_capacity(w);
-                for (s, slot) in per_step.iter_mut().enumerate() {
-                    let plan = plan_step(
-                        &mut model,
-                        clip,
-                        &guidance,
-                        &stencil,
-                        cfg.beta,
-                        cfg.cell_mean,
-                        &state,
-                        f + s,
-                        &mut rng,
-                    )?;
-                    let (next, loss, e_m, e_v) =
-                        window_loss(&model, &forces, state, std::slice::from_ref(&plan), weights)?;
-                    plans.push(plan);
-                    state = next;
-                    em += e_m / (w as f64 * kr);
-                    ev += e_v / (w as f64 * kr);
-                    let loss = match cfg.loss {
-                        LossKind::Fields => {
-                            let fl = fields_loss(clip, &state, f + s + 1)?;
-                            ef += crate::sim::read_vec(&fl.clone().detach())?[0] / (w as f64 * kr);
-                            loss + fl
-                        }
-                        LossKind::Ensemble => {
-                            slot.push(state.clone());
-                            loss
-                        }
-                        LossKind::Paper => {
-                            // Logged only: evaluated off the autodiff graph.
-                            let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
-                            ef += crate::sim::read_vec(&fl)?[0] / (w as f64 * kr);
-                            loss
-                        }
-                    };
-                    add(&mut total, loss.div_scalar(kr));
-                }
-                all_plans.push(plans);
-                ends.push(state);
-            }
-            if cfg.loss == LossKind::Ensemble {
-                for (s, states) in per_step.iter().enumerate() {
-                    let l = ensemble_loss(clip, states, f + s + 1)?;
-                    ef += crate::sim::read_vec(&l.clone().detach())?[0] / w as f64;
-                    add(&mut total, l);
-                }
-            }
-            let loss = total
-                .ok_or_else(|| Error::invalid("empty window"))?
-                .div_scalar(w as f64);
-            let grad_of = |loss: Tensor<1>, th: &Tensor<1>| -> Result<[f64; N_PARAMS]> {
-                let grads = loss.backward();
-                let gv = th
-                    .grad(&grads)
-                    .map(|t| crate::sim::read_vec(&t))
-                    .transpose()?
-                    .unwrap_or_else(|| vec![0.0; N_PARAMS]);
-                let mut g = [0.0; N_PARAMS];
-                g.copy_from_slice(&gv);
-                Ok(g)
-            };
-            let mut garr = grad_of(loss, &th)?;
-            if cfg.split_gradients && cfg.loss == LossKind::Paper {
-                // Pass 2 (§6.1): the alignment parameters learn from E_var alone, on the same
-                // (replayed) decisions and targets.
-                let th2 = theta_tensor(&theta, &ad).require_grad();
-                let forces2 = ForceTensors::new(&th2, &model.params.constants);
-                let mut total2: Option<Tensor<1>> = None;
-                for (k, &r) in live.iter().enumerate() {
-                    let mut s2 = HerdState::from_rows(&herds[r], &ad);
-                    for (dec, tgt) in &all_plans[k] {
-                        s2 = model.step(&forces2, &s2, dec)?;
-                        let l = step_loss(&s2.hx, &s2.hy, tgt).e_var;
-                        add(&mut total2, l.div_scalar(kr));
+            let mut next_ids: Vec<u64> = herds.iter().map(|h| h.len() as u64).collect();
+            let mut f = a;
+            while f + 1 < b {
+                let w = cfg.window.min(b - 1 - f);
+                let t0 = std::time::Instant::now();
+                for (rows, next_id) in herds.iter_mut().zip(next_ids.iter_mut()) {
+                    if rows.is_empty() {
+                        *rows = population_control(
+                            clip,
+                            f,
+                            std::mem::take(rows),
+                            0.0,
+                            &model.params.speed,
+                            next_id,
+                            &mut rng,
+                        );
                     }
                 }
-                let loss2 = total2
+                if herds.iter().all(|h| h.is_empty()) {
+                    f += w;
+                    continue;
+                }
+                // Weights of (E_mean, E_var) in the back-propagated loss: the paper's split takes
+                // E_var's gradient in a second pass; field matching replaces E_mean.
+                let weights = match (cfg.loss, cfg.split_gradients) {
+                    (LossKind::Fields | LossKind::Ensemble, _) => (0.0, cfg.var_weight),
+                    (LossKind::Paper, true) => (1.0, 0.0),
+                    (LossKind::Paper, false) => (1.0, cfg.var_weight),
+                };
+                let th = theta_tensor(&theta, &ad).require_grad();
+                let forces = ForceTensors::new(&th, &model.params.constants);
+                let mut total: Option<Tensor<1>> = None;
+                let add = |total: &mut Option<Tensor<1>>, l: Tensor<1>| {
+                    *total = Some(match total.take() {
+                        None => l,
+                        Some(t) => t + l,
+                    });
+                };
+                let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
+                let mut all_plans = Vec::with_capacity(replicas);
+                let mut ends = Vec::with_capacity(replicas);
+                // Per step, each replica's end-of-step state (for the ensemble loss).
+                let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); w];
+                let live: Vec<usize> = (0..replicas).filter(|&r| !herds[r].is_empty()).collect();
+                let kr = live.len() as f64;
+                for &r in &live {
+                    let mut state = HerdState::from_rows(&herds[r], &ad);
+                    let mut plans = Vec::with_capacity(w);
+                    for (s, slot) in per_step.iter_mut().enumerate() {
+                        let plan = plan_step(
+                            &mut model,
+                            clip,
+                            guidance,
+                            stencil,
+                            cfg.beta,
+                            cfg.cell_mean,
+                            &state,
+                            f + s,
+                            &mut rng,
+                        )?;
+                        let (next, loss, e_m, e_v) = window_loss(
+                            &model,
+                            &forces,
+                            state,
+                            std::slice::from_ref(&plan),
+                            weights,
+                        )?;
+                        plans.push(plan);
+                        state = next;
+                        em += e_m / (w as f64 * kr);
+                        ev += e_v / (w as f64 * kr);
+                        let loss = match cfg.loss {
+                            LossKind::Fields => {
+                                let fl = fields_loss(clip, &state, f + s + 1)?;
+                                ef += crate::sim::read_vec(&fl.clone().detach())?[0]
+                                    / (w as f64 * kr);
+                                loss + fl
+                            }
+                            LossKind::Ensemble => {
+                                slot.push(state.clone());
+                                loss
+                            }
+                            LossKind::Paper => {
+                                // Logged only: evaluated off the autodiff graph.
+                                let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
+                                ef += crate::sim::read_vec(&fl)?[0] / (w as f64 * kr);
+                                loss
+                            }
+                        };
+                        add(&mut total, loss.div_scalar(kr));
+                    }
+                    all_plans.push(plans);
+                    ends.push(state);
+                }
+                if cfg.loss == LossKind::Ensemble {
+                    for (s, states) in per_step.iter().enumerate() {
+                        let l = ensemble_loss(clip, states, f + s + 1)?;
+                        ef += crate::sim::read_vec(&l.clone().detach())?[0] / w as f64;
+                        add(&mut total, l);
+                    }
+                }
+                let loss = total
                     .ok_or_else(|| Error::invalid("empty window"))?
                     .div_scalar(w as f64);
-                let gvar = grad_of(loss2, &th2)?;
-                for p in ALIGNMENT {
-                    garr[p] = cfg.var_weight * gvar[p];
+                let grad_of = |loss: Tensor<1>, th: &Tensor<1>| -> Result<[f64; N_PARAMS]> {
+                    let grads = loss.backward();
+                    let gv = th
+                        .grad(&grads)
+                        .map(|t| crate::sim::read_vec(&t))
+                        .transpose()?
+                        .unwrap_or_else(|| vec![0.0; N_PARAMS]);
+                    let mut g = [0.0; N_PARAMS];
+                    g.copy_from_slice(&gv);
+                    Ok(g)
+                };
+                let mut garr = grad_of(loss, &th)?;
+                if cfg.split_gradients && cfg.loss == LossKind::Paper {
+                    // Pass 2 (§6.1): the alignment parameters learn from E_var alone, on the same
+                    // (replayed) decisions and targets.
+                    let th2 = theta_tensor(&theta, &ad).require_grad();
+                    let forces2 = ForceTensors::new(&th2, &model.params.constants);
+                    let mut total2: Option<Tensor<1>> = None;
+                    for (k, &r) in live.iter().enumerate() {
+                        let mut s2 = HerdState::from_rows(&herds[r], &ad);
+                        for (dec, tgt) in &all_plans[k] {
+                            s2 = model.step(&forces2, &s2, dec)?;
+                            let l = step_loss(&s2.hx, &s2.hy, tgt).e_var;
+                            add(&mut total2, l.div_scalar(kr));
+                        }
+                    }
+                    let loss2 = total2
+                        .ok_or_else(|| Error::invalid("empty window"))?
+                        .div_scalar(w as f64);
+                    let gvar = grad_of(loss2, &th2)?;
+                    for p in ALIGNMENT {
+                        garr[p] = cfg.var_weight * gvar[p];
+                    }
                 }
+                if learn {
+                    // Learning rate decays linearly to 10 % over the epochs.
+                    let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
+                    update(&mut theta, &garr, &mut opt, cfg, lr, &mut rng);
+                }
+                model.params = model.params.with_vec(&theta);
+                f += w;
+                let (mut de, mut ve, mut agents) = (0.0, 0.0, 0usize);
+                for (k, &r) in live.iter().enumerate() {
+                    let ids: Vec<u64> = herds[r].iter().map(|x| x.id).collect();
+                    let rows = ends[k].clone().detach().rows(&ids)?;
+                    herds[r] = population_control(
+                        clip,
+                        f,
+                        rows,
+                        cfg.density_threshold,
+                        &model.params.speed,
+                        &mut next_ids[r],
+                        &mut rng,
+                    );
+                    let (d, v) = field_errors(clip, f, &herds[r]);
+                    de += d / kr;
+                    ve += v / kr;
+                    agents += herds[r].len();
+                }
+                log.push(LogRow {
+                    epoch,
+                    frame: f,
+                    e_mean: em,
+                    e_var: ev,
+                    e_fields: ef,
+                    density_error: de,
+                    velocity_error: ve,
+                    agents: agents / live.len(),
+                    theta,
+                    clip: ci,
+                });
+                progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
             }
-            if learn {
-                // Learning rate decays linearly to 10 % over the epochs.
-                let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
-                update(&mut theta, &garr, &mut opt, cfg, lr, &mut rng);
-            }
-            model.params = model.params.with_vec(&theta);
-            f += w;
-            let (mut de, mut ve, mut agents) = (0.0, 0.0, 0usize);
-            for (k, &r) in live.iter().enumerate() {
-                let ids: Vec<u64> = herds[r].iter().map(|x| x.id).collect();
-                let rows = ends[k].clone().detach().rows(&ids)?;
-                herds[r] = population_control(
-                    clip,
-                    f,
-                    rows,
-                    cfg.density_threshold,
-                    &model.params.speed,
-                    &mut next_ids[r],
-                    &mut rng,
-                );
-                let (d, v) = field_errors(clip, f, &herds[r]);
-                de += d / kr;
-                ve += v / kr;
-                agents += herds[r].len();
-            }
-            log.push(LogRow {
-                epoch,
-                frame: f,
-                e_mean: em,
-                e_var: ev,
-                e_fields: ef,
-                density_error: de,
-                velocity_error: ve,
-                agents: agents / live.len(),
-                theta,
-            });
-            progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
         }
         if let Some(c) = ckpt {
             let k = Checkpoint {
