@@ -42,6 +42,8 @@ def main():
                     help="crossing: 2 BL/s through obstacle cells in the herd's path (default); "
                          "drift: 1 BL/s, obstacles off the path (session-1 protocol)")
     ap.add_argument("--jobs", type=int, default=1, help="fits run in parallel")
+    ap.add_argument("--clips", type=int, default=1,
+                    help="clip realisations (seeds 11, 12, …) fitted jointly")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
     if a.frames == 0:
@@ -57,9 +59,9 @@ def main():
             [(7, 4), (7, 5), (8, 4), (8, 5), (11, 2), (11, 7)]
         json.dump({"cells": [[int(x * k) + i, int(y * k) + j] for x, y in sq
                              for i in range(int(k)) for j in range(int(k))]}, f)
+    clip_dirs = [clip] + [os.path.join(tmp, f"clip{11 + c}") for c in range(1, a.clips)]
     cmd = [a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames),
-           "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells,
-           "--seed", "11", "--out", clip]
+           "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells]
     if a.scenario == "crossing":
         # The built-in set at 2 BL/s (speed STD 0.3): the herd crosses the obstacles in 8 s.
         p = os.path.join(tmp, "truth-in.json")
@@ -71,7 +73,8 @@ def main():
         t["speed"]["mean"], t["speed"]["std"] = 2.0, 0.3
         json.dump(t, open(p, "w"))
         cmd += ["--params", p]
-    subprocess.run(cmd, check=True, capture_output=True)
+    for c, d in enumerate(clip_dirs):
+        subprocess.run(cmd + ["--seed", str(11 + c), "--out", d], check=True, capture_output=True)
     truth = json.load(open(os.path.join(clip, "truth.json")))
     t = vec(truth)
     rng = random.Random(2026)
@@ -84,7 +87,7 @@ def main():
         w, k = job
         out = os.path.join(tmp, f"fit-w{w}-{k}.json")
         t0 = time.time()
-        subprocess.run([a.herdfit, "fit", clip, "--out", out, "--init",
+        subprocess.run([a.herdfit, "fit"] + clip_dirs + ["--out", out, "--init",
                         os.path.join(tmp, f"init{k}.json"), "--window", str(w),
                         "--epochs", str(a.epochs), "--seed", str(k)] + a.extra.split(),
                        check=True, capture_output=True)
