@@ -124,6 +124,17 @@ impl Default for SpeedModel {
 }
 
 impl SpeedModel {
+    /// Standard deviation of the speeds the OU process of eq. 6 settles to around its mean,
+    /// v_σ / √(2 θ_OU) (the stationary spread; `std` is the noise v_σ). New agents draw their
+    /// speed from this spread.
+    pub fn stationary_std(&self) -> f64 {
+        if self.reversion > 0.0 {
+            self.std / (2.0 * self.reversion).sqrt()
+        } else {
+            self.std
+        }
+    }
+
     /// v_μ(ρ): linear interpolation in the speed–density table, clamped at its ends; the global
     /// mean when there is no table (eq. 6, §6.2).
     pub fn mean_at(&self, density: f64) -> f64 {

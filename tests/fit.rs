@@ -643,3 +643,56 @@ fn several_clips_are_fitted_jointly() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains(s(&b)) && e.contains("out of range"), "{e}");
 }
+
+#[test]
+fn the_clip_speed_model_reproduces_the_clip_speed_spread() {
+    use herdfit::io::AgentRow;
+    use herdfit::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model, World};
+    use rand::SeedableRng;
+    // A clip whose agents moved at 1.5 ± 0.2 BL/s (mean ± STD over agents and frames).
+    let mut clip = line_clip([1.0; 5], [1.5, 0.0]);
+    clip.meta.speed.mean = 1.5;
+    clip.meta.speed.std = 0.2;
+    let base = Params::default();
+    let speed = clip.speed_model(&base.speed);
+    // Eq. 6 with θ_OU = 1 settles to a spread of v_σ / √2: v_σ must be 0.2 · √2.
+    assert!((speed.std - 0.2 * 2f64.sqrt()).abs() < 1e-12);
+    assert!((speed.stationary_std() - 0.2).abs() < 1e-12);
+    // Run the model's own speed update: 40 agents 10 BL apart (no neighbours), 60 s.
+    let mut params = Params::default();
+    params.speed = speed;
+    let model = Model {
+        params: params.clone(),
+        world: World {
+            obstacles: None,
+            guidance: Guidance::None,
+        },
+        dt: 0.04,
+    };
+    let rows: Vec<AgentRow> = (0..40)
+        .map(|i| AgentRow {
+            id: i,
+            x: 10.0 * i as f64,
+            y: 0.0,
+            vx: 1.5,
+            vy: 0.0,
+        })
+        .collect();
+    let device = dev();
+    let f = ForceTensors::new(&theta_tensor(&params.to_vec(), &device), &params.constants);
+    let mut state = HerdState::from_rows(&rows, &device);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let mut samples = Vec::new();
+    for t in 0..1500 {
+        let dec = model.decide(&state.snapshot().unwrap(), &mut rng);
+        state = model.step(&f, &state, &dec).unwrap();
+        if t >= 100 {
+            samples.extend(read_vec(&state.speed).unwrap());
+        }
+    }
+    let n = samples.len() as f64;
+    let m = samples.iter().sum::<f64>() / n;
+    let sd = (samples.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt();
+    assert!((m - 1.5).abs() < 0.02, "mean {m}");
+    assert!((sd - 0.2).abs() < 0.02, "spread {sd} (the clip's 0.2)");
+}

@@ -152,7 +152,13 @@ impl ClipFields {
         let s = &self.meta.speed;
         SpeedModel {
             mean: s.mean,
-            std: s.std,
+            // The clip measures the spread of speeds, which for the OU process of eq. 6 is
+            // v_σ / √(2 θ_OU): the noise that reproduces it is v_σ = spread · √(2 θ_OU).
+            std: if base.reversion > 0.0 {
+                s.std * (2.0 * base.reversion).sqrt()
+            } else {
+                s.std
+            },
             max: base.max.max(s.mean + 4.0 * s.std),
             reversion: base.reversion,
             density_table: (!s.density_table.is_empty()).then(|| s.density_table.clone()),

@@ -427,7 +427,7 @@ pub fn init_herd(
     for (k, &(ix, iy, _)) in want.iter().enumerate() {
         for _ in 0..counts[k] {
             let z: f64 = rng.sample(StandardNormal);
-            let s = (speed.mean + speed.std * z).clamp(0.0, speed.max);
+            let s = (speed.mean + speed.stationary_std() * z).clamp(0.0, speed.max);
             let id = rows.len() as u64;
             rows.push(new_agent(clip, f, ix, iy, id, s, rng));
         }
@@ -490,7 +490,7 @@ pub fn population_control(
             break;
         }
         let z: f64 = rng.sample(StandardNormal);
-        let s = (speed.mean + speed.std * z).clamp(0.0, speed.max);
+        let s = (speed.mean + speed.stationary_std() * z).clamp(0.0, speed.max);
         rows.push(new_agent(clip, f, c % g.nx, c / g.nx, *next_id, s, rng));
         *next_id += 1;
         n_sim[c] += 1.0;
