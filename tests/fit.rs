@@ -659,8 +659,10 @@ fn the_clip_speed_model_reproduces_the_clip_speed_spread() {
     assert!((speed.std - 0.2 * 2f64.sqrt()).abs() < 1e-12);
     assert!((speed.stationary_std() - 0.2).abs() < 1e-12);
     // Run the model's own speed update: 40 agents 10 BL apart (no neighbours), 60 s.
-    let mut params = Params::default();
-    params.speed = speed;
+    let params = Params {
+        speed,
+        ..Default::default()
+    };
     let model = Model {
         params: params.clone(),
         world: World {
