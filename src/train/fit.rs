@@ -1079,7 +1079,7 @@ impl Default for Settle {
 /// positions they do not; settled (200 iterations) the run stays at 0.971–0.974
 /// (`cargo run --release --example init_bias -- out/demo/synthetic 60 200`). The price: a static
 /// balance packs agents tighter than a moving herd does, and the held-out density error of the
-/// true parameters rises (0.24 → 0.44, RESULTS.md §3). Off by default.
+/// true parameters rises (0.24 → 0.44, RESULTS.md §1, held-out validation). Off by default.
 pub fn settle(
     model: &Model,
     clip: &ClipFields,
