@@ -22,6 +22,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from scenario import CROSSING_CELLS, crossing_truth
+
 NAMES = [f"{f}.{p}" for f in ("cohesion", "avoidance", "alignment", "obstacle")
          for p in ("weight", "radial", "angular")]
 
@@ -31,18 +33,13 @@ ap.add_argument("--k", type=int, default=8, help="re-simulations per parameter s
 ap.add_argument("--clips", type=int, default=4, help="clip realisations (seeds 11, 12, …)")
 ap.add_argument("--jobs", type=int, default=2)
 ap.add_argument("--agents", type=int, default=300)
-ap.add_argument("--obstacles", default="[[7,4],[7,5],[8,4],[8,5],[11,2],[11,7]]",
+ap.add_argument("--obstacles", default=json.dumps(CROSSING_CELLS),
                 help="obstacle cells as JSON [[ix, iy], …] on the 14×10 grid")
 a = ap.parse_args()
 tmp = tempfile.mkdtemp(prefix="herdfit-ident-")
 cells = os.path.join(tmp, "cells.json")
 json.dump({"cells": json.loads(a.obstacles)}, open(cells, "w"))
-subprocess.run([a.herdfit, "synth", "--agents", "2", "--frames", "1", "--grid", "1x1",
-                "--cell-size", "1", "--out", os.path.join(tmp, "probe")],
-               check=True, capture_output=True)
-truth = json.load(open(os.path.join(tmp, "probe", "truth.json")))
-truth.pop("physical", None)
-truth["speed"]["mean"], truth["speed"]["std"] = 2.0, 0.3
+truth = crossing_truth(a.herdfit, tmp)[1]
 
 
 def synth(out, seed, params):

@@ -9,6 +9,8 @@ moves raise it.
 """
 import argparse, json, os, subprocess, tempfile
 
+from scenario import CROSSING_CELLS, DRIFT_CELLS, crossing_truth
+
 NAMES = [f"{f}.{p}" for f in ("cohesion", "avoidance", "alignment", "obstacle")
          for p in ("weight", "radial", "angular")]
 
@@ -25,19 +27,11 @@ tmp = tempfile.mkdtemp(prefix="herdfit-landscape-")
 clip = os.path.join(tmp, "clip")
 cells = os.path.join(tmp, "cells.json")
 crossing = a.scenario == "crossing"
-json.dump({"cells": [[7, 4], [7, 5], [8, 4], [8, 5], [11, 2], [11, 7]] if crossing
-           else [[8, 4], [8, 5], [3, 8]]}, open(cells, "w"))
+json.dump({"cells": CROSSING_CELLS if crossing else DRIFT_CELLS}, open(cells, "w"))
 cmd = [a.herdfit, "synth", "--agents", "300", "--frames", "200" if crossing else "100",
        "--grid", "14x10", "--cell-size", "4", "--obstacles", cells, "--seed", "11", "--out", clip]
 if crossing:
-    subprocess.run([a.herdfit, "synth", "--agents", "2", "--frames", "1", "--grid", "1x1",
-                    "--cell-size", "1", "--out", os.path.join(tmp, "probe")],
-                   check=True, capture_output=True)
-    t = json.load(open(os.path.join(tmp, "probe", "truth.json")))
-    t.pop("physical", None)
-    t["speed"]["mean"], t["speed"]["std"] = 2.0, 0.3
-    json.dump(t, open(os.path.join(tmp, "truth-in.json"), "w"))
-    cmd += ["--params", os.path.join(tmp, "truth-in.json")]
+    cmd += ["--params", crossing_truth(a.herdfit, tmp)[0]]
 subprocess.run(cmd, check=True, capture_output=True)
 truth = json.load(open(os.path.join(clip, "truth.json")))
 

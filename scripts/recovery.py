@@ -10,6 +10,8 @@ errors before/after, and wall time. Uses only the herdfit CLI and the Python sta
 import argparse, json, os, random, subprocess, sys, tempfile, time
 from concurrent.futures import ThreadPoolExecutor
 
+from scenario import CROSSING_CELLS, DRIFT_CELLS, crossing_truth
+
 NAMES = [f"{f}.{p}" for f in ("cohesion", "avoidance", "alignment", "obstacle")
          for p in ("weight", "radial", "angular")]
 
@@ -55,24 +57,15 @@ def main():
     k = 4.0 / a.cell
     with open(cells, "w") as f:
         # The same 4-BL obstacle squares whatever the cell size.
-        sq = [(8, 4), (8, 5), (3, 8)] if a.scenario == "drift" else \
-            [(7, 4), (7, 5), (8, 4), (8, 5), (11, 2), (11, 7)]
+        sq = DRIFT_CELLS if a.scenario == "drift" else CROSSING_CELLS
         json.dump({"cells": [[int(x * k) + i, int(y * k) + j] for x, y in sq
                              for i in range(int(k)) for j in range(int(k))]}, f)
     clip_dirs = [clip] + [os.path.join(tmp, f"clip{11 + c}") for c in range(1, a.clips)]
     cmd = [a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames),
            "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells]
     if a.scenario == "crossing":
-        # The built-in set at 2 BL/s (speed STD 0.3): the herd crosses the obstacles in 8 s.
-        p = os.path.join(tmp, "truth-in.json")
-        subprocess.run([a.herdfit, "synth", "--agents", "2", "--frames", "1", "--grid", "1x1",
-                        "--cell-size", "1", "--out", os.path.join(tmp, "probe")],
-                       check=True, capture_output=True)
-        t = json.load(open(os.path.join(tmp, "probe", "truth.json")))
-        t.pop("physical", None)
-        t["speed"]["mean"], t["speed"]["std"] = 2.0, 0.3
-        json.dump(t, open(p, "w"))
-        cmd += ["--params", p]
+        # The built-in set at 2 BL/s: the herd crosses the obstacles in 8 s.
+        cmd += ["--params", crossing_truth(a.herdfit, tmp)[0]]
     for c, d in enumerate(clip_dirs):
         subprocess.run(cmd + ["--seed", str(11 + c), "--out", d], check=True, capture_output=True)
     truth = json.load(open(os.path.join(clip, "truth.json")))

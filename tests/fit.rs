@@ -344,11 +344,15 @@ fn loss_gradcheck_passes() {
     let dir = tempfile::tempdir().unwrap();
     let clip = make_clip(dir.path(), "clip", "120", "20");
     let json = dir.path().join("g.json");
-    // The paper's loss, field matching, and the ensemble objective over 2 herds.
-    for extra in [
-        &["--loss", "paper"][..],
-        &["--loss", "fields"][..],
-        &["--loss", "ensemble", "--replicas", "2"][..],
+    // The paper's loss, field matching, and the ensemble objective over 2 herds. The finite
+    // differences use h = 1e-5: along avoidance.radial this clip's paper loss curves sharply
+    // (a near-contact pair), and the 4-point formula at h = 1e-4 is off by 8 % there, while at
+    // h = 1e-5 and 1e-6 it agrees with autodiff to 6e-8. Field matching stays at ~1.2e-6 for
+    // every h on its smallest component (avoidance.angular, 3e-5, i.e. 4e-11 absolute).
+    for (extra, bound) in [
+        (&["--loss", "paper"][..], 1e-6),
+        (&["--loss", "fields"][..], 1e-5),
+        (&["--loss", "ensemble", "--replicas", "2"][..], 1e-6),
     ] {
         let mut args = vec![
             "gradcheck",
@@ -358,6 +362,8 @@ fn loss_gradcheck_passes() {
             s(&clip),
             "--steps",
             "8",
+            "--fd-step",
+            "1e-5",
             "--json",
             s(&json),
         ];
@@ -365,7 +371,10 @@ fn loss_gradcheck_passes() {
         ok(&args);
         let g: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-        assert!(g["max_rel_err"].as_f64().unwrap() <= 1e-6, "{extra:?}: {g}");
+        assert!(
+            g["max_rel_err"].as_f64().unwrap() <= bound,
+            "{extra:?}: {g}"
+        );
         assert_eq!(g["steps"], 8);
     }
 }
@@ -384,30 +393,21 @@ fn bad_fit_input_fails_cleanly() {
         assert!(e.contains(needle), "{args:?}: {e}");
         assert!(!out.exists() && !d.join("p.log.csv").exists());
     };
-    fails(
-        &["fit", s(&clip), "--out", s(&out), "--frames", "5..40"],
-        "out of range",
-    );
-    fails(
-        &["fit", s(&clip), "--out", s(&out), "--frames", "5..6"],
-        "at least 2 frames",
-    );
-    fails(&["fit", s(&d.join("none")), "--out", s(&out)], "none");
     let bad = d.join("bad.json");
     std::fs::write(&bad, "{\"schema\": \"herdfit.params/1\"").unwrap();
-    fails(
-        &["fit", s(&clip), "--out", s(&out), "--init", s(&bad)],
-        "bad.json",
-    );
-    fails(&["fit", s(&clip), "--out", s(&out), "--lr", "5"], "--lr");
-    fails(
-        &["fit", s(&clip), "--out", s(&out), "--loss", "ensemble"],
-        "--replicas",
-    );
-    fails(
-        &["fit", s(&clip), "--out", s(&out), "--replicas", "0"],
-        "--replicas",
-    );
+    for (extra, needle) in [
+        (&["--frames", "5..40"][..], "out of range"),
+        (&["--frames", "5..6"][..], "at least 2 frames"),
+        (&["--init", s(&bad)][..], "bad.json"),
+        (&["--lr", "5"][..], "--lr"),
+        (&["--loss", "ensemble"][..], "--replicas"),
+        (&["--replicas", "0"][..], "--replicas"),
+    ] {
+        let mut args = vec!["fit", s(&clip), "--out", s(&out)];
+        args.extend_from_slice(extra);
+        fails(&args, needle);
+    }
+    fails(&["fit", s(&d.join("none")), "--out", s(&out)], "none");
     // A clip with zero density everywhere.
     let mut c = ClipFields::load(&clip).unwrap();
     c.density.fill(0.0);

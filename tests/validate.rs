@@ -3,26 +3,38 @@
 mod common;
 use common::{herdfit, ok, s};
 
+/// `herdfit synth` into `dir/clip` on 3-BL cells.
+fn synth_clip(
+    dir: &std::path::Path,
+    agents: &str,
+    frames: &str,
+    grid: &str,
+    seed: &str,
+) -> std::path::PathBuf {
+    let clip = dir.join("clip");
+    ok(&[
+        "synth",
+        "--agents",
+        agents,
+        "--frames",
+        frames,
+        "--grid",
+        grid,
+        "--cell-size",
+        "3",
+        "--seed",
+        seed,
+        "--out",
+        s(&clip),
+    ]);
+    clip
+}
+
 #[test]
 fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let clip = d.join("clip");
-    ok(&[
-        "synth",
-        "--agents",
-        "200",
-        "--frames",
-        "60",
-        "--grid",
-        "12x8",
-        "--cell-size",
-        "3",
-        "--seed",
-        "7",
-        "--out",
-        s(&clip),
-    ]);
+    let clip = synth_clip(d, "200", "60", "12x8", "7");
     // Baseline: no cohesion, no alignment, strong avoidance.
     let mut bad: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(clip.join("truth.json")).unwrap()).unwrap();
@@ -185,22 +197,7 @@ fn demo_runs_the_whole_chain() {
 fn a_warm_up_starts_earlier_and_reports_the_same_frames() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let clip = d.join("clip");
-    ok(&[
-        "synth",
-        "--agents",
-        "80",
-        "--frames",
-        "24",
-        "--grid",
-        "8x6",
-        "--cell-size",
-        "3",
-        "--seed",
-        "5",
-        "--out",
-        s(&clip),
-    ]);
+    let clip = synth_clip(d, "80", "24", "8x6", "5");
     let run = |warmup: &str| -> serde_json::Value {
         let out = d.join(format!("r{warmup}"));
         ok(&[

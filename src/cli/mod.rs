@@ -1141,10 +1141,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         cell_mean: a.cell_mean,
         loss: a.loss,
         checkpointing: a.checkpointing,
-        settle: crate::train::fit::Settle {
-            iterations: a.settle,
-            ..Default::default()
-        },
+        settle: crate::train::fit::Settle::with_iterations(a.settle),
         replicas: a.replicas,
     };
     for (c, p) in clips.iter().zip(&a.clips) {
@@ -1481,10 +1478,7 @@ fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
             split: a.split,
             grid: a.grid,
             seeds: a.seeds,
-            settle: crate::train::fit::Settle {
-                iterations: a.settle,
-                ..Default::default()
-            },
+            settle: crate::train::fit::Settle::with_iterations(a.settle),
             warmup: a.warmup,
         },
         || pb.inc(1),

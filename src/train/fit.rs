@@ -1055,6 +1055,16 @@ pub struct Settle {
     pub max_move: f64,
 }
 
+impl Settle {
+    /// `iterations` iterations with the default step sizes.
+    pub fn with_iterations(iterations: usize) -> Self {
+        Settle {
+            iterations,
+            ..Default::default()
+        }
+    }
+}
+
 impl Default for Settle {
     fn default() -> Self {
         Settle {
