@@ -180,6 +180,48 @@ fn splatting_is_bilinear_conserves_mass_and_is_differentiable() {
     assert!((gx - fd).abs() < 1e-7, "{gx} vs {fd}");
 }
 
+#[test]
+fn box_counts_blurred_like_splatting_match_the_mean_splat() {
+    use herdfit::train::target::blur_like_splat;
+    use rand::{Rng, SeedableRng};
+    let g = Grid {
+        origin: [0.0, 0.0],
+        cell_size: 2.0,
+        nx: 5,
+        ny: 4,
+    };
+    // 20 000 points uniform in cell (1, 2) and 20 000 in the corner cell (0, 0).
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mut pos = Vec::new();
+    for (cx, cy) in [(1.0, 2.0), (0.0, 0.0)] {
+        for _ in 0..20_000 {
+            pos.push([(cx + rng.gen::<f64>()) * 2.0, (cy + rng.gen::<f64>()) * 2.0]);
+        }
+    }
+    let x = t1(pos.iter().map(|p| p[0]).collect());
+    let y = t1(pos.iter().map(|p| p[1]).collect());
+    let splatted = read_vec(&splat_density(&x, &y, &pos, &g)).unwrap();
+    // The same points binned into their cells, then blurred.
+    let mut boxed = vec![0.0; 20];
+    boxed[2 * 5 + 1] = 20_000.0 / 4.0;
+    boxed[0] = 20_000.0 / 4.0;
+    let blurred = blur_like_splat(&boxed, 5, 4);
+    // ¾ · ¾ of a cell's mass stays, ¾ · ⅛ goes to each side neighbour; at the corner the
+    // weights that leave the grid are lost, as splatting loses them.
+    assert!((blurred[2 * 5 + 1] / boxed[2 * 5 + 1] - 0.5625).abs() < 1e-12);
+    assert!((blurred[2 * 5 + 2] / boxed[2 * 5 + 1] - 0.09375).abs() < 1e-12);
+    for c in 0..20 {
+        assert!(
+            (splatted[c] - blurred[c]).abs() < 0.02 * 5000.0,
+            "cell {c}: splat {} vs blurred box {}",
+            splatted[c],
+            blurred[c]
+        );
+    }
+    let total = |v: &[f64]| v.iter().sum::<f64>();
+    assert!((total(&splatted) - total(&blurred)).abs() < 0.01 * total(&blurred));
+}
+
 fn make_clip(dir: &Path, name: &str, agents: &str, frames: &str) -> std::path::PathBuf {
     let out = dir.join(name);
     ok(&[
@@ -457,6 +499,7 @@ fn ensemble_loss_subtracts_the_replicas_own_spread() {
     use herdfit::io::AgentRow;
     use herdfit::sim::HerdState;
     use herdfit::train::fit::{ensemble_loss, fields_loss};
+    use herdfit::train::target::blur_like_splat;
     // Clip frame 1: two agents' worth of density in cell 1, velocity +x everywhere.
     let mut clip = line_clip([0.0; 5], [1.0, 0.0]);
     clip.density[[1, 0, 1]] = 2.0;
@@ -476,18 +519,33 @@ fn ensemble_loss_subtracts_the_replicas_own_spread() {
         HerdState::from_rows(&rows, &dev())
     };
     let (a, b) = (at([1, 1]), at([1, 3]));
+    // The target is the clip's density blurred as splatting would see it; with speed 1 along +x
+    // the momentum target is the same field, so both terms are equal.
+    let target = blur_like_splat(&[0.0, 2.0, 0.0, 0.0, 0.0], 5, 1);
+    let norm: f64 = target.iter().map(|t| t * t).sum();
+    let plain = |rho: [f64; 5]| -> f64 {
+        2.0 * rho
+            .iter()
+            .zip(&target)
+            .map(|(r, t)| (r - t).powi(2))
+            .sum::<f64>()
+            / norm
+    };
+    let (la, lb) = (
+        plain([0.0, 2.0, 0.0, 0.0, 0.0]),
+        plain([0.0, 1.0, 0.0, 1.0, 0.0]),
+    );
+    assert!((val(fields_loss(&clip, &a, 1).unwrap()) - la).abs() < 1e-12);
+    assert!((val(fields_loss(&clip, &b, 1).unwrap()) - lb).abs() < 1e-12);
     let e = |v: Vec<HerdState>| val(ensemble_loss(&clip, &v, 1).unwrap());
-    // A matches the clip exactly; B misplaces one agent: ‖ρ_B − ρ‖² = 2, Σρ² = 4, and the same
-    // for momentum, so matching B alone costs 2/4 + 2/4 = 1.
-    assert!(val(fields_loss(&clip, &a, 1).unwrap()).abs() < 1e-12);
-    assert!((val(fields_loss(&clip, &b, 1).unwrap()) - 1.0).abs() < 1e-12);
     // Identical replicas: no spread to subtract, the plain field loss.
-    assert!(e(vec![a.clone(), a.clone()]).abs() < 1e-12);
-    assert!((e(vec![b.clone(), b.clone()]) - 1.0).abs() < 1e-12);
-    // A and B: the mean [0, 1.5, 0, 0.5, 0] is 0.5 away (squared) from the clip, which is exactly
-    // the spread term S/K = ((0.25 + 0.25) · 2 / 1) / 2, so the estimate of ‖E ρ' − ρ‖² is 0,
-    // whereas the mean of the two plain losses is 0.5: spread is not rewarded.
-    assert!(e(vec![a.clone(), b.clone()]).abs() < 1e-12);
+    assert!((e(vec![a.clone(), a.clone()]) - la).abs() < 1e-12);
+    assert!((e(vec![b.clone(), b.clone()]) - lb).abs() < 1e-12);
+    // A and B: the mean of the two plain losses is ‖ρ̄ − ρ‖² + ‖ρ_A − ρ_B‖²/4 per term; the
+    // estimate of ‖E ρ' − ρ‖² removes the replicas' spread, ‖ρ_A − ρ_B‖²/4 again, so it is lower
+    // by ‖ρ_A − ρ_B‖²/2 = 1 per term (normalised): spread is not rewarded.
+    let want = (la + lb) / 2.0 - 2.0 * 1.0 / norm;
+    assert!((e(vec![a.clone(), b.clone()]) - want).abs() < 1e-12);
     // One replica is refused.
     assert!(ensemble_loss(&clip, &[a], 1).is_err());
 }

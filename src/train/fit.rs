@@ -1022,18 +1022,16 @@ pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
 /// Field-matching loss of a state against frame `f` of the clip:
 /// Σ(ρ' − ρ)² / Σρ² + Σ‖ρ'V' − ρV‖² / Σ‖ρV‖² with ρ' and ρ'V' by bilinear splatting.
 pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
-    use super::target::{frame_tensors, splat};
+    use super::target::{splat, splat_comparable_targets};
     let device = state.x.device();
     let snap = state.snapshot()?;
     let g = clip.grid();
-    let [rho, vx, vy, _] = frame_tensors(clip, f, &device);
+    let [rho, mx, my] = splat_comparable_targets(clip, f, &device);
     let vx_a = state.hx.clone() * state.speed.clone();
     let vy_a = state.hy.clone() * state.speed.clone();
     let rho_s = splat(&state.x, &state.y, &snap.pos, &g, None);
     let mx_s = splat(&state.x, &state.y, &snap.pos, &g, Some(&vx_a));
     let my_s = splat(&state.x, &state.y, &snap.pos, &g, Some(&vy_a));
-    let mx = rho.clone() * vx;
-    let my = rho.clone() * vy;
     let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
     let norm_m =
         crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);
@@ -1165,7 +1163,7 @@ pub fn start_herd(
 /// parameter set is not rewarded for making the herd less variable (which matching one
 /// simulated herd to one clip does: E‖ρ' − ρ‖² = ‖E ρ' − ρ‖² + Var ρ' + …; RESULTS.md §1).
 pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Result<Tensor<1>> {
-    use super::target::{frame_tensors, splat};
+    use super::target::{splat, splat_comparable_targets};
     let k = states.len();
     if k < 2 {
         return Err(Error::invalid(
@@ -1174,9 +1172,7 @@ pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Resul
     }
     let device = states[0].x.device();
     let g = clip.grid();
-    let [rho, vx, vy, _] = frame_tensors(clip, f, &device);
-    let mx = rho.clone() * vx;
-    let my = rho.clone() * vy;
+    let [rho, mx, my] = splat_comparable_targets(clip, f, &device);
     let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
     let norm_m =
         crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);

@@ -227,8 +227,12 @@ pub fn target_directions(
     f_next: usize,
 ) -> Result<Vec<P2>> {
     let device = x.device();
-    let rho_sim = splat_density(&x.clone().detach(), &y.clone().detach(), pos, &clip.grid());
-    let [rho, vx, vy, _] = frame_tensors(clip, f_next, &device);
+    let g = clip.grid();
+    let rho_sim = splat_density(&x.clone().detach(), &y.clone().detach(), pos, &g);
+    let [_, vx, vy, _] = frame_tensors(clip, f_next, &device);
+    // The clip's density as splatting would see its agents, so that ρ' − ρ compares like with
+    // like (a herd matching the clip exactly gives D = 0 on average).
+    let [rho, _, _] = splat_comparable_targets(clip, f_next, &device);
     let (ux, uy) = target_field(&rho_sim, &rho, &vx, &vy, st, beta);
     let (ux, uy) = (read_vec(&ux)?, read_vec(&uy)?);
     Ok(ux
@@ -243,4 +247,68 @@ pub fn target_directions(
             }
         })
         .collect())
+}
+
+/// A cell field (row-major `[ny·nx]`) convolved with the kernel that bilinear splatting applies to
+/// box-binned counts: a point uniform inside its cell splats, on average, ¾ to its cell and ⅛ to
+/// each side neighbour along each axis, so `E[splat] = K ∗ box` with K = [⅛, ¾, ⅛] ⊗ [⅛, ¾, ⅛].
+/// Weights falling outside the grid are dropped, as splatting drops them.
+pub fn blur_like_splat(field: &[f64], nx: usize, ny: usize) -> Vec<f64> {
+    const K: [f64; 3] = [0.125, 0.75, 0.125];
+    let mut tmp = vec![0.0; nx * ny];
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let v = field[iy * nx + ix];
+            for (d, k) in K.iter().enumerate() {
+                let jx = ix as i64 + d as i64 - 1;
+                if jx >= 0 && (jx as usize) < nx {
+                    tmp[iy * nx + jx as usize] += k * v;
+                }
+            }
+        }
+    }
+    let mut out = vec![0.0; nx * ny];
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let v = tmp[iy * nx + ix];
+            for (d, k) in K.iter().enumerate() {
+                let jy = iy as i64 + d as i64 - 1;
+                if jy >= 0 && (jy as usize) < ny {
+                    out[jy as usize * nx + ix] += k * v;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The clip's density and momentum (ρ, ρVx, ρVy) of frame `f` as splatting would see the same
+/// agents ([`blur_like_splat`]), for comparison with splatted simulations.
+pub fn splat_comparable_targets(clip: &ClipFields, f: usize, device: &Device) -> [Tensor<1>; 3] {
+    let g = clip.grid();
+    let d: Vec<f64> = clip
+        .density
+        .index_axis(ndarray::Axis(0), f)
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
+    let vel = clip.velocity.index_axis(ndarray::Axis(0), f);
+    let mx: Vec<f64> = vel
+        .index_axis(ndarray::Axis(2), 0)
+        .iter()
+        .zip(&d)
+        .map(|(&v, r)| v as f64 * r)
+        .collect();
+    let my: Vec<f64> = vel
+        .index_axis(ndarray::Axis(2), 1)
+        .iter()
+        .zip(&d)
+        .map(|(&v, r)| v as f64 * r)
+        .collect();
+    let blur = |v: Vec<f64>| blur_like_splat(&v, g.nx, g.ny);
+    [
+        floats(blur(d), device),
+        floats(blur(mx), device),
+        floats(blur(my), device),
+    ]
 }
