@@ -90,7 +90,8 @@ pub enum LossKind {
     Paper,
     /// Field matching: after every step, the simulated density and momentum fields (bilinear
     /// splatting of the agents and of their velocities) against the clip's,
-    /// Σ(ρ' − ρ)² / Σρ² + Σ‖ρ'V' − ρV‖² / Σ‖ρV‖², plus λ_var E_var.
+    /// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖², plus λ_var E_var, where K blurs the
+    /// clip's box-binned fields as splatting blurs points ([`super::target::blur_like_splat`]).
     Fields,
     /// Field matching of the *expected* simulated fields: the replicas' mean fields against the
     /// clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖², see
@@ -1020,7 +1021,9 @@ pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
 }
 
 /// Field-matching loss of a state against frame `f` of the clip:
-/// Σ(ρ' − ρ)² / Σρ² + Σ‖ρ'V' − ρV‖² / Σ‖ρV‖² with ρ' and ρ'V' by bilinear splatting.
+/// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖² with ρ' and ρ'V' by bilinear
+/// splatting and K the blur that splatting applies to points uniform in a cell
+/// ([`super::target::blur_like_splat`]), so that a herd matching the clip scores 0 on average.
 pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
     use super::target::{splat, splat_comparable_targets};
     let device = state.x.device();
