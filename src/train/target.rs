@@ -182,37 +182,22 @@ pub fn target_field(
     )
 }
 
+/// The clip's frame `f` as `[cells]` plain values: density, velocity x, velocity y, direction
+/// variance.
+fn frame_values(clip: &ClipFields, f: usize) -> [Vec<f64>; 4] {
+    let plain = |a: ndarray::ArrayView2<f32>| a.iter().map(|&v| v as f64).collect::<Vec<f64>>();
+    let vel = clip.velocity.index_axis(ndarray::Axis(0), f);
+    [
+        plain(clip.density.index_axis(ndarray::Axis(0), f)),
+        plain(vel.index_axis(ndarray::Axis(2), 0)),
+        plain(vel.index_axis(ndarray::Axis(2), 1)),
+        plain(clip.dir_variance.index_axis(ndarray::Axis(0), f)),
+    ]
+}
+
 /// The clip's frame `f` as `[cells]` tensors: density, velocity x, velocity y, direction variance.
 pub fn frame_tensors(clip: &ClipFields, f: usize, device: &Device) -> [Tensor<1>; 4] {
-    let d: Vec<f64> = clip
-        .density
-        .index_axis(ndarray::Axis(0), f)
-        .iter()
-        .map(|&v| v as f64)
-        .collect();
-    let vel = clip.velocity.index_axis(ndarray::Axis(0), f);
-    let vx: Vec<f64> = vel
-        .index_axis(ndarray::Axis(2), 0)
-        .iter()
-        .map(|&v| v as f64)
-        .collect();
-    let vy: Vec<f64> = vel
-        .index_axis(ndarray::Axis(2), 1)
-        .iter()
-        .map(|&v| v as f64)
-        .collect();
-    let s: Vec<f64> = clip
-        .dir_variance
-        .index_axis(ndarray::Axis(0), f)
-        .iter()
-        .map(|&v| v as f64)
-        .collect();
-    [
-        floats(d, device),
-        floats(vx, device),
-        floats(vy, device),
-        floats(s, device),
-    ]
+    frame_values(clip, f).map(|v| floats(v, device))
 }
 
 /// The unit target direction of every cell for the step into frame `f + 1`, computed from the
@@ -286,25 +271,9 @@ pub fn blur_like_splat(field: &[f64], nx: usize, ny: usize) -> Vec<f64> {
 /// agents ([`blur_like_splat`]), for comparison with splatted simulations.
 pub fn splat_comparable_targets(clip: &ClipFields, f: usize, device: &Device) -> [Tensor<1>; 3] {
     let g = clip.grid();
-    let d: Vec<f64> = clip
-        .density
-        .index_axis(ndarray::Axis(0), f)
-        .iter()
-        .map(|&v| v as f64)
-        .collect();
-    let vel = clip.velocity.index_axis(ndarray::Axis(0), f);
-    let mx: Vec<f64> = vel
-        .index_axis(ndarray::Axis(2), 0)
-        .iter()
-        .zip(&d)
-        .map(|(&v, r)| v as f64 * r)
-        .collect();
-    let my: Vec<f64> = vel
-        .index_axis(ndarray::Axis(2), 1)
-        .iter()
-        .zip(&d)
-        .map(|(&v, r)| v as f64 * r)
-        .collect();
+    let [d, vx, vy, _] = frame_values(clip, f);
+    let mx: Vec<f64> = vx.iter().zip(&d).map(|(v, r)| v * r).collect();
+    let my: Vec<f64> = vy.iter().zip(&d).map(|(v, r)| v * r).collect();
     let blur = |v: Vec<f64>| blur_like_splat(&v, g.nx, g.ny);
     [
         floats(blur(d), device),
