@@ -36,6 +36,19 @@ pub struct Emergent {
     pub aspect_ratio: f64,
 }
 
+impl Emergent {
+    /// [polarization, angular momentum about the centroid, about the frame centre, aspect ratio]
+    /// (the order of [`MEASURES`] after the two errors).
+    pub fn values(&self) -> [f64; 4] {
+        [
+            self.polarization,
+            self.angular_momentum_centroid,
+            self.angular_momentum_frame_centre,
+            self.aspect_ratio,
+        ]
+    }
+}
+
 /// The emergent measures of frame `f` of `c`, from its fields.
 pub fn emergent(c: &ClipFields, f: usize) -> Emergent {
     let (pos, vel, w) = field_points(c, f);
@@ -333,22 +346,10 @@ pub fn validate(
                 let (de, ve) = coarse_errors(clip, f, &run.fields, f - start, grid);
                 let e = emergent(&run.fields, f - start);
                 let v = video[k];
-                let sim_vals = [
-                    de,
-                    ve,
-                    e.polarization,
-                    e.angular_momentum_centroid,
-                    e.angular_momentum_frame_centre,
-                    e.aspect_ratio,
-                ];
-                let vid_vals = [
-                    0.0,
-                    0.0,
-                    v.polarization,
-                    v.angular_momentum_centroid,
-                    v.angular_momentum_frame_centre,
-                    v.aspect_ratio,
-                ];
+                let [p, ac, af, ar] = e.values();
+                let sim_vals = [de, ve, p, ac, af, ar];
+                let [p, ac, af, ar] = v.values();
+                let vid_vals = [0.0, 0.0, p, ac, af, ar];
                 for m in 0..6 {
                     let err = if m < 2 {
                         sim_vals[m]
@@ -384,17 +385,7 @@ pub fn validate(
             .map(|(m, name)| MeasureRow {
                 measure: name.to_string(),
                 video: (m >= 2).then(|| {
-                    let v: Vec<f64> = video
-                        .iter()
-                        .map(|e| {
-                            [
-                                e.polarization,
-                                e.angular_momentum_centroid,
-                                e.angular_momentum_frame_centre,
-                                e.aspect_ratio,
-                            ][m - 2]
-                        })
-                        .collect();
+                    let v: Vec<f64> = video.iter().map(|e| e.values()[m - 2]).collect();
                     stat(&v)
                 }),
                 simulation: (m >= 2).then(|| stat(&sims[m])),
@@ -417,17 +408,7 @@ pub fn validate(
             split,
             grid,
             seeds,
-            video_per_frame: video
-                .iter()
-                .map(|e| {
-                    [
-                        e.polarization,
-                        e.angular_momentum_centroid,
-                        e.angular_momentum_frame_centre,
-                        e.aspect_ratio,
-                    ]
-                })
-                .collect(),
+            video_per_frame: video.iter().map(Emergent::values).collect(),
             sets: reports,
         },
         runs_all,

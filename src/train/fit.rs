@@ -1025,24 +1025,41 @@ pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
 /// splatting and K the blur that splatting applies to points uniform in a cell
 /// ([`super::target::blur_like_splat`]), so that a herd matching the clip scores 0 on average.
 pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
-    use super::target::{splat, splat_comparable_targets};
-    let device = state.x.device();
-    let snap = state.snapshot()?;
-    let g = clip.grid();
-    let [rho, mx, my] = splat_comparable_targets(clip, f, &device);
-    let vx_a = state.hx.clone() * state.speed.clone();
-    let vy_a = state.hy.clone() * state.speed.clone();
-    let rho_s = splat(&state.x, &state.y, &snap.pos, &g, None);
-    let mx_s = splat(&state.x, &state.y, &snap.pos, &g, Some(&vx_a));
-    let my_s = splat(&state.x, &state.y, &snap.pos, &g, Some(&vy_a));
-    let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
-    let norm_m =
-        crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);
+    let ([rho, mx, my], norm_d, norm_m) = field_targets(clip, f, &state.x.device())?;
+    let [rho_s, mx_s, my_s] = splatted_fields(state, &clip.grid())?;
     let ed = (rho_s - rho).square().sum().div_scalar(norm_d);
     let em = ((mx_s - mx).square() + (my_s - my).square())
         .sum()
         .div_scalar(norm_m);
     Ok(ed + em)
+}
+
+/// The clip's splat-comparable density and momentum of frame `f`
+/// ([`super::target::splat_comparable_targets`]) and their normalisers Σρ², Σ‖m‖².
+fn field_targets(
+    clip: &ClipFields,
+    f: usize,
+    device: &Device,
+) -> Result<([Tensor<1>; 3], f64, f64)> {
+    let [rho, mx, my] = super::target::splat_comparable_targets(clip, f, device);
+    let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
+    let norm_m =
+        crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);
+    Ok(([rho, mx, my], norm_d, norm_m))
+}
+
+/// A herd's density and momentum fields by bilinear splatting (differentiable in positions,
+/// headings and speeds).
+fn splatted_fields(state: &HerdState, g: &crate::fields::Grid) -> Result<[Tensor<1>; 3]> {
+    use super::target::splat;
+    let snap = state.snapshot()?;
+    let vx = state.hx.clone() * state.speed.clone();
+    let vy = state.hy.clone() * state.speed.clone();
+    Ok([
+        splat(&state.x, &state.y, &snap.pos, g, None),
+        splat(&state.x, &state.y, &snap.pos, g, Some(&vx)),
+        splat(&state.x, &state.y, &snap.pos, g, Some(&vy)),
+    ])
 }
 
 /// How a herd initialised from fields is settled (see [`settle`]; off by default).
@@ -1166,30 +1183,18 @@ pub fn start_herd(
 /// parameter set is not rewarded for making the herd less variable (which matching one
 /// simulated herd to one clip does: E‖ρ' − ρ‖² = ‖E ρ' − ρ‖² + Var ρ' + …; RESULTS.md §1).
 pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Result<Tensor<1>> {
-    use super::target::{splat, splat_comparable_targets};
     let k = states.len();
     if k < 2 {
         return Err(Error::invalid(
             "the ensemble loss needs at least 2 replicas",
         ));
     }
-    let device = states[0].x.device();
+    let ([rho, mx, my], norm_d, norm_m) = field_targets(clip, f, &states[0].x.device())?;
     let g = clip.grid();
-    let [rho, mx, my] = splat_comparable_targets(clip, f, &device);
-    let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
-    let norm_m =
-        crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);
-    let mut fields = Vec::with_capacity(k);
-    for st in states {
-        let snap = st.snapshot()?;
-        let vxa = st.hx.clone() * st.speed.clone();
-        let vya = st.hy.clone() * st.speed.clone();
-        fields.push([
-            splat(&st.x, &st.y, &snap.pos, &g, None),
-            splat(&st.x, &st.y, &snap.pos, &g, Some(&vxa)),
-            splat(&st.x, &st.y, &snap.pos, &g, Some(&vya)),
-        ]);
-    }
+    let fields = states
+        .iter()
+        .map(|st| splatted_fields(st, &g))
+        .collect::<Result<Vec<_>>>()?;
     let kf = k as f64;
     let mean = |i: usize| {
         fields

@@ -239,32 +239,22 @@ pub fn target_directions(
 /// each side neighbour along each axis, so `E[splat] = K ∗ box` with K = [⅛, ¾, ⅛] ⊗ [⅛, ¾, ⅛].
 /// Weights falling outside the grid are dropped, as splatting drops them.
 pub fn blur_like_splat(field: &[f64], nx: usize, ny: usize) -> Vec<f64> {
-    const K: [f64; 3] = [0.125, 0.75, 0.125];
-    let mut tmp = vec![0.0; nx * ny];
-    for iy in 0..ny {
-        for ix in 0..nx {
-            let v = field[iy * nx + ix];
+    // One pass along x (stride 1, length nx), one along y (stride nx, length ny).
+    let pass = |v: &[f64], stride: usize, len: usize| -> Vec<f64> {
+        const K: [f64; 3] = [0.125, 0.75, 0.125];
+        let mut out = vec![0.0; v.len()];
+        for (c, &x) in v.iter().enumerate() {
+            let i = (c / stride) % len;
             for (d, k) in K.iter().enumerate() {
-                let jx = ix as i64 + d as i64 - 1;
-                if jx >= 0 && (jx as usize) < nx {
-                    tmp[iy * nx + jx as usize] += k * v;
+                let j = i as i64 + d as i64 - 1;
+                if j >= 0 && (j as usize) < len {
+                    out[c + j as usize * stride - i * stride] += k * x;
                 }
             }
         }
-    }
-    let mut out = vec![0.0; nx * ny];
-    for iy in 0..ny {
-        for ix in 0..nx {
-            let v = tmp[iy * nx + ix];
-            for (d, k) in K.iter().enumerate() {
-                let jy = iy as i64 + d as i64 - 1;
-                if jy >= 0 && (jy as usize) < ny {
-                    out[jy as usize * nx + ix] += k * v;
-                }
-            }
-        }
-    }
-    out
+        out
+    };
+    pass(&pass(field, 1, nx), nx, ny)
 }
 
 /// The clip's density and momentum (ρ, ρVx, ρVy) of frame `f` as splatting would see the same

@@ -378,17 +378,8 @@ pub fn extract(
                         };
                         Ok(Some((frame, small)))
                     })();
-                    match item {
-                        Ok(Some(x)) => {
-                            if tx.send(Ok(x)).is_err() {
-                                return;
-                            }
-                        }
-                        Ok(None) => return,
-                        Err(e) => {
-                            let _ = tx.send(Err(e));
-                            return;
-                        }
+                    if !forward(&tx, item) {
+                        return;
                     }
                     k += 1;
                 }
@@ -910,17 +901,8 @@ pub fn extract(
                             .map_err(&fail)?;
                         Ok(Some((st, herd, grey)))
                     })();
-                    match item {
-                        Ok(Some(x)) => {
-                            if tx.send(Ok(x)).is_err() {
-                                return;
-                            }
-                        }
-                        Ok(None) => return,
-                        Err(e) => {
-                            let _ = tx.send(Err(e));
-                            return;
-                        }
+                    if !forward(&tx, item) {
+                        return;
                     }
                 }
             })
@@ -1158,4 +1140,17 @@ fn preview_png(
     imgcodecs::imencode(".png", &img, &mut buf, &opencv::core::Vector::new()).map_err(&fail)?;
     let _ = Vec3b::default();
     Ok(buf.to_vec())
+}
+
+/// Hands one item of a producer thread to its consumer: `true` to go on; `false` when the stream
+/// has ended (`Ok(None)`), failed (the error is passed on) or the consumer has gone.
+fn forward<T>(tx: &std::sync::mpsc::SyncSender<Result<T>>, item: Result<Option<T>>) -> bool {
+    match item {
+        Ok(Some(x)) => tx.send(Ok(x)).is_ok(),
+        Ok(None) => false,
+        Err(e) => {
+            let _ = tx.send(Err(e));
+            false
+        }
+    }
 }
