@@ -33,18 +33,24 @@ ap.add_argument("--k", type=int, default=8, help="re-simulations per parameter s
 ap.add_argument("--clips", type=int, default=4, help="clip realisations (seeds 11, 12, …)")
 ap.add_argument("--jobs", type=int, default=2)
 ap.add_argument("--agents", type=int, default=300)
+ap.add_argument("--frames", type=int, default=200)
+ap.add_argument("--scale", type=int, default=1,
+                help="cells per 4-BL cell along each axis (2: 28×20 cells of 2 BL)")
+ap.add_argument("--blur", type=float, default=0.0,
+                help="Gaussian blur σ (cells) applied to both fields before comparing; 0 = none")
 ap.add_argument("--obstacles", default=json.dumps(CROSSING_CELLS),
                 help="obstacle cells as JSON [[ix, iy], …] on the 14×10 grid")
 a = ap.parse_args()
 tmp = tempfile.mkdtemp(prefix="herdfit-ident-")
 cells = os.path.join(tmp, "cells.json")
-json.dump({"cells": json.loads(a.obstacles)}, open(cells, "w"))
+json.dump({"cells": [[ix * a.scale + dx, iy * a.scale + dy] for ix, iy in json.loads(a.obstacles)
+                    for dx in range(a.scale) for dy in range(a.scale)]}, open(cells, "w"))
 truth = crossing_truth(a.herdfit, tmp)[1]
 
 
 def synth(out, seed, params):
-    subprocess.run([a.herdfit, "synth", "--agents", str(a.agents), "--frames", "200", "--grid", "14x10",
-                    "--cell-size", "4", "--obstacles", cells, "--seed", str(seed), "--out", out,
+    subprocess.run([a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames), "--grid",
+                    f"{14 * a.scale}x{10 * a.scale}", "--cell-size", str(4 / a.scale), "--obstacles", cells, "--seed", str(seed), "--out", out,
                     "--params", params], check=True, capture_output=True)
 
 
@@ -68,10 +74,22 @@ with ThreadPoolExecutor(a.jobs) as ex:
     list(ex.map(lambda j: synth(*j), jobs))
 
 
+def blur(x):
+    """Separable Gaussian blur of σ = --blur cells over the two grid axes (zero outside)."""
+    if a.blur <= 0:
+        return x
+    def mat(n):
+        i = np.arange(n)
+        w = np.exp(-0.5 * ((i[:, None] - i[None, :]) / a.blur) ** 2)
+        return w / w.sum(1, keepdims=True)
+    by, bx = mat(x.shape[1]), mat(x.shape[2])
+    return np.einsum("yj,fji...->fyi...", by, np.einsum("xi,fji...->fjx...", bx, x))
+
+
 def fields(d):
     z = np.load(os.path.join(d, "fields.npz"))
     r = z["density"].astype(float)
-    return r, r[..., None] * z["velocity"].astype(float)
+    return blur(r), blur(r[..., None] * z["velocity"].astype(float))
 
 
 ens = {}
