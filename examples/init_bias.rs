@@ -7,7 +7,11 @@
 //! - `true agents`: the clip's agents at that frame;
 //! - `fields`: the herd the fit and `validate` start from ([`init_herd`]);
 //! - `fields + settle`: the same, settled ([`settle`], `--settle N` of `fit` and `validate`);
-//! - `true positions`: the clip's positions with the headings and speeds sampled from the fields.
+//! - `true positions`: the clip's positions with the headings and speeds sampled from the fields;
+//! - `true agents, σ = ∞`: the clip's agents, the leaders guided by the herd's mean direction
+//!   rather than by each cell's mean velocity ([`guidance_field`]'s scale).
+//!
+//! Beside the polarization it prints the herd's radius of gyration (BL) every 10 frames.
 //!
 //! ```text
 //! herdfit synth --agents 300 --frames 120 --grid 14x10 --cell-size 4 --seed 7 --out /tmp/syn
@@ -26,6 +30,25 @@ use std::path::PathBuf;
 fn polar(rows: &[AgentRow]) -> f64 {
     let v: Vec<[f64; 2]> = rows.iter().map(|r| [r.vx, r.vy]).collect();
     polarization(&v, &vec![1.0; rows.len()])
+}
+
+/// Radius of gyration of the herd (BL).
+fn gyration(rows: &[AgentRow]) -> f64 {
+    let n = rows.len() as f64;
+    let mx = rows.iter().map(|r| r.x).sum::<f64>() / n;
+    let my = rows.iter().map(|r| r.y).sum::<f64>() / n;
+    (rows
+        .iter()
+        .map(|r| (r.x - mx).powi(2) + (r.y - my).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
+
+/// Every 10th value, rounded to `digits` decimals.
+fn every10(v: &[f64], digits: i32) -> Vec<f64> {
+    let k = 10f64.powi(digits);
+    v.iter().step_by(10).map(|x| (x * k).round() / k).collect()
 }
 
 fn main() -> anyhow::Result<()> {
@@ -62,19 +85,26 @@ fn main() -> anyhow::Result<()> {
     let clip_pol: Vec<f64> = (start..clip.frames())
         .map(|k| polar(&truth_rows[k]))
         .collect();
-    println!(
-        "{:<18} {:?}",
-        "clip",
-        clip_pol
-            .iter()
-            .step_by(10)
-            .map(|x| (x * 1000.0).round() / 1000.0)
-            .collect::<Vec<_>>()
-    );
-    for mode in ["true agents", "fields", "fields + settle", "true positions"] {
+    let clip_gyr: Vec<f64> = (start..clip.frames())
+        .map(|k| gyration(&truth_rows[k]))
+        .collect();
+    println!("{:<20} polarization {:?}", "clip", every10(&clip_pol, 3));
+    println!("{:<20} gyration     {:?}", "", every10(&clip_gyr, 2));
+    for mode in [
+        "true agents",
+        "fields",
+        "fields + settle",
+        "true positions",
+        "true agents, σ = ∞",
+    ] {
+        let scale = if mode.ends_with('∞') {
+            f64::INFINITY
+        } else {
+            0.0
+        };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         let mut rows = match mode {
-            "true agents" => truth_rows[start].clone(),
+            "true agents" | "true agents, σ = ∞" => truth_rows[start].clone(),
             _ => init_herd(&clip, start, &params.speed, &mut rng),
         };
         if mode == "fields + settle" {
@@ -110,19 +140,17 @@ fn main() -> anyhow::Result<()> {
         let forces = ForceTensors::new(&th, &params.constants);
         let mut state = HerdState::from_rows(&rows, &device);
         let mut pol = vec![polar(&rows)];
+        let mut gyr = vec![gyration(&rows)];
         for fr in start..clip.frames() - 1 {
-            m.world.guidance = guidance_field(&clip, fr);
+            m.world.guidance = guidance_field(&clip, fr, scale);
             let dec = m.decide(&state.snapshot()?, &mut rng);
             state = m.step(&forces, &state, &dec)?;
-            pol.push(polar(&state.rows(&ids)?));
+            let now = state.rows(&ids)?;
+            pol.push(polar(&now));
+            gyr.push(gyration(&now));
         }
-        println!(
-            "{mode:<18} {:?}",
-            pol.iter()
-                .step_by(10)
-                .map(|x| (x * 1000.0).round() / 1000.0)
-                .collect::<Vec<_>>()
-        );
+        println!("{mode:<20} polarization {:?}", every10(&pol, 3));
+        println!("{:<20} gyration     {:?}", "", every10(&gyr, 2));
     }
     Ok(())
 }

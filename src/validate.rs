@@ -170,11 +170,11 @@ pub fn simulate_clip(
     clip: &ClipFields,
     params: &Params,
     range: std::ops::Range<usize>,
-    warmup: usize,
     seed: u64,
-    settle: &Settle,
+    cfg: &ValidateConfig,
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
+    let (warmup, settle) = (cfg.warmup, &cfg.settle);
     let g = clip.grid();
     let mut params = params.clone();
     params.speed = clip.speed_model(&params.speed);
@@ -196,7 +196,7 @@ pub fn simulate_clip(
         frames.push(rows);
     }
     for fr in first..range.end.saturating_sub(1) {
-        model.world.guidance = guidance_field(clip, fr);
+        model.world.guidance = guidance_field(clip, fr, cfg.guidance_scale);
         let dec = model.decide(&state.snapshot()?, &mut rng);
         state = model.step(&f, &state, &dec)?;
         if fr + 1 >= range.start {
@@ -295,6 +295,9 @@ pub struct ValidateConfig {
     /// Frames before the held-out part that the herd is simulated through first (0: it starts
     /// from the fields of the first held-out frame).
     pub warmup: usize,
+    /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
+    /// ([`guidance_field`]).
+    pub guidance_scale: f64,
 }
 
 /// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
@@ -305,7 +308,8 @@ pub fn validate(
     cfg: &ValidateConfig,
     mut progress: impl FnMut(),
 ) -> Result<(Report, Vec<Vec<SimRun>>)> {
-    let (split, grid, seeds, settle) = (cfg.split, cfg.grid, cfg.seeds, &cfg.settle);
+    let (split, grid, seeds) = (cfg.split, cfg.grid, cfg.seeds);
+    crate::train::fit::check_guidance_scale(cfg.guidance_scale)?;
     if !(split.is_finite() && (0.0..1.0).contains(&split)) {
         return Err(Error::invalid(format!("--split {split} must be in [0, 1)")));
     }
@@ -332,15 +336,7 @@ pub fn validate(
         let mut map = vec![vec![0.0f64; kx]; ky];
         let mut runs = Vec::new();
         for seed in 0..seeds {
-            let run = simulate_clip(
-                clip,
-                params,
-                start..nf,
-                cfg.warmup,
-                seed as u64,
-                settle,
-                &device,
-            )?;
+            let run = simulate_clip(clip, params, start..nf, seed as u64, cfg, &device)?;
             for (k, f) in (start..nf).enumerate() {
                 // The simulation's fields are indexed from the first held-out frame.
                 let (de, ve) = coarse_errors(clip, f, &run.fields, f - start, grid);

@@ -280,6 +280,8 @@ fn a_short_fit_reduces_the_loss() {
     let total = |k: &str| l[k]["e_mean"].as_f64().unwrap() + l[k]["e_var"].as_f64().unwrap();
     assert!(total("fitted") < total("start") - 0.005, "{l}");
     assert_eq!(prov["frames"], serde_json::json!([0, 25]));
+    // The evaluation averages 4 runs by default; one run with the same seed is not that average.
+    assert_eq!(prov["evaluation"]["seeds"], 4);
     assert!(prov["final_losses"]["e_mean"].as_f64().unwrap() > 0.0);
     // Stage 2: the speed model comes from the clip.
     let c = ClipFields::load(&clip).unwrap();
@@ -443,6 +445,9 @@ fn bad_fit_input_fails_cleanly() {
         (&["--lr", "5"][..], "--lr"),
         (&["--loss", "ensemble"][..], "--replicas"),
         (&["--replicas", "0"][..], "--replicas"),
+        (&["--guidance-scale", "-1"][..], "--guidance-scale"),
+        (&["--guidance-scale", "NaN"][..], "--guidance-scale"),
+        (&["--eval-seeds", "0"][..], "--eval-seeds"),
     ] {
         let mut args = vec!["fit", s(&clip), "--out", s(&out)];
         args.extend_from_slice(extra);
@@ -754,4 +759,75 @@ fn the_clip_speed_model_reproduces_the_clip_speed_spread() {
     let sd = (samples.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt();
     assert!((m - 1.5).abs() < 0.02, "mean {m}");
     assert!((sd - 0.2).abs() < 0.02, "spread {sd} (the clip's 0.2)");
+}
+
+/// A 5×3 clip of one frame: a herd moving +x whose top and bottom rows drift inwards (the flanks
+/// of a contracting herd), cell (4, 1) empty, cell (0, 0) an obstacle.
+fn flanked_clip() -> ClipFields {
+    let mut c = line_clip([1.0; 5], [1.0, 0.0]);
+    let (nx, ny) = (5, 3);
+    c.meta.ny = ny;
+    c.meta.frames = 1;
+    c.density = Array3::from_elem((1, ny, nx), 1.0);
+    c.velocity = Array4::zeros((1, ny, nx, 2));
+    c.dir_variance = Array3::zeros((1, ny, nx));
+    c.obstacles = Array2::zeros((ny, nx));
+    for ix in 0..nx {
+        c.velocity[[0, 0, ix, 0]] = 1.0;
+        c.velocity[[0, 0, ix, 1]] = 0.5; // bottom row drifts up
+        c.velocity[[0, 1, ix, 0]] = 1.0;
+        c.velocity[[0, 2, ix, 0]] = 1.0;
+        c.velocity[[0, 2, ix, 1]] = -0.5; // top row drifts down
+    }
+    c.density[[0, 1, 4]] = 0.0;
+    c.velocity[[0, 1, 4, 0]] = 0.0;
+    c.obstacles[[0, 0]] = 1;
+    c.density[[0, 0, 0]] = 0.0;
+    c
+}
+
+#[test]
+fn leader_guidance_smooths_away_the_flanks_inward_drift() {
+    use herdfit::sim::{Guidance, World};
+    use herdfit::train::fit::guidance_field;
+    let clip = flanked_clip();
+    let at = |scale: f64, ix: usize, iy: usize| -> [f64; 2] {
+        let g = guidance_field(&clip, 0, scale);
+        assert!(matches!(g, Guidance::Field { .. }));
+        let w = World {
+            obstacles: None,
+            guidance: g,
+        };
+        w.guidance_at([ix as f64 + 0.5, iy as f64 + 0.5])
+            .unwrap_or([0.0, 0.0])
+    };
+    // σ = 0: each cell's own direction; the empty cell takes its filled neighbours' mean (+x);
+    // the obstacle cell gets none.
+    let d = at(0.0, 2, 0);
+    let n = (1.0f64 + 0.25).sqrt();
+    assert!(
+        (d[0] - 1.0 / n).abs() < 1e-9 && (d[1] - 0.5 / n).abs() < 1e-9,
+        "{d:?}"
+    );
+    let e = at(0.0, 4, 1);
+    assert!((e[0] - 1.0).abs() < 1e-9 && e[1].abs() < 1e-9, "{e:?}");
+    assert_eq!(at(0.0, 0, 0), [0.0, 0.0]);
+    // σ = ∞: the herd's mean direction everywhere accessible. The two flanks cancel except for
+    // the obstacle's missing bottom-row cell: Σ m = (13, 4·0.5 − 5·0.5).
+    let m = [13.0f64, -0.5];
+    let l = (m[0] * m[0] + m[1] * m[1]).sqrt();
+    for (ix, iy) in [(2, 0), (2, 2), (4, 1), (1, 1)] {
+        let d = at(f64::INFINITY, ix, iy);
+        assert!(
+            (d[0] - m[0] / l).abs() < 1e-9 && (d[1] - m[1] / l).abs() < 1e-9,
+            "{d:?}"
+        );
+    }
+    assert_eq!(at(f64::INFINITY, 0, 0), [0.0, 0.0]);
+    // σ = 1.5: in between, and the flanks' inward components shrink.
+    let s = at(1.5, 2, 0);
+    let raw = at(0.0, 2, 0);
+    assert!(s[1] > 0.0 && s[1] < 0.5 * raw[1], "{s:?} vs {raw:?}");
+    let t = at(1.5, 2, 2);
+    assert!(t[1] < 0.0 && t[1] > 0.5 * at(0.0, 2, 2)[1], "{t:?}");
 }

@@ -159,6 +159,19 @@ fn bad_validation_input_fails_cleanly() {
             ],
             "--seeds",
         ),
+        (
+            vec![
+                "validate",
+                s(&clip),
+                "--params",
+                s(&clip.join("truth.json")),
+                "--guidance-scale",
+                "-2",
+                "--out",
+                s(&out),
+            ],
+            "--guidance-scale",
+        ),
     ] {
         let o = herdfit(&args);
         assert_eq!(o.status.code(), Some(1), "{args:?}");

@@ -172,6 +172,14 @@ pub struct FitArgs {
     /// compares their mean fields with the clip's).
     #[arg(long, value_name = "K", default_value_t = 1)]
     pub replicas: usize,
+    /// Runs (seeds S, S+1, …) whose density and velocity errors, with the start and the fitted
+    /// parameters, are averaged into the provenance's `evaluation` (one run is mostly noise).
+    #[arg(long, value_name = "K", default_value_t = 4)]
+    pub eval_seeds: usize,
+    /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
+    /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
+    #[arg(long, value_name = "S", default_value_t = crate::train::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
+    pub guidance_scale: f64,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Write a checkpoint into DIR after every epoch.
@@ -295,6 +303,10 @@ pub struct ValidateArgs {
     /// through them unrecorded (0: start from the fields of the first held-out frame).
     #[arg(long, value_name = "F", default_value_t = 0)]
     pub warmup: usize,
+    /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
+    /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
+    #[arg(long, value_name = "S", default_value_t = crate::train::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
+    pub guidance_scale: f64,
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
@@ -799,6 +811,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         frames: 0..half,
         seed: 1,
         loss: crate::train::fit::LossKind::Fields,
+        optimizer: crate::train::fit::Optimizer::Normalized,
         ..FitConfig::default()
     };
     let pb = progress_bar((cfg.epochs * (half - 1).div_ceil(cfg.window)) as u64, "fit");
@@ -828,6 +841,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         seeds: 3,
         settle: crate::train::fit::Settle::default().iterations,
         warmup: 0,
+        guidance_scale: crate::train::fit::GUIDANCE_SCALE,
         no_video: false,
         out: report_dir.clone(),
     })?;
@@ -1112,6 +1126,12 @@ fn commit_video(_p: Pending) -> Result<()> {
 
 fn fit_cmd(a: FitArgs) -> Result<()> {
     use crate::train::fit::{evaluate, fit_clips, write_log, CheckpointDir, FitConfig};
+    if a.eval_seeds == 0 || a.eval_seeds > 64 {
+        return Err(Error::invalid(format!(
+            "--eval-seeds {} is out of range 1..=64",
+            a.eval_seeds
+        )));
+    }
     let loaded = a
         .clips
         .iter()
@@ -1143,6 +1163,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         checkpointing: a.checkpointing,
         settle: crate::train::fit::Settle::with_iterations(a.settle),
         replicas: a.replicas,
+        guidance_scale: a.guidance_scale,
     };
     for (c, p) in clips.iter().zip(&a.clips) {
         cfg.check(c).map_err(|e| e.in_file(p))?;
@@ -1200,9 +1221,20 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         for c in &clips {
             let mut q = p.clone();
             q.speed = c.speed_model(&init.speed);
-            let (x, y) = evaluate(c, &q, frames.clone(), a.seed, a.precision, &cfg.settle)?;
-            d += x / clips.len() as f64;
-            v += y / clips.len() as f64;
+            for k in 0..a.eval_seeds {
+                let (x, y) = evaluate(
+                    c,
+                    &q,
+                    frames.clone(),
+                    a.seed.wrapping_add(k as u64),
+                    a.precision,
+                    &cfg.settle,
+                    cfg.guidance_scale,
+                )?;
+                let w = (clips.len() * a.eval_seeds) as f64;
+                d += x / w;
+                v += y / w;
+            }
         }
         Ok((d, v))
     };
@@ -1235,7 +1267,8 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
             "fitted": {"e_mean": loss_after.0, "e_var": loss_after.1, "e_fields": loss_after.2},
         },
         "evaluation": {
-            "what": "mean per-frame errors of a run from the first frame's fields, no population control",
+            "what": "mean per-frame errors of runs from the first frame's fields (no population control), averaged over the seeds",
+            "seeds": a.eval_seeds,
             "start": {"density_error": before.0, "velocity_error": before.1},
             "fitted": {"density_error": after.0, "velocity_error": after.1},
         },
@@ -1480,6 +1513,7 @@ fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
             seeds: a.seeds,
             settle: crate::train::fit::Settle::with_iterations(a.settle),
             warmup: a.warmup,
+            guidance_scale: a.guidance_scale,
         },
         || pb.inc(1),
     )

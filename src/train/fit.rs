@@ -75,6 +75,14 @@ pub struct FitConfig {
     /// noise); the losses are averaged over them, and `--loss ensemble` compares their mean.
     #[serde(default = "one_replica")]
     pub replicas: usize,
+    /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
+    /// ([`guidance_field`]).
+    #[serde(default = "default_guidance_scale")]
+    pub guidance_scale: f64,
+}
+
+fn default_guidance_scale() -> f64 {
+    GUIDANCE_SCALE
 }
 
 fn one_replica() -> usize {
@@ -122,6 +130,7 @@ impl Default for FitConfig {
             checkpointing: false,
             settle: Settle::default(),
             replicas: 1,
+            guidance_scale: GUIDANCE_SCALE,
         }
     }
 }
@@ -153,6 +162,7 @@ impl FitConfig {
         if self.window == 0 || self.epochs == 0 {
             return Err(Error::invalid("--window and --epochs must be ≥ 1"));
         }
+        check_guidance_scale(self.guidance_scale)?;
         for (name, v, lo, hi) in [
             ("--beta", self.beta, 0.0, 1.0),
             ("--var-weight", self.var_weight, 0.0, f64::INFINITY),
@@ -245,22 +255,119 @@ pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
     }
 }
 
-/// The clip's velocity field of frame `f`, propagated into empty accessible cells (each empty cell
-/// takes the mean of its already-filled 4-neighbours, breadth first), as leader guidance.
-pub fn guidance_field(clip: &ClipFields, f: usize) -> Guidance {
+/// Default σ (cells) of [`guidance_field`]: each cell's own mean velocity (see there for why).
+pub const GUIDANCE_SCALE: f64 = 0.0;
+
+/// Separable Gaussian smoothing of a `ny × nx` field (row-major) with σ = `sigma` cells, zero
+/// outside the grid, truncated at 4σ; σ = ∞ gives the field's sum everywhere.
+fn gauss_smooth(v: &[f64], nx: usize, ny: usize, sigma: f64) -> Vec<f64> {
+    if sigma.is_infinite() {
+        return vec![v.iter().sum(); v.len()];
+    }
+    let reach = (4.0 * sigma).ceil() as i64;
+    let w: Vec<f64> = (-reach..=reach)
+        .map(|d| (-0.5 * (d as f64 / sigma).powi(2)).exp())
+        .collect();
+    let mut rows = vec![0.0; v.len()];
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let mut acc = 0.0;
+            for (k, wk) in w.iter().enumerate() {
+                let jx = ix as i64 + k as i64 - reach;
+                if jx >= 0 && jx < nx as i64 {
+                    acc += wk * v[iy * nx + jx as usize];
+                }
+            }
+            rows[iy * nx + ix] = acc;
+        }
+    }
+    let mut out = vec![0.0; v.len()];
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let mut acc = 0.0;
+            for (k, wk) in w.iter().enumerate() {
+                let jy = iy as i64 + k as i64 - reach;
+                if jy >= 0 && jy < ny as i64 {
+                    acc += wk * rows[jy as usize * nx + ix];
+                }
+            }
+            out[iy * nx + ix] = acc;
+        }
+    }
+    out
+}
+
+/// Checks a `--guidance-scale` value: ≥ 0, ∞ allowed.
+pub fn check_guidance_scale(v: f64) -> Result<()> {
+    if v.is_nan() || v < 0.0 {
+        return Err(Error::invalid(format!(
+            "--guidance-scale {v} is out of range: it must be ≥ 0 (or inf)"
+        )));
+    }
+    Ok(())
+}
+
+/// Leader guidance of frame `f`: the clip's momentum ρV smoothed by a Gaussian of σ = `scale`
+/// cells (0: each occupied cell's own mean velocity; ∞: the herd's mean direction everywhere),
+/// taken as a direction in every accessible cell it reaches, then propagated into the remaining
+/// accessible cells (each takes the mean of its already-filled 4-neighbours, breadth first).
+///
+/// A cell's mean velocity holds the followers' own motion too, such as the inward drift of a
+/// herd's flanks under cohesion; leaders that follow it pull the flanks in further. On the
+/// recovery clips (RESULTS.md §1, seeds 11–13), the true parameters started from the clip's own
+/// agents end 200 frames with a radius of gyration 0.16–0.42 BL below the clip’s with σ = 0, and
+/// within 0.1 BL of it with σ = ∞ (`cargo run --release --example init_bias`). But the raw field
+/// also carries how this clip's herd went round its obstacles, which a smoothed one loses: fitted
+/// from θ* on clips 11–14, σ = 0 ends 0.138 from θ*, σ = ∞ 0.213. Hence σ = 0 by default;
+/// `--guidance-scale` sets it.
+pub fn guidance_field(clip: &ClipFields, f: usize, scale: f64) -> Guidance {
     let g = clip.grid();
     let (nx, ny) = (g.nx, g.ny);
     let mut dirs = vec![[0.0f64; 2]; nx * ny];
     let mut filled = vec![false; nx * ny];
     let mut frontier = Vec::new();
+    let mom = |k: usize| -> Vec<f64> {
+        let mut m = vec![0.0; nx * ny];
+        for iy in 0..ny {
+            for ix in 0..nx {
+                m[iy * nx + ix] =
+                    clip.density[[f, iy, ix]] as f64 * clip.velocity[[f, iy, ix, k]] as f64;
+            }
+        }
+        m
+    };
+    let vel = |k: usize| -> Vec<f64> {
+        let mut v = vec![0.0; nx * ny];
+        for iy in 0..ny {
+            for ix in 0..nx {
+                v[iy * nx + ix] = clip.velocity[[f, iy, ix, k]] as f64;
+            }
+        }
+        v
+    };
+    let (mx, my) = if scale > 0.0 {
+        (
+            gauss_smooth(&mom(0), nx, ny, scale),
+            gauss_smooth(&mom(1), nx, ny, scale),
+        )
+    } else {
+        (vel(0), vel(1))
+    };
     for iy in 0..ny {
         for ix in 0..nx {
             let c = iy * nx + ix;
-            let v = [
-                clip.velocity[[f, iy, ix, 0]] as f64,
-                clip.velocity[[f, iy, ix, 1]] as f64,
-            ];
-            if clip.density[[f, iy, ix]] > 0.0 && (v[0] != 0.0 || v[1] != 0.0) {
+            let v = [mx[c], my[c]];
+            let reached = if scale > 0.0 {
+                clip.obstacles[[iy, ix]] == 0
+            } else {
+                clip.density[[f, iy, ix]] > 0.0
+            };
+            let moving = if scale > 0.0 {
+                (v[0] * v[0] + v[1] * v[1]).sqrt() > 1e-9
+            } else {
+                v[0] != 0.0 || v[1] != 0.0
+            };
+            if reached && moving {
                 dirs[c] = v;
                 filled[c] = true;
                 frontier.push(c);
@@ -731,7 +838,7 @@ fn fit_inner(
         .map(|clip| {
             (
                 (0..clip.frames())
-                    .map(|f| guidance_field(clip, f))
+                    .map(|f| guidance_field(clip, f, cfg.guidance_scale))
                     .collect(),
                 Stencil::new(clip),
             )
@@ -989,6 +1096,7 @@ pub fn evaluate(
     seed: u64,
     precision: Precision,
     settle: &Settle,
+    guidance_scale: f64,
 ) -> Result<(f64, f64)> {
     let device = cpu_device(precision)?;
     let mut model = clip_model(params.clone(), clip);
@@ -1004,7 +1112,7 @@ pub fn evaluate(
     let (mut de, mut ve, mut n): (f64, f64, f64) = (0.0, 0.0, 0.0);
     for fr in range.start..range.end.saturating_sub(1) {
         let snap = state.snapshot()?;
-        model.world.guidance = guidance_field(clip, fr);
+        model.world.guidance = guidance_field(clip, fr, guidance_scale);
         let dec = model.decide(&snap, &mut rng);
         state = model.step(&f, &state, &dec)?;
         let (d, v) = field_errors(clip, fr + 1, &state.rows(&ids)?);

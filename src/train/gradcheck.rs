@@ -287,7 +287,7 @@ impl LossScenario {
         params.speed = clip.speed_model(&params.speed);
         let mut model = super::fit::clip_model(params, clip);
         let guidance: Vec<Guidance> = (0..clip.frames())
-            .map(|f| guidance_field(clip, f))
+            .map(|f| guidance_field(clip, f, super::fit::GUIDANCE_SCALE))
             .collect();
         let stencil = super::target::Stencil::new(clip);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
