@@ -4,13 +4,13 @@ several random starts for each window size, and report the mean |θ − θ*| per
 errors before/after, and wall time. Uses only the herdfit CLI and the Python standard library.
 
     python3 scripts/recovery.py [--herdfit target/release/herdfit] [--starts 5] [--windows 1,4,16]
-        [--epochs 8] [--scenario crossing|drift] [--jobs 2] [--extra "--loss ensemble --replicas 4"]
+        [--epochs 8] [--scenario crossing|drift|corridor] [--jobs 2] [--extra "--loss ensemble --replicas 4"]
         [--out results.json]
 """
 import argparse, json, os, random, subprocess, sys, tempfile, time
 from concurrent.futures import ThreadPoolExecutor
 
-from scenario import CROSSING_CELLS, DRIFT_CELLS, crossing_truth
+from scenario import CORRIDOR_CELLS, CROSSING_CELLS, DRIFT_CELLS, crossing_truth
 
 NAMES = [f"{f}.{p}" for f in ("cohesion", "avoidance", "alignment", "obstacle")
          for p in ("weight", "radial", "angular")]
@@ -40,16 +40,17 @@ def main():
     ap.add_argument("--frames", type=int, default=0, help="0: 200 (crossing) or 100 (drift)")
     ap.add_argument("--extra", default="")
     ap.add_argument("--cell", type=float, default=4.0, help="cell size (BL); the grid covers 56×40 BL")
-    ap.add_argument("--scenario", choices=["crossing", "drift"], default="crossing",
+    ap.add_argument("--scenario", choices=["crossing", "drift", "corridor"], default="crossing",
                     help="crossing: 2 BL/s through obstacle cells in the herd's path (default); "
-                         "drift: 1 BL/s, obstacles off the path (session-1 protocol)")
+                         "drift: 1 BL/s, obstacles off the path (session-1 protocol); "
+                         "corridor: 2 BL/s between two walls")
     ap.add_argument("--jobs", type=int, default=1, help="fits run in parallel")
     ap.add_argument("--clips", type=int, default=1,
                     help="clip realisations (seeds 11, 12, …) fitted jointly")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
     if a.frames == 0:
-        a.frames = 200 if a.scenario == "crossing" else 100
+        a.frames = 100 if a.scenario == "drift" else 200
     tmp = tempfile.mkdtemp(prefix="herdfit-recovery-")
     clip = os.path.join(tmp, "clip")
     cells = os.path.join(tmp, "cells.json")
@@ -57,13 +58,13 @@ def main():
     k = 4.0 / a.cell
     with open(cells, "w") as f:
         # The same 4-BL obstacle squares whatever the cell size.
-        sq = DRIFT_CELLS if a.scenario == "drift" else CROSSING_CELLS
+        sq = {"drift": DRIFT_CELLS, "crossing": CROSSING_CELLS, "corridor": CORRIDOR_CELLS}[a.scenario]
         json.dump({"cells": [[int(x * k) + i, int(y * k) + j] for x, y in sq
                              for i in range(int(k)) for j in range(int(k))]}, f)
     clip_dirs = [clip] + [os.path.join(tmp, f"clip{11 + c}") for c in range(1, a.clips)]
     cmd = [a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames),
            "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells]
-    if a.scenario == "crossing":
+    if a.scenario != "drift":
         # The built-in set at 2 BL/s: the herd crosses the obstacles in 8 s.
         cmd += ["--params", crossing_truth(a.herdfit, tmp)[0]]
     for c, d in enumerate(clip_dirs):

@@ -4,9 +4,11 @@ import os
 import subprocess
 
 # Obstacle cells on the 14×10 grid of 4-BL cells: in the herd's path ("crossing"), or off it
-# ("drift", the session-1 protocol).
+# ("drift", the session-1 protocol), or walls along the path ("corridor").
 CROSSING_CELLS = [[7, 4], [7, 5], [8, 4], [8, 5], [11, 2], [11, 7]]
 DRIFT_CELLS = [[8, 4], [8, 5], [3, 8]]
+# Walls along both long sides ("corridor"): the herd is pressed between them and does not split.
+CORRIDOR_CELLS = [[x, y] for x in range(14) for y in (0, 1, 8, 9)]
 
 
 def crossing_truth(herdfit, tmp):
