@@ -268,33 +268,24 @@ fn gauss_smooth(v: &[f64], nx: usize, ny: usize, sigma: f64) -> Vec<f64> {
     let w: Vec<f64> = (-reach..=reach)
         .map(|d| (-0.5 * (d as f64 / sigma).powi(2)).exp())
         .collect();
-    let mut rows = vec![0.0; v.len()];
-    for iy in 0..ny {
-        for ix in 0..nx {
-            let mut acc = 0.0;
-            for (k, wk) in w.iter().enumerate() {
-                let jx = ix as i64 + k as i64 - reach;
-                if jx >= 0 && jx < nx as i64 {
-                    acc += wk * v[iy * nx + jx as usize];
-                }
-            }
-            rows[iy * nx + ix] = acc;
+    // One pass along x (stride 1, lines of nx), then one along y (stride nx, lines of ny).
+    let pass = |v: &[f64], along_x: bool| -> Vec<f64> {
+        let (len, stride) = if along_x { (nx, 1) } else { (ny, nx) };
+        let mut out = vec![0.0; v.len()];
+        for (c, o) in out.iter_mut().enumerate() {
+            let i = if along_x { c % nx } else { c / nx } as i64;
+            let base = c as i64 - i * stride as i64;
+            *o = w
+                .iter()
+                .enumerate()
+                .map(|(k, wk)| (i + k as i64 - reach, wk))
+                .filter(|&(j, _)| j >= 0 && j < len as i64)
+                .map(|(j, wk)| wk * v[(base + j * stride as i64) as usize])
+                .sum();
         }
-    }
-    let mut out = vec![0.0; v.len()];
-    for iy in 0..ny {
-        for ix in 0..nx {
-            let mut acc = 0.0;
-            for (k, wk) in w.iter().enumerate() {
-                let jy = iy as i64 + k as i64 - reach;
-                if jy >= 0 && jy < ny as i64 {
-                    acc += wk * rows[jy as usize * nx + ix];
-                }
-            }
-            out[iy * nx + ix] = acc;
-        }
-    }
-    out
+        out
+    };
+    pass(&pass(v, true), false)
 }
 
 /// Checks a `--guidance-scale` value: ≥ 0, ∞ allowed.
