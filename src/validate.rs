@@ -12,7 +12,7 @@ use crate::io::AgentRow;
 use crate::metrics::{angular_momentum, aspect_ratio, centroid, field_points, polarization};
 use crate::params::Params;
 use crate::sim::{theta_tensor, ForceTensors, HerdState};
-use crate::train::fit::{guidance_field, start_herd, Settle};
+use crate::train::fit::{guidance_fields, start_herd, Settle};
 use rand::SeedableRng;
 use serde::Serialize;
 
@@ -160,9 +160,9 @@ pub struct SimRun {
     pub fields: ClipFields,
 }
 
-/// Simulates `range` of the clip with `params` and seed `seed` (leaders follow the clip's
-/// velocity field, no population control). The herd starts from the fields of frame
-/// `range.start − warmup` (settled by `settle`) and runs through the `warmup` frames before
+/// Simulates `range` of the clip with `params` and seed `seed` (leaders follow `guidance`, the
+/// clip's velocity field of every frame; no population control). The herd starts from the fields
+/// of frame `range.start − warmup` (settled by `settle`) and runs through the `warmup` frames before
 /// `range` unrecorded, so that it reaches `range.start` in an arrangement of its own making rather
 /// than the one sampled from fields (RESULTS.md §1, held-out validation); the returned frames and
 /// fields start at `range.start`.
@@ -172,6 +172,7 @@ pub fn simulate_clip(
     range: std::ops::Range<usize>,
     seed: u64,
     cfg: &ValidateConfig,
+    guidance: &[crate::sim::Guidance],
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
     let (warmup, settle) = (cfg.warmup, &cfg.settle);
@@ -195,8 +196,9 @@ pub fn simulate_clip(
     if first == range.start {
         frames.push(rows);
     }
-    for fr in first..range.end.saturating_sub(1) {
-        model.world.guidance = guidance_field(clip, fr, cfg.guidance_scale);
+    let last = range.end.saturating_sub(1);
+    for (fr, lead) in guidance.iter().enumerate().take(last).skip(first) {
+        model.world.guidance = lead.clone();
         let dec = model.decide(&state.snapshot()?, &mut rng);
         state = model.step(&f, &state, &dec)?;
         if fr + 1 >= range.start {
@@ -296,7 +298,7 @@ pub struct ValidateConfig {
     /// from the fields of the first held-out frame).
     pub warmup: usize,
     /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
-    /// ([`guidance_field`]).
+    /// ([`crate::train::fit::guidance_field`]).
     pub guidance_scale: f64,
 }
 
@@ -324,6 +326,8 @@ pub fn validate(
         )));
     }
     let device = cpu_device(Precision::F32)?;
+    // The leaders' guidance of every frame, the same for every set and seed.
+    let guidance = guidance_fields(clip, cfg.guidance_scale);
     let video: Vec<Emergent> = (start..nf).map(|f| emergent(clip, f)).collect();
     let mut reports = Vec::new();
     let mut runs_all = Vec::new();
@@ -336,7 +340,15 @@ pub fn validate(
         let mut map = vec![vec![0.0f64; kx]; ky];
         let mut runs = Vec::new();
         for seed in 0..seeds {
-            let run = simulate_clip(clip, params, start..nf, seed as u64, cfg, &device)?;
+            let run = simulate_clip(
+                clip,
+                params,
+                start..nf,
+                seed as u64,
+                cfg,
+                &guidance,
+                &device,
+            )?;
             for (k, f) in (start..nf).enumerate() {
                 // The simulation's fields are indexed from the first held-out frame.
                 let (de, ve) = coarse_errors(clip, f, &run.fields, f - start, grid);

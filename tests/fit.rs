@@ -141,14 +141,19 @@ fn target_field_points_up_the_missing_density() {
     assert!((ux[3] - 0.5).abs() < 1e-9 && (uy[3] - 0.5).abs() < 1e-9);
 }
 
-#[test]
-fn splatting_is_bilinear_conserves_mass_and_is_differentiable() {
-    let g = Grid {
+/// An `nx × ny` grid of 2-BL cells at the origin.
+fn grid2(nx: usize, ny: usize) -> Grid {
+    Grid {
         origin: [0.0, 0.0],
         cell_size: 2.0,
-        nx: 4,
-        ny: 3,
-    };
+        nx,
+        ny,
+    }
+}
+
+#[test]
+fn splatting_is_bilinear_conserves_mass_and_is_differentiable() {
+    let g = grid2(4, 3);
     // At a cell centre: all mass in that cell. Halfway between two centres: half and half.
     let pos = vec![[3.0, 3.0], [4.0, 1.0]];
     let rho = splat_density(&t1(vec![3.0, 4.0]), &t1(vec![3.0, 1.0]), &pos, &g);
@@ -184,12 +189,7 @@ fn splatting_is_bilinear_conserves_mass_and_is_differentiable() {
 fn box_counts_blurred_like_splatting_match_the_mean_splat() {
     use herdfit::train::target::blur_like_splat;
     use rand::{Rng, SeedableRng};
-    let g = Grid {
-        origin: [0.0, 0.0],
-        cell_size: 2.0,
-        nx: 5,
-        ny: 4,
-    };
+    let g = grid2(5, 4);
     // 20 000 points uniform in cell (1, 2) and 20 000 in the corner cell (0, 0).
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     let mut pos = Vec::new();

@@ -1216,9 +1216,13 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     let loss_before = crate::train::fit::loss_of(&clips, &start_params, &cfg)?;
     let loss_after = crate::train::fit::loss_of(&clips, &res.params, &cfg)?;
     // Density and velocity errors, averaged over the clips (each simulated with its own speeds).
+    let guidance: Vec<Vec<crate::sim::Guidance>> = clips
+        .iter()
+        .map(|c| crate::train::fit::guidance_fields(c, cfg.guidance_scale))
+        .collect();
     let errors = |p: &Params| -> Result<(f64, f64)> {
         let (mut d, mut v) = (0.0, 0.0);
-        for c in &clips {
+        for (c, guidance) in clips.iter().zip(&guidance) {
             let mut q = p.clone();
             q.speed = c.speed_model(&init.speed);
             for k in 0..a.eval_seeds {
@@ -1229,7 +1233,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
                     a.seed.wrapping_add(k as u64),
                     a.precision,
                     &cfg.settle,
-                    cfg.guidance_scale,
+                    guidance,
                 )?;
                 let w = (clips.len() * a.eval_seeds) as f64;
                 d += x / w;

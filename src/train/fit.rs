@@ -258,8 +258,8 @@ pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
 /// Default σ (cells) of [`guidance_field`]: each cell's own mean velocity (see there for why).
 pub const GUIDANCE_SCALE: f64 = 0.0;
 
-/// Separable Gaussian smoothing of a `ny × nx` field (row-major) with σ = `sigma` cells, zero
-/// outside the grid, truncated at 4σ; σ = ∞ gives the field's sum everywhere.
+/// Gaussian smoothing of a `ny × nx` field (row-major) with σ = `sigma` cells, zero outside the
+/// grid, truncated at 4σ; σ = ∞ gives the field's sum everywhere.
 fn gauss_smooth(v: &[f64], nx: usize, ny: usize, sigma: f64) -> Vec<f64> {
     if sigma.is_infinite() {
         return vec![v.iter().sum(); v.len()];
@@ -268,24 +268,7 @@ fn gauss_smooth(v: &[f64], nx: usize, ny: usize, sigma: f64) -> Vec<f64> {
     let w: Vec<f64> = (-reach..=reach)
         .map(|d| (-0.5 * (d as f64 / sigma).powi(2)).exp())
         .collect();
-    // One pass along x (stride 1, lines of nx), then one along y (stride nx, lines of ny).
-    let pass = |v: &[f64], along_x: bool| -> Vec<f64> {
-        let (len, stride) = if along_x { (nx, 1) } else { (ny, nx) };
-        let mut out = vec![0.0; v.len()];
-        for (c, o) in out.iter_mut().enumerate() {
-            let i = if along_x { c % nx } else { c / nx } as i64;
-            let base = c as i64 - i * stride as i64;
-            *o = w
-                .iter()
-                .enumerate()
-                .map(|(k, wk)| (i + k as i64 - reach, wk))
-                .filter(|&(j, _)| j >= 0 && j < len as i64)
-                .map(|(j, wk)| wk * v[(base + j * stride as i64) as usize])
-                .sum();
-        }
-        out
-    };
-    pass(&pass(v, true), false)
+    super::target::separable_filter(v, nx, ny, &w)
 }
 
 /// Checks a `--guidance-scale` value: ≥ 0, ∞ allowed.
@@ -296,6 +279,13 @@ pub fn check_guidance_scale(v: f64) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// [`guidance_field`] of every frame of the clip.
+pub fn guidance_fields(clip: &ClipFields, scale: f64) -> Vec<Guidance> {
+    (0..clip.frames())
+        .map(|f| guidance_field(clip, f, scale))
+        .collect()
 }
 
 /// Leader guidance of frame `f`: the clip's momentum ρV smoothed by a Gaussian of σ = `scale`
@@ -317,32 +307,28 @@ pub fn guidance_field(clip: &ClipFields, f: usize, scale: f64) -> Guidance {
     let mut dirs = vec![[0.0f64; 2]; nx * ny];
     let mut filled = vec![false; nx * ny];
     let mut frontier = Vec::new();
-    let mom = |k: usize| -> Vec<f64> {
+    // Each cell's velocity (σ = 0) or momentum ρV (to be smoothed), component k.
+    let cells = |k: usize| -> Vec<f64> {
         let mut m = vec![0.0; nx * ny];
         for iy in 0..ny {
             for ix in 0..nx {
-                m[iy * nx + ix] =
-                    clip.density[[f, iy, ix]] as f64 * clip.velocity[[f, iy, ix, k]] as f64;
+                let v = clip.velocity[[f, iy, ix, k]] as f64;
+                m[iy * nx + ix] = if scale > 0.0 {
+                    clip.density[[f, iy, ix]] as f64 * v
+                } else {
+                    v
+                };
             }
         }
         m
     };
-    let vel = |k: usize| -> Vec<f64> {
-        let mut v = vec![0.0; nx * ny];
-        for iy in 0..ny {
-            for ix in 0..nx {
-                v[iy * nx + ix] = clip.velocity[[f, iy, ix, k]] as f64;
-            }
-        }
-        v
-    };
     let (mx, my) = if scale > 0.0 {
         (
-            gauss_smooth(&mom(0), nx, ny, scale),
-            gauss_smooth(&mom(1), nx, ny, scale),
+            gauss_smooth(&cells(0), nx, ny, scale),
+            gauss_smooth(&cells(1), nx, ny, scale),
         )
     } else {
-        (vel(0), vel(1))
+        (cells(0), cells(1))
     };
     for iy in 0..ny {
         for ix in 0..nx {
@@ -828,9 +814,7 @@ fn fit_inner(
         .iter()
         .map(|clip| {
             (
-                (0..clip.frames())
-                    .map(|f| guidance_field(clip, f, cfg.guidance_scale))
-                    .collect(),
+                guidance_fields(clip, cfg.guidance_scale),
                 Stencil::new(clip),
             )
         })
@@ -907,12 +891,6 @@ fn fit_inner(
                 let th = theta_tensor(&theta, &ad).require_grad();
                 let forces = ForceTensors::new(&th, &model.params.constants);
                 let mut total: Option<Tensor<1>> = None;
-                let add = |total: &mut Option<Tensor<1>>, l: Tensor<1>| {
-                    *total = Some(match total.take() {
-                        None => l,
-                        Some(t) => t + l,
-                    });
-                };
                 let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
                 let mut all_plans = Vec::with_capacity(replicas);
                 let mut ends = Vec::with_capacity(replicas);
@@ -1079,7 +1057,8 @@ fn fit_inner(
 
 /// Simulates the frames `range` of the clip from its first frame's fields with `params`
 /// (leaders following the clip's velocity field, no population control) and returns the mean
-/// density and velocity errors over the frames after the first.
+/// density and velocity errors over the frames after the first. `guidance` holds the leaders'
+/// guidance of every frame ([`guidance_fields`]).
 pub fn evaluate(
     clip: &ClipFields,
     params: &Params,
@@ -1087,7 +1066,7 @@ pub fn evaluate(
     seed: u64,
     precision: Precision,
     settle: &Settle,
-    guidance_scale: f64,
+    guidance: &[Guidance],
 ) -> Result<(f64, f64)> {
     let device = cpu_device(precision)?;
     let mut model = clip_model(params.clone(), clip);
@@ -1101,9 +1080,10 @@ pub fn evaluate(
     let f = ForceTensors::new(&theta, &params.constants);
     let mut state = HerdState::from_rows(&rows, &device);
     let (mut de, mut ve, mut n): (f64, f64, f64) = (0.0, 0.0, 0.0);
-    for fr in range.start..range.end.saturating_sub(1) {
+    let last = range.end.saturating_sub(1);
+    for (fr, lead) in guidance.iter().enumerate().take(last).skip(range.start) {
         let snap = state.snapshot()?;
-        model.world.guidance = guidance_field(clip, fr, guidance_scale);
+        model.world.guidance = lead.clone();
         let dec = model.decide(&snap, &mut rng);
         state = model.step(&f, &state, &dec)?;
         let (d, v) = field_errors(clip, fr + 1, &state.rows(&ids)?);
@@ -1272,6 +1252,14 @@ pub fn start_herd(
     Ok(rows)
 }
 
+/// Adds a loss term to a running total (the first term starts it).
+pub(crate) fn add(total: &mut Option<Tensor<1>>, l: Tensor<1>) {
+    *total = Some(match total.take() {
+        None => l,
+        Some(t) => t + l,
+    });
+}
+
 /// The ensemble objective for one frame: with ρ_k, m_k the density and momentum fields splatted
 /// from replica k (k = 1..K) and ρ̄, m̄ their means,
 ///
@@ -1295,28 +1283,23 @@ pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Resul
         .map(|st| splatted_fields(st, &g))
         .collect::<Result<Vec<_>>>()?;
     let kf = k as f64;
+    // k ≥ 2: sums start from zeros shaped like the first replica's.
     let mean = |i: usize| {
         fields
             .iter()
-            .map(|x| x[i].clone())
-            .reduce(|a, b| a + b)
-            .map(|t| t.div_scalar(kf))
+            .fold(fields[0][i].zeros_like(), |a, x| a + x[i].clone())
+            .div_scalar(kf)
     };
-    let (rb, mxb, myb) = (
-        mean(0).ok_or_else(|| Error::Internal("no replica".into()))?,
-        mean(1).ok_or_else(|| Error::Internal("no replica".into()))?,
-        mean(2).ok_or_else(|| Error::Internal("no replica".into()))?,
-    );
+    let (rb, mxb, myb) = (mean(0), mean(1), mean(2));
     let spread = |i: usize, m: &Tensor<1>| {
         fields
             .iter()
             .map(|x| (x[i].clone() - m.clone()).square().sum())
-            .reduce(|a, b| a + b)
-            .map(|t| t.div_scalar((kf - 1.0) * kf))
+            .fold(fields[0][i].zeros_like().sum(), |a, b| a + b)
+            .div_scalar((kf - 1.0) * kf)
     };
-    let sd = spread(0, &rb).ok_or_else(|| Error::Internal("no replica".into()))?;
-    let sm = spread(1, &mxb).ok_or_else(|| Error::Internal("no replica".into()))?
-        + spread(2, &myb).ok_or_else(|| Error::Internal("no replica".into()))?;
+    let sd = spread(0, &rb);
+    let sm = spread(1, &mxb) + spread(2, &myb);
     let ed = ((rb - rho).square().sum() - sd).div_scalar(norm_d);
     let em = ((mxb - mx).square().sum() + (myb - my).square().sum() - sm).div_scalar(norm_m);
     Ok(ed + em)

@@ -270,7 +270,7 @@ impl LossScenario {
         seed: u64,
         device: &Device,
     ) -> Result<Self> {
-        use super::fit::{guidance_field, init_herd, plan_step, LossKind};
+        use super::fit::{guidance_fields, init_herd, plan_step, LossKind};
         if start + steps >= clip.frames() {
             return Err(Error::invalid(format!(
                 "{steps} steps from frame {start} need {} frames; the clip has {}",
@@ -286,9 +286,7 @@ impl LossScenario {
         let mut params = params.clone();
         params.speed = clip.speed_model(&params.speed);
         let mut model = super::fit::clip_model(params, clip);
-        let guidance: Vec<Guidance> = (0..clip.frames())
-            .map(|f| guidance_field(clip, f, super::fit::GUIDANCE_SCALE))
-            .collect();
+        let guidance = guidance_fields(clip, super::fit::GUIDANCE_SCALE);
         let stencil = super::target::Stencil::new(clip);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let theta = theta_tensor(&model.params.to_vec(), device);
@@ -349,12 +347,7 @@ impl LossScenario {
             0.0
         };
         let mut total: Option<Tensor<1>> = None;
-        let mut add = |l: Tensor<1>| {
-            total = Some(match total.take() {
-                None => l,
-                Some(x) => x + l,
-            })
-        };
+        let mut add = |l: Tensor<1>| super::fit::add(&mut total, l);
         let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); steps];
         for (init, plans) in self.init.iter().zip(&self.plans) {
             let mut state = HerdState::from_rows(init, device);

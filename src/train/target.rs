@@ -239,14 +239,20 @@ pub fn target_directions(
 /// each side neighbour along each axis, so `E[splat] = K ∗ box` with K = [⅛, ¾, ⅛] ⊗ [⅛, ¾, ⅛].
 /// Weights falling outside the grid are dropped, as splatting drops them.
 pub fn blur_like_splat(field: &[f64], nx: usize, ny: usize) -> Vec<f64> {
+    separable_filter(field, nx, ny, &[0.125, 0.75, 0.125])
+}
+
+/// A cell field (row-major `[ny·nx]`) filtered by a symmetric kernel of odd length, centred on
+/// each cell, along x then along y; weights falling outside the grid are dropped.
+pub fn separable_filter(field: &[f64], nx: usize, ny: usize, kernel: &[f64]) -> Vec<f64> {
+    let half = (kernel.len() / 2) as i64;
     // One pass along x (stride 1, length nx), one along y (stride nx, length ny).
     let pass = |v: &[f64], stride: usize, len: usize| -> Vec<f64> {
-        const K: [f64; 3] = [0.125, 0.75, 0.125];
         let mut out = vec![0.0; v.len()];
         for (c, &x) in v.iter().enumerate() {
             let i = (c / stride) % len;
-            for (d, k) in K.iter().enumerate() {
-                let j = i as i64 + d as i64 - 1;
+            for (d, k) in kernel.iter().enumerate() {
+                let j = i as i64 + d as i64 - half;
                 if j >= 0 && (j as usize) < len {
                     out[c + j as usize * stride - i * stride] += k * x;
                 }
