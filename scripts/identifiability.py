@@ -40,6 +40,9 @@ ap.add_argument("--blur", type=float, default=0.0,
                 help="Gaussian blur σ (cells) applied to both fields before comparing; 0 = none")
 ap.add_argument("--obstacles", default=json.dumps(CROSSING_CELLS),
                 help="obstacle cells as JSON [[ix, iy], …] on the 14×10 grid")
+ap.add_argument("--sets", default=None,
+                help="a recovery.py --out JSON: also score each run's start and fitted forces "
+                     "(the truth's speed model kept), instead of the ±0.2 moves")
 a = ap.parse_args()
 tmp = tempfile.mkdtemp(prefix="herdfit-ident-")
 cells = os.path.join(tmp, "cells.json")
@@ -55,15 +58,25 @@ def synth(out, seed, params):
 
 
 points = [("truth", None, 0.0)]
-for n in NAMES:
-    f, p = n.split(".")
-    for d in (-0.2, 0.2):
-        if 0.001 <= truth["forces"][f][p] + d <= 1.0:
-            points.append((f"{n}{d:+.1f}", (f, p), d))
+if a.sets:
+    rec = json.load(open(a.sets))
+    for r in rec["runs"]:
+        points.append((f"start{r['start']}", "set", rec["starts"][r["start"]]))
+        points.append((f"fitted{r['start']}", "set", r["fitted"]))
+else:
+    for n in NAMES:
+        f, p = n.split(".")
+        for d in (-0.2, 0.2):
+            if 0.001 <= truth["forces"][f][p] + d <= 1.0:
+                points.append((f"{n}{d:+.1f}", (f, p), d))
 jobs = []
 for name, fp, d in points:
     q = json.loads(json.dumps(truth))
-    if fp:
+    if fp == "set":
+        for i, n in enumerate(NAMES):
+            f, p = n.split(".")
+            q["forces"][f][p] = round(float(d[i]), 6)
+    elif fp:
         q["forces"][fp[0]][fp[1]] = round(q["forces"][fp[0]][fp[1]] + d, 6)
     pf = os.path.join(tmp, f"{name}.json")
     json.dump(q, open(pf, "w"))
@@ -118,6 +131,15 @@ for name, fp, _ in points[1:]:
     dn = np.mean([table[(c, name)][0] - table[(c, 'truth')][0] for c in range(a.clips)])
     du = [table[(c, name)][1] - table[(c, 'truth')][1] for c in range(a.clips)]
     print(f"| {name} | {dn:+.4f} | " + " ".join(f"{x:+.4f}" for x in du) + " |")
+if a.sets:
+    print("\n| set | mean abs error | Δ unbiased, sum over clips | ± (std of the per-clip Δ × √clips) |")
+    print("|---|---:|---:|---:|")
+    t = np.array(json.load(open(a.sets))["truth"])
+    for name, fp, d in points[1:]:
+        du = np.array([table[(c, name)][1] - table[(c, 'truth')][1] for c in range(a.clips)])
+        print(f"| {name} | {np.mean(np.abs(np.array(d) - t)):.3f} | {du.sum():+.4f} | "
+              f"{du.std(ddof=1) * np.sqrt(a.clips) if a.clips > 1 else float('nan'):.4f} |")
+    raise SystemExit
 for kind, i in (("naive", 0), ("unbiased", 1)):
     wins = []
     for c in range(a.clips):

@@ -63,40 +63,37 @@ pub fn emergent(c: &ClipFields, f: usize) -> Emergent {
     }
 }
 
-/// Density and velocity errors of frame `fs` of `sim` against frame `f` of `clip` (same grid), on
-/// a coarse `k × k` grid: agents and momentum are summed into coarse cells; density
-/// Σ|n' − n| / Σ n, velocity Σ n ‖V' − V‖ / Σ n ‖V‖.
-pub fn coarse_errors(
-    clip: &ClipFields,
-    f: usize,
-    sim: &ClipFields,
-    fs: usize,
-    k: usize,
-) -> (f64, f64) {
-    let g = clip.grid();
+/// Agents and momentum of frame `f` of `c` summed into the cells of a coarse `k × k` grid (fewer
+/// along an axis with fewer cells): `[n, n·Vx, n·Vy]` per coarse cell, row-major.
+pub fn coarse_cells(c: &ClipFields, f: usize, k: usize) -> Vec<[f64; 3]> {
+    let g = c.grid();
     let a = g.cell_area();
     let kx = k.min(g.nx).max(1);
     let ky = k.min(g.ny).max(1);
-    let mut n = vec![[0.0f64; 6]; kx * ky]; // n, mx, my, n', mx', my'
+    let mut n = vec![[0.0f64; 3]; kx * ky];
     for iy in 0..g.ny {
         for ix in 0..g.nx {
-            let c = (iy * ky / g.ny) * kx + ix * kx / g.nx;
-            for (o, src, fr) in [(0, clip, f), (3, sim, fs)] {
-                let d = src.density[[fr, iy, ix]] as f64 * a;
-                n[c][o] += d;
-                n[c][o + 1] += d * src.velocity[[fr, iy, ix, 0]] as f64;
-                n[c][o + 2] += d * src.velocity[[fr, iy, ix, 1]] as f64;
-            }
+            let cell = (iy * ky / g.ny) * kx + ix * kx / g.nx;
+            let d = c.density[[f, iy, ix]] as f64 * a;
+            n[cell][0] += d;
+            n[cell][1] += d * c.velocity[[f, iy, ix, 0]] as f64;
+            n[cell][2] += d * c.velocity[[f, iy, ix, 1]] as f64;
         }
     }
+    n
+}
+
+/// Density and velocity errors of simulated coarse cells `sim` against the clip's `clip` (from
+/// [`coarse_cells`]): density Σ|n' − n| / Σ n, velocity Σ n ‖V' − V‖ / Σ n ‖V‖.
+pub fn cell_errors(clip: &[[f64; 3]], sim: &[[f64; 3]]) -> (f64, f64) {
     let (mut dn, mut tn, mut dv, mut tv) = (0.0, 0.0, 0.0, 0.0);
-    for c in &n {
-        dn += (c[3] - c[0]).abs();
+    for (c, s) in clip.iter().zip(sim) {
+        dn += (s[0] - c[0]).abs();
         tn += c[0];
         if c[0] > 0.0 {
             let v = [c[1] / c[0], c[2] / c[0]];
-            let vs = if c[3] > 0.0 {
-                [c[4] / c[3], c[5] / c[3]]
+            let vs = if s[0] > 0.0 {
+                [s[1] / s[0], s[2] / s[0]]
             } else {
                 [0.0, 0.0]
             };
@@ -108,6 +105,18 @@ pub fn coarse_errors(
         if tn > 0.0 { dn / tn } else { 0.0 },
         if tv > 0.0 { dv / tv } else { 0.0 },
     )
+}
+
+/// Density and velocity errors of frame `fs` of `sim` against frame `f` of `clip` (same grid), on
+/// a coarse `k × k` grid ([`coarse_cells`], [`cell_errors`]).
+pub fn coarse_errors(
+    clip: &ClipFields,
+    f: usize,
+    sim: &ClipFields,
+    fs: usize,
+    k: usize,
+) -> (f64, f64) {
+    cell_errors(&coarse_cells(clip, f, k), &coarse_cells(sim, fs, k))
 }
 
 /// The temporal window (frames) over which the clip's velocities were averaged: the extraction's
@@ -277,6 +286,8 @@ pub struct Report {
     pub split: f64,
     pub grid: usize,
     pub seeds: usize,
+    /// Whether the seeds' mean prediction was compared ([`ValidateConfig::ensemble_mean`]).
+    pub ensemble_mean: bool,
     /// The video's per-frame measures: [polarization, ang. momentum centroid, frame centre,
     /// aspect ratio].
     pub video_per_frame: Vec<[f64; 4]>,
@@ -300,6 +311,11 @@ pub struct ValidateConfig {
     /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
     /// ([`crate::train::fit::guidance_field`]).
     pub guidance_scale: f64,
+    /// Compare the seeds' mean prediction (coarse counts and momenta, each measure averaged over
+    /// the seeds frame by frame) with the clip, instead of averaging each seed's own errors. A
+    /// stochastic herd's best prediction is its expectation; per-seed errors also charge it for
+    /// its own run-to-run spread, which favours sets that make the herd less variable.
+    pub ensemble_mean: bool,
 }
 
 /// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
@@ -329,6 +345,7 @@ pub fn validate(
     // The leaders' guidance of every frame, the same for every set and seed.
     let guidance = guidance_fields(clip, cfg.guidance_scale);
     let video: Vec<Emergent> = (start..nf).map(|f| emergent(clip, f)).collect();
+    let clip_cells: Vec<Vec<[f64; 3]>> = (start..nf).map(|f| coarse_cells(clip, f, grid)).collect();
     let mut reports = Vec::new();
     let mut runs_all = Vec::new();
     let (kx, ky) = (grid.min(clip.meta.nx), grid.min(clip.meta.ny));
@@ -339,6 +356,29 @@ pub fn validate(
         let mut sims: Vec<Vec<f64>> = vec![Vec::new(); 6];
         let mut map = vec![vec![0.0f64; kx]; ky];
         let mut runs = Vec::new();
+        // One frame's simulated values (weight w: 1/seeds per run, or 1 for the ensemble mean):
+        // errors against the video, per-frame means and the coarse density error map.
+        let mut record = |k: usize, sim_vals: [f64; 6], cells: &[[f64; 3]], w: f64| {
+            let vid = video[k].values();
+            let vid_vals = [0.0, 0.0, vid[0], vid[1], vid[2], vid[3]];
+            for m in 0..6 {
+                let err = if m < 2 {
+                    sim_vals[m]
+                } else {
+                    (sim_vals[m] - vid_vals[m]).abs()
+                };
+                errs[m].push(err);
+                sims[m].push(sim_vals[m]);
+                per_frame[k][m] += w * sim_vals[m];
+            }
+            for (c, (s, v)) in cells.iter().zip(&clip_cells[k]).enumerate() {
+                map[c / kx][c % kx] += w * (s[0] - v[0]).abs() / (nf - start) as f64;
+            }
+        };
+        // Seed-averaged coarse cells and measures (the ensemble's prediction of each frame).
+        let mut mean_cells = vec![vec![[0.0f64; 3]; kx * ky]; nf - start];
+        let mut mean_vals = vec![[0.0f64; 4]; nf - start];
+        let w = 1.0 / seeds as f64;
         for seed in 0..seeds {
             let run = simulate_clip(
                 clip,
@@ -349,43 +389,32 @@ pub fn validate(
                 &guidance,
                 &device,
             )?;
-            for (k, f) in (start..nf).enumerate() {
+            for k in 0..nf - start {
                 // The simulation's fields are indexed from the first held-out frame.
-                let (de, ve) = coarse_errors(clip, f, &run.fields, f - start, grid);
-                let e = emergent(&run.fields, f - start);
-                let v = video[k];
-                let [p, ac, af, ar] = e.values();
-                let sim_vals = [de, ve, p, ac, af, ar];
-                let [p, ac, af, ar] = v.values();
-                let vid_vals = [0.0, 0.0, p, ac, af, ar];
-                for m in 0..6 {
-                    let err = if m < 2 {
-                        sim_vals[m]
-                    } else {
-                        (sim_vals[m] - vid_vals[m]).abs()
-                    };
-                    errs[m].push(err);
-                    sims[m].push(sim_vals[m]);
-                    per_frame[k][m] += sim_vals[m] / seeds as f64;
-                }
-                // Error map on the coarse grid.
-                let g = clip.grid();
-                let a = g.cell_area();
-                let mut cells = vec![0.0f64; kx * ky];
-                for iy in 0..g.ny {
-                    for ix in 0..g.nx {
-                        let c = (iy * ky / g.ny) * kx + ix * kx / g.nx;
-                        cells[c] += (clip.density[[f, iy, ix]] as f64
-                            - run.fields.density[[f - start, iy, ix]] as f64)
-                            * a;
+                let cells = coarse_cells(&run.fields, k, grid);
+                let vals = emergent(&run.fields, k).values();
+                for (m, c) in mean_cells[k].iter_mut().zip(&cells) {
+                    for j in 0..3 {
+                        m[j] += w * c[j];
                     }
                 }
-                for (c, v) in cells.iter().enumerate() {
-                    map[c / kx][c % kx] += v.abs() / ((nf - start) * seeds) as f64;
+                for j in 0..4 {
+                    mean_vals[k][j] += w * vals[j];
+                }
+                if !cfg.ensemble_mean {
+                    let (de, ve) = cell_errors(&clip_cells[k], &cells);
+                    record(k, [de, ve, vals[0], vals[1], vals[2], vals[3]], &cells, w);
                 }
             }
             runs.push(run);
             progress();
+        }
+        if cfg.ensemble_mean {
+            for k in 0..nf - start {
+                let (de, ve) = cell_errors(&clip_cells[k], &mean_cells[k]);
+                let v = mean_vals[k];
+                record(k, [de, ve, v[0], v[1], v[2], v[3]], &mean_cells[k], 1.0);
+            }
         }
         let rows = MEASURES
             .iter()
@@ -416,6 +445,7 @@ pub fn validate(
             split,
             grid,
             seeds,
+            ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),
             sets: reports,
         },
@@ -427,8 +457,19 @@ pub fn validate(
 pub fn markdown(r: &Report) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "# herdfit validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid.\n\n",
-        r.clip, r.frames[0], r.frames[1], r.split, r.seeds, r.grid, r.grid
+        "# herdfit validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid, {}.\n\n",
+        r.clip,
+        r.frames[0],
+        r.frames[1],
+        r.split,
+        r.seeds,
+        r.grid,
+        r.grid,
+        if r.ensemble_mean {
+            "of the seeds' mean prediction"
+        } else {
+            "averaged over the seeds' own errors"
+        }
     ));
     s.push_str("| measure | video mean ± STD |");
     for set in &r.sets {

@@ -831,3 +831,49 @@ fn leader_guidance_smooths_away_the_flanks_inward_drift() {
     let t = at(1.5, 2, 2);
     assert!(t[1] < 0.0 && t[1] > 0.5 * at(0.0, 2, 2)[1], "{t:?}");
 }
+
+#[test]
+fn the_averaged_step_follows_a_steady_gradient_and_damps_a_noisy_one() {
+    use herdfit::train::fit::{update, FitConfig, OptState, Optimizer};
+    use rand::{Rng, SeedableRng};
+    let cfg = |optimizer| FitConfig {
+        optimizer,
+        ..FitConfig::default()
+    };
+    // A steady gradient: every step moves lr along −g/‖g‖ (both running means bias-corrected),
+    // exactly as the normalised step does.
+    let g = [3.0, -4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    for opt in [Optimizer::Averaged, Optimizer::Normalized] {
+        let mut theta = [0.5; 12];
+        let mut st = OptState::default();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+        for _ in 0..10 {
+            update(&mut theta, &g, &mut st, &cfg(opt), 0.001, &mut rng);
+        }
+        assert!(
+            (theta[0] - (0.5 - 10.0 * 0.001 * 0.6)).abs() < 1e-12,
+            "{opt:?}: {theta:?}"
+        );
+        assert!(
+            (theta[1] - (0.5 + 10.0 * 0.001 * 0.8)).abs() < 1e-12,
+            "{opt:?}: {theta:?}"
+        );
+        assert!(theta[2..].iter().all(|&t| t == 0.5));
+    }
+    // Gradients that are pure noise about a minimum: the normalised step random-walks lr per
+    // update, the averaged step's mean gradient averages out and it stays near the start.
+    let walk = |opt| {
+        let mut theta = [0.5; 12];
+        let mut st = OptState::default();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let mut noise = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        for _ in 0..400 {
+            let g: [f64; 12] = std::array::from_fn(|_| noise.gen::<f64>() - 0.5);
+            update(&mut theta, &g, &mut st, &cfg(opt), 0.002, &mut rng);
+        }
+        theta.iter().map(|t| (t - 0.5).powi(2)).sum::<f64>().sqrt()
+    };
+    let (avg, norm) = (walk(Optimizer::Averaged), walk(Optimizer::Normalized));
+    assert!(norm > 0.02, "normalised walk {norm}");
+    assert!(avg < 0.3 * norm, "averaged {avg} vs normalised {norm}");
+}

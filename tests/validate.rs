@@ -238,3 +238,57 @@ fn a_warm_up_starts_earlier_and_reports_the_same_frames() {
     assert_ne!(b["sets"][0]["per_frame"], c["sets"][0]["per_frame"]);
     assert_eq!(c["sets"][0]["per_frame"], run("12")["sets"][0]["per_frame"]);
 }
+
+#[test]
+fn ensemble_mean_validation_scores_the_seeds_mean_prediction() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = synth_clip(d, "120", "40", "10x6", "5");
+    let report = |name: &str, seeds: &str, ensemble: bool| {
+        let out = d.join(name);
+        let truth = clip.join("truth.json");
+        let mut args = vec![
+            "validate",
+            s(&clip),
+            "--params",
+            s(&truth),
+            "--seeds",
+            seeds,
+            "--no-video",
+            "--out",
+            s(&out),
+        ];
+        if ensemble {
+            args.push("--ensemble-mean");
+        }
+        ok(&args);
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        assert_eq!(r["ensemble_mean"], ensemble);
+        let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+        assert_eq!(md.contains("the seeds' mean prediction"), ensemble);
+        (0..6)
+            .map(|m| r["sets"][0]["rows"][m]["error"]["mean"].as_f64().unwrap())
+            .collect::<Vec<f64>>()
+    };
+    // One seed: the mean prediction is that seed's run, so both modes give the same numbers.
+    let (one, one_ens) = (report("p1", "1", false), report("e1", "1", true));
+    for m in 0..6 {
+        assert!(
+            (one[m] - one_ens[m]).abs() < 1e-12,
+            "measure {m}: {one:?} vs {one_ens:?}"
+        );
+    }
+    // Three seeds: |mean(n') − n| ≤ mean |n' − n| cell by cell and frame by frame, and the same
+    // for each measure, so the density error and the measures' errors of the mean prediction can
+    // only be smaller; they are strictly smaller when the seeds' runs differ.
+    let (per_run, ens) = (report("p3", "3", false), report("e3", "3", true));
+    for m in [0, 2, 3, 4, 5] {
+        assert!(
+            ens[m] <= per_run[m] + 1e-12,
+            "measure {m}: {ens:?} vs {per_run:?}"
+        );
+    }
+    assert!(ens[0] < per_run[0], "density: {ens:?} vs {per_run:?}");
+}

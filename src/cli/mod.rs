@@ -307,6 +307,10 @@ pub struct ValidateArgs {
     /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
     #[arg(long, value_name = "S", default_value_t = crate::train::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
     pub guidance_scale: f64,
+    /// Compare the seeds' mean prediction with the clip (counts, momenta and each measure
+    /// averaged over the seeds frame by frame) instead of averaging each seed's own errors.
+    #[arg(long)]
+    pub ensemble_mean: bool,
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
@@ -842,6 +846,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         settle: crate::train::fit::Settle::default().iterations,
         warmup: 0,
         guidance_scale: crate::train::fit::GUIDANCE_SCALE,
+        ensemble_mean: false,
         no_video: false,
         out: report_dir.clone(),
     })?;
@@ -1518,6 +1523,7 @@ fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
             settle: crate::train::fit::Settle::with_iterations(a.settle),
             warmup: a.warmup,
             guidance_scale: a.guidance_scale,
+            ensemble_mean: a.ensemble_mean,
         },
         || pb.inc(1),
     )

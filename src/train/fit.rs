@@ -35,6 +35,13 @@ pub enum Optimizer {
     Adam,
     /// The paper's normalised gradient step θ ← θ − lr · g/‖g‖.
     Normalized,
+    /// The normalised step on averaged gradients, scaled by their agreement:
+    /// θ ← θ − lr · (‖m‖/√s) · m/√s, m the running mean of g (β 0.98, about one epoch of 50
+    /// windows), s that of ‖g‖² (β 0.999), both bias-corrected. Where successive gradients agree
+    /// it steps lr along them, as the normalised step does; where they are noise about a minimum,
+    /// ‖m‖/√s falls to about 0.1 and the steps to a hundredth of lr (averaging alone would not
+    /// do: the sum of averaged noise random-walks as far as the noise itself).
+    Averaged,
 }
 
 /// Settings of a fit (the `fit` command's flags).
@@ -655,15 +662,18 @@ pub fn window_loss(
     Ok((state, total, em / k, ev / k))
 }
 
-/// Adam state (or nothing for the normalised step).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// Optimiser state: Adam's moments; the averaged step's mean gradient (`m`) and mean ‖g‖²
+/// (`v[0]`); nothing for the normalised step.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 pub struct OptState {
     pub m: [f64; N_PARAMS],
     pub v: [f64; N_PARAMS],
     pub t: u64,
 }
 
-fn update(
+/// One optimiser step on `theta` with gradient `g` and step size `lr` (then clamped to the
+/// parameters' ranges); a vanishing gradient takes `cfg.zero_grad_step` in a random direction.
+pub fn update(
     theta: &mut [f64; N_PARAMS],
     g: &[f64; N_PARAMS],
     opt: &mut OptState,
@@ -684,6 +694,24 @@ fn update(
             Optimizer::Normalized => {
                 for (t, x) in theta.iter_mut().zip(g) {
                     *t -= lr * x / norm;
+                }
+            }
+            Optimizer::Averaged => {
+                let (b1, b2): (f64, f64) = (0.98, 0.999);
+                opt.t += 1;
+                let (c1, c2) = (1.0 - b1.powi(opt.t as i32), 1.0 - b2.powi(opt.t as i32));
+                // One running mean of ‖g‖² for all parameters (kept in v[0]): each parameter
+                // moves by its share of the averaged gradient, as in the normalised step.
+                opt.v[0] = b2 * opt.v[0] + (1.0 - b2) * norm * norm;
+                let rms = (opt.v[0] / c2).sqrt();
+                for (m, x) in opt.m.iter_mut().zip(g) {
+                    *m = b1 * *m + (1.0 - b1) * x;
+                }
+                // Signal-to-noise of the averaged gradient, ‖m‖/√s: 1 for a steady gradient,
+                // about √((1 − β₁)/(1 + β₁)) = 0.1 for pure noise.
+                let snr = opt.m.iter().map(|m| (m / c1).powi(2)).sum::<f64>().sqrt() / rms;
+                for (t, m) in theta.iter_mut().zip(&opt.m) {
+                    *t -= lr * snr * (m / c1) / rms;
                 }
             }
             Optimizer::Adam => {
