@@ -264,7 +264,8 @@ pub struct SetReport {
     /// Per frame, seed-averaged: [density error, velocity error, polarization, ang. momentum
     /// centroid, ang. momentum frame centre, aspect ratio] of the simulation.
     pub per_frame: Vec<[f64; 6]>,
-    /// Mean |ρ' − ρ| (agents) per coarse cell over frames and seeds, row 0 at the bottom.
+    /// Mean |ρ' − ρ| (agents) per coarse cell over frames and seeds (of the seeds' mean
+    /// prediction with `ensemble_mean`), row 0 at the bottom.
     pub error_map: Vec<Vec<f64>>,
 }
 
