@@ -41,6 +41,9 @@ pub enum Optimizer {
     /// it steps lr along them, as the normalised step does; where they are noise about a minimum,
     /// ‖m‖/√s falls to about 0.1 and the steps to a hundredth of lr (averaging alone would not
     /// do: the sum of averaged noise random-walks as far as the noise itself).
+    #[value(
+        help = "The normalised step on a running mean of the gradients, scaled by how well they agree (about lr where they agree, a hundredth of it where they are noise)"
+    )]
     Averaged,
 }
 
