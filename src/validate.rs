@@ -376,7 +376,8 @@ pub fn validate(
                 map[c / kx][c % kx] += w * (s[0] - v[0]).abs() / (nf - start) as f64;
             }
         };
-        // Seed-averaged coarse cells and measures (the ensemble's prediction of each frame).
+        // Seed-averaged coarse cells and measures (the ensemble's prediction of each frame),
+        // accumulated only with `ensemble_mean`.
         let mut mean_cells = vec![vec![[0.0f64; 3]; kx * ky]; nf - start];
         let mut mean_vals = vec![[0.0f64; 4]; nf - start];
         let w = 1.0 / seeds as f64;
@@ -394,15 +395,16 @@ pub fn validate(
                 // The simulation's fields are indexed from the first held-out frame.
                 let cells = coarse_cells(&run.fields, k, grid);
                 let vals = emergent(&run.fields, k).values();
-                for (m, c) in mean_cells[k].iter_mut().zip(&cells) {
-                    for j in 0..3 {
-                        m[j] += w * c[j];
+                if cfg.ensemble_mean {
+                    for (m, c) in mean_cells[k].iter_mut().zip(&cells) {
+                        for j in 0..3 {
+                            m[j] += w * c[j];
+                        }
                     }
-                }
-                for j in 0..4 {
-                    mean_vals[k][j] += w * vals[j];
-                }
-                if !cfg.ensemble_mean {
+                    for j in 0..4 {
+                        mean_vals[k][j] += w * vals[j];
+                    }
+                } else {
                     let (de, ve) = cell_errors(&clip_cells[k], &cells);
                     record(k, [de, ve, vals[0], vals[1], vals[2], vals[3]], &cells, w);
                 }

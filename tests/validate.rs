@@ -30,20 +30,39 @@ fn synth_clip(
     clip
 }
 
-#[test]
-fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let clip = synth_clip(d, "200", "60", "12x8", "7");
-    // Baseline: no cohesion, no alignment, strong avoidance.
+/// The clip's truth with no cohesion, no alignment and the strongest avoidance, written to
+/// `path`: a parameter set that is genuinely wrong.
+fn disordered_start(clip: &std::path::Path, path: &std::path::Path) {
     let mut bad: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(clip.join("truth.json")).unwrap()).unwrap();
     bad["forces"]["cohesion"]["weight"] = 0.0.into();
     bad["forces"]["alignment"]["weight"] = 0.0.into();
     bad["forces"]["avoidance"]["weight"] = 1.0.into();
     bad.as_object_mut().unwrap().remove("physical");
+    std::fs::write(path, bad.to_string()).unwrap();
+}
+
+/// Asserts that report.md prints set `set`'s error of every measure as report.json holds it.
+fn assert_report_prints(r: &serde_json::Value, md: &str, set: usize) {
+    for m in 0..6 {
+        let row = &r["sets"][set]["rows"][m];
+        let cell = format!(
+            "{:.4} ± {:.4}",
+            row["error"]["mean"].as_f64().unwrap(),
+            row["error"]["std"].as_f64().unwrap()
+        );
+        assert!(md.contains(&cell), "{cell} not in report.md");
+    }
+}
+
+#[test]
+fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = synth_clip(d, "200", "60", "12x8", "7");
+    // Baseline: no cohesion, no alignment, strong avoidance.
     let bad_path = d.join("bad.json");
-    std::fs::write(&bad_path, bad.to_string()).unwrap();
+    disordered_start(&clip, &bad_path);
     let out = d.join("report");
     let printed = ok(&[
         "validate",
@@ -90,15 +109,7 @@ fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers(
         .position(|l| l.starts_with("| measure |"))
         .unwrap();
     assert!(first_table < 5);
-    for m in 0..6 {
-        let row = &r["sets"][0]["rows"][m];
-        let cell = format!(
-            "{:.4} ± {:.4}",
-            row["error"]["mean"].as_f64().unwrap(),
-            row["error"]["std"].as_f64().unwrap()
-        );
-        assert!(md.contains(&cell), "{cell} not in report.md");
-    }
+    assert_report_prints(&r, &md, 0);
     assert!(printed.contains("| measure |"));
 }
 
@@ -302,30 +313,9 @@ fn ensemble_mean_validation_scores_the_seeds_mean_prediction() {
 fn a_fit_beats_its_disordered_start_on_every_held_out_measure() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let clip = d.join("clip");
-    ok(&[
-        "synth",
-        "--agents",
-        "300",
-        "--frames",
-        "120",
-        "--grid",
-        "16x10",
-        "--cell-size",
-        "3",
-        "--seed",
-        "11",
-        "--out",
-        s(&clip),
-    ]);
-    let mut bad: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(clip.join("truth.json")).unwrap()).unwrap();
-    bad["forces"]["cohesion"]["weight"] = 0.0.into();
-    bad["forces"]["alignment"]["weight"] = 0.0.into();
-    bad["forces"]["avoidance"]["weight"] = 1.0.into();
-    bad.as_object_mut().unwrap().remove("physical");
+    let clip = synth_clip(d, "300", "120", "16x10", "11");
     let start = d.join("start.json");
-    std::fs::write(&start, bad.to_string()).unwrap();
+    disordered_start(&clip, &start);
     let fitted = d.join("fitted.json");
     ok(&[
         "fit",
@@ -364,24 +354,18 @@ fn a_fit_beats_its_disordered_start_on_every_held_out_measure() {
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(r["frames"], serde_json::json!([60, 120]));
-    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     for m in 0..6 {
-        let row = |set: usize| &r["sets"][set]["rows"][m];
-        let err = |set: usize| row(set)["error"]["mean"].as_f64().unwrap();
+        let sets = &r["sets"];
+        let err = |set: usize| sets[set]["rows"][m]["error"]["mean"].as_f64().unwrap();
         assert!(
             err(0) < err(1),
             "{}: fitted {} vs start {}",
-            row(0)["measure"],
+            sets[0]["rows"][m]["measure"],
             err(0),
             err(1)
         );
-        for set in 0..2 {
-            let cell = format!(
-                "{:.4} ± {:.4}",
-                err(set),
-                row(set)["error"]["std"].as_f64().unwrap()
-            );
-            assert!(md.contains(&cell), "{cell} not in report.md");
-        }
     }
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert_report_prints(&r, &md, 0);
+    assert_report_prints(&r, &md, 1);
 }
