@@ -1812,3 +1812,34 @@ fn author_cmd(a: AuthorArgs) -> Result<()> {
     );
     Ok(())
 }
+
+/// [`crate::progress::Progress`] as indicatif bars on stderr (hidden when stderr is not a
+/// terminal), one bar per stage.
+#[derive(Default)]
+pub struct Bars {
+    bar: Option<ProgressBar>,
+}
+
+impl crate::progress::Progress for Bars {
+    fn start(&mut self, what: &str, len: u64) {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+        self.bar = Some(progress_bar(len, what));
+    }
+    fn inc(&mut self, n: u64) {
+        if let Some(b) = &self.bar {
+            b.inc(n);
+        }
+    }
+    fn message(&mut self, msg: &str) {
+        if let Some(b) = &self.bar {
+            b.set_message(msg.to_string());
+        }
+    }
+    fn finish(&mut self) {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+    }
+}

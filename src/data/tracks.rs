@@ -1,0 +1,718 @@
+//! `herdfit.tracks/1`: trajectories of individuals, 2D or 3D, shared by every system.
+//!
+//! A tracks file is a CSV with a header, one row per animal per frame:
+//!
+//! ```text
+//! frame,time,id,x,y[,z][,vx,vy[,vz]][,role]
+//! ```
+//!
+//! and an optional JSON sidecar beside it with the same stem (`flock.csv` → `flock.json`):
+//!
+//! ```json
+//! {"schema": "herdfit.tracks/1", "units": "m", "fps": 2.5, "dimension": 2, "provenance": {…}}
+//! ```
+//!
+//! Columns are found by name (any order; unknown columns are ignored), rows are ordered by frame
+//! (non-decreasing) and a `(frame, id)` pair appears at most once. Without a sidecar, the units are
+//! body lengths, the dimension follows from the presence of a `z` column and the frame rate from
+//! the `time` column, so the `TRAJ.csv` files of `herdfit simulate` read as they are.
+//!
+//! Coordinates: in `BL` and `m` the axes are x right, y up (z up in 3D); in `px` they are image
+//! coordinates, x right and y **down**, origin at the top-left corner of the image.
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Schema tag of tracks sidecars.
+pub const TRACKS_SCHEMA: &str = "herdfit.tracks/1";
+
+/// Length unit of a tracks file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Units {
+    /// Body lengths (the herd model's unit), y up.
+    #[serde(rename = "BL")]
+    BodyLengths,
+    /// Metres, y up.
+    #[serde(rename = "m")]
+    Metres,
+    /// Image pixels, y down.
+    #[serde(rename = "px")]
+    Pixels,
+}
+
+impl Units {
+    /// The unit as written in the sidecar.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Units::BodyLengths => "BL",
+            Units::Metres => "m",
+            Units::Pixels => "px",
+        }
+    }
+}
+
+/// The sidecar of a tracks file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TracksMeta {
+    /// Always [`TRACKS_SCHEMA`].
+    pub schema: String,
+    /// Length unit of positions (velocities are in that unit per second).
+    pub units: Units,
+    /// Frames per second (`time = frame / fps` up to the first frame's offset).
+    pub fps: f64,
+    /// 2 or 3.
+    pub dimension: u8,
+    /// Where the tracks came from (free-form JSON).
+    #[serde(default)]
+    pub provenance: serde_json::Value,
+}
+
+impl TracksMeta {
+    /// A sidecar for new tracks.
+    pub fn new(units: Units, fps: f64, dimension: u8) -> Self {
+        TracksMeta {
+            schema: TRACKS_SCHEMA.into(),
+            units,
+            fps,
+            dimension,
+            provenance: serde_json::Value::Null,
+        }
+    }
+}
+
+/// One animal in one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackRow {
+    pub frame: u64,
+    /// Seconds.
+    pub time: f64,
+    pub id: u64,
+    /// Position; `pos[2]` is 0 in 2D.
+    pub pos: [f64; 3],
+    /// Velocity (units per second) when the file has one; `vel[2]` is 0 in 2D.
+    pub vel: Option<[f64; 3]>,
+    /// A free-form role (`leader`, `follower`, a behaviour name) when the file has one.
+    pub role: Option<String>,
+}
+
+/// A whole tracks file: sidecar plus rows ordered by `(frame, id)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tracks {
+    pub meta: TracksMeta,
+    pub rows: Vec<TrackRow>,
+}
+
+/// The sidecar path of a tracks CSV: same folder and stem, extension `json`.
+pub fn sidecar_path(csv: &Path) -> PathBuf {
+    csv.with_extension("json")
+}
+
+impl Tracks {
+    /// Tracks from rows in any order; sorts them by `(frame, id)` and checks them.
+    pub fn new(meta: TracksMeta, mut rows: Vec<TrackRow>) -> Result<Self> {
+        rows.sort_by_key(|r| (r.frame, r.id));
+        let t = Tracks { meta, rows };
+        t.check()?;
+        Ok(t)
+    }
+
+    /// Checks the sidecar and the rows: finite values, one row per `(frame, id)`, one time per
+    /// frame, time increasing with frame, z = 0 in 2D. Errors name the key or row.
+    pub fn check(&self) -> Result<()> {
+        let m = &self.meta;
+        if m.schema != TRACKS_SCHEMA {
+            return Err(Error::invalid(format!(
+                "schema is '{}', expected '{TRACKS_SCHEMA}'",
+                m.schema
+            )));
+        }
+        if !(m.fps.is_finite() && m.fps > 0.0 && m.fps <= 1e6) {
+            return Err(Error::invalid(format!(
+                "fps = {} must be in (0, 1e6]",
+                m.fps
+            )));
+        }
+        if m.dimension != 2 && m.dimension != 3 {
+            return Err(Error::invalid(format!(
+                "dimension = {} must be 2 or 3",
+                m.dimension
+            )));
+        }
+        let has_vel = self.rows.first().is_some_and(|r| r.vel.is_some());
+        let has_role = self.rows.first().is_some_and(|r| r.role.is_some());
+        let mut prev: Option<&TrackRow> = None;
+        for (i, r) in self.rows.iter().enumerate() {
+            let row = i + 1;
+            let bad = |what: &str| {
+                Error::invalid(format!(
+                    "row {row} (frame {}, id {}): {what}",
+                    r.frame, r.id
+                ))
+            };
+            if !r.time.is_finite() {
+                return Err(bad(&format!("time is {}", r.time)));
+            }
+            if r.pos.iter().any(|v| !v.is_finite()) {
+                return Err(bad("position is not finite"));
+            }
+            if m.dimension == 2 && r.pos[2] != 0.0 {
+                return Err(bad("z given in 2D tracks"));
+            }
+            if r.vel.is_some() != has_vel || r.role.is_some() != has_role {
+                return Err(bad("columns differ from the first row's"));
+            }
+            if let Some(v) = r.vel {
+                if v.iter().any(|c| !c.is_finite()) {
+                    return Err(bad("velocity is not finite"));
+                }
+            }
+            if let Some(p) = prev {
+                if (r.frame, r.id) <= (p.frame, p.id) {
+                    return Err(bad(if r.frame == p.frame && r.id == p.id {
+                        "duplicate (frame, id)"
+                    } else {
+                        "rows not ordered by (frame, id)"
+                    }));
+                }
+                if r.frame == p.frame && r.time != p.time {
+                    return Err(bad(&format!(
+                        "time {} differs from {} earlier in the same frame",
+                        r.time, p.time
+                    )));
+                }
+                if r.frame > p.frame && r.time <= p.time {
+                    return Err(bad(&format!(
+                        "time {} does not increase with the frame (previous frame at {})",
+                        r.time, p.time
+                    )));
+                }
+            }
+            prev = Some(r);
+        }
+        Ok(())
+    }
+
+    /// Whether the rows carry velocities.
+    pub fn has_velocity(&self) -> bool {
+        self.rows.first().is_some_and(|r| r.vel.is_some())
+    }
+
+    /// Whether the rows carry roles.
+    pub fn has_role(&self) -> bool {
+        self.rows.first().is_some_and(|r| r.role.is_some())
+    }
+
+    /// The distinct ids, ascending.
+    pub fn ids(&self) -> Vec<u64> {
+        let mut ids: Vec<u64> = self.rows.iter().map(|r| r.id).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    }
+
+    /// Row indices per frame, frames ascending.
+    pub fn frames(&self) -> Vec<(u64, std::ops::Range<usize>)> {
+        let mut out = Vec::new();
+        let mut start = 0;
+        for i in 1..=self.rows.len() {
+            if i == self.rows.len() || self.rows[i].frame != self.rows[start].frame {
+                out.push((self.rows[start].frame, start..i));
+                start = i;
+            }
+        }
+        out
+    }
+
+    /// Row indices per id (each list ordered by frame).
+    pub fn by_id(&self) -> BTreeMap<u64, Vec<usize>> {
+        let mut m: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
+        for (i, r) in self.rows.iter().enumerate() {
+            m.entry(r.id).or_default().push(i);
+        }
+        m
+    }
+
+    /// The CSV text (header + rows, shortest round-trip floats, so the bytes depend only on the
+    /// values).
+    pub fn to_csv(&self) -> String {
+        use std::fmt::Write as _;
+        let three = self.meta.dimension == 3;
+        let mut head = String::from("frame,time,id,x,y");
+        if three {
+            head.push_str(",z");
+        }
+        if self.has_velocity() {
+            head.push_str(if three { ",vx,vy,vz" } else { ",vx,vy" });
+        }
+        if self.has_role() {
+            head.push_str(",role");
+        }
+        let mut s = head;
+        s.push('\n');
+        for r in &self.rows {
+            let _ = write!(
+                s,
+                "{},{},{},{},{}",
+                r.frame, r.time, r.id, r.pos[0], r.pos[1]
+            );
+            if three {
+                let _ = write!(s, ",{}", r.pos[2]);
+            }
+            if let Some(v) = r.vel {
+                let _ = write!(s, ",{},{}", v[0], v[1]);
+                if three {
+                    let _ = write!(s, ",{}", v[2]);
+                }
+            }
+            if let Some(role) = &r.role {
+                let _ = write!(s, ",{role}");
+            }
+            s.push('\n');
+        }
+        s
+    }
+
+    /// Writes `path` (CSV) and its sidecar, each atomically.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        self.check().map_err(|e| e.in_file(path))?;
+        let side = sidecar_path(path);
+        if side == path {
+            return Err(Error::file(path, "a tracks CSV must not end in .json"));
+        }
+        let json = serde_json::to_string_pretty(&self.meta)
+            .map_err(|e| Error::Internal(format!("tracks sidecar: {e}")))?;
+        crate::io::write_atomic(path, self.to_csv().as_bytes())?;
+        crate::io::write_atomic(&side, format!("{json}\n").as_bytes())
+    }
+
+    /// Reads a tracks CSV and its sidecar (when present; see the module docs for the defaults
+    /// without one).
+    pub fn load(path: &Path) -> Result<Tracks> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+        let side = sidecar_path(path);
+        let meta = if side != path && side.is_file() {
+            let s = std::fs::read_to_string(&side)
+                .map_err(|e| Error::file(&side, format!("cannot read: {e}")))?;
+            let m: TracksMeta = serde_json::from_str(&s)
+                .map_err(|e| Error::file(&side, format!("not a tracks sidecar: {e}")))?;
+            Some(m)
+        } else {
+            None
+        };
+        let (rows, has_z) = parse_csv(path, &text)?;
+        let meta = match meta {
+            Some(m) => {
+                if has_z != (m.dimension == 3) {
+                    return Err(Error::file(
+                        &side,
+                        format!(
+                            "dimension = {} but {} has {} z column",
+                            m.dimension,
+                            path.display(),
+                            if has_z { "a" } else { "no" }
+                        ),
+                    ));
+                }
+                m
+            }
+            None => {
+                // Rows first (their errors say more than a missing frame rate), then the rate.
+                let provisional =
+                    TracksMeta::new(Units::BodyLengths, 1.0, if has_z { 3 } else { 2 });
+                let t = Tracks {
+                    meta: provisional,
+                    rows,
+                };
+                t.check().map_err(|e| e.in_file(path))?;
+                let rows = t.rows;
+                let meta = TracksMeta::new(
+                    Units::BodyLengths,
+                    infer_fps(&rows).ok_or_else(|| {
+                        Error::file(
+                            path,
+                            format!(
+                            "no sidecar {} and the frame rate cannot be read off the time column",
+                            side.display()
+                        ),
+                        )
+                    })?,
+                    if has_z { 3 } else { 2 },
+                );
+                let t = Tracks { meta, rows };
+                t.check().map_err(|e| e.in_file(path))?;
+                return Ok(t);
+            }
+        };
+        let t = Tracks { meta, rows };
+        t.check().map_err(|e| e.in_file(path))?;
+        Ok(t)
+    }
+}
+
+/// Frames per second from rows ordered by frame: (frame difference) / (time difference) between
+/// the first and the last frame, when both differ.
+fn infer_fps(rows: &[TrackRow]) -> Option<f64> {
+    let (a, b) = (rows.first()?, rows.last()?);
+    let df = b.frame.checked_sub(a.frame)? as f64;
+    let dt = b.time - a.time;
+    (df > 0.0 && dt > 0.0 && dt.is_finite()).then(|| df / dt)
+}
+
+fn parse_csv(path: &Path, text: &str) -> Result<(Vec<TrackRow>, bool)> {
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let Some((_, header)) = lines.next() else {
+        return Err(Error::file(
+            path,
+            "empty file (expected header frame,time,id,x,y,…)",
+        ));
+    };
+    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+    let find = |name: &str| cols.iter().position(|c| *c == name);
+    let need = |name: &str| {
+        find(name).ok_or_else(|| Error::file(path, format!("header lacks column '{name}'")))
+    };
+    let (c_frame, c_time, c_id, c_x, c_y) = (
+        need("frame")?,
+        need("time")?,
+        need("id")?,
+        need("x")?,
+        need("y")?,
+    );
+    let c_z = find("z");
+    let (c_vx, c_vy, c_vz) = (find("vx"), find("vy"), find("vz"));
+    if c_vx.is_some() != c_vy.is_some() {
+        return Err(Error::file(path, "header has one of vx, vy but not both"));
+    }
+    if c_vz.is_some() && (c_z.is_none() || c_vx.is_none()) {
+        return Err(Error::file(path, "header has vz without z and vx, vy"));
+    }
+    if c_z.is_some() && c_vx.is_some() && c_vz.is_none() {
+        return Err(Error::file(path, "3D tracks with vx, vy need vz too"));
+    }
+    let c_role = find("role");
+    let mut rows = Vec::new();
+    for (ln, line) in lines {
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        let line_no = ln + 1;
+        let get = |c: usize, name: &str| -> Result<&str> {
+            f.get(c).copied().ok_or_else(|| {
+                Error::file(path, format!("line {line_no}: missing column '{name}'"))
+            })
+        };
+        let num = |c: usize, name: &str| -> Result<f64> {
+            let s = get(c, name)?;
+            let v: f64 = s.parse().map_err(|_| {
+                Error::file(
+                    path,
+                    format!("line {line_no}: {name} = '{s}' is not a number"),
+                )
+            })?;
+            if !v.is_finite() {
+                return Err(Error::file(path, format!("line {line_no}: {name} is {v}")));
+            }
+            Ok(v)
+        };
+        let int = |c: usize, name: &str| -> Result<u64> {
+            let s = get(c, name)?;
+            s.parse().map_err(|_| {
+                Error::file(
+                    path,
+                    format!("line {line_no}: {name} = '{s}' is not a non-negative integer"),
+                )
+            })
+        };
+        let z = match c_z {
+            Some(c) => num(c, "z")?,
+            None => 0.0,
+        };
+        let vel = match (c_vx, c_vy) {
+            (Some(a), Some(b)) => Some([
+                num(a, "vx")?,
+                num(b, "vy")?,
+                match c_vz {
+                    Some(c) => num(c, "vz")?,
+                    None => 0.0,
+                },
+            ]),
+            _ => None,
+        };
+        let role = match c_role {
+            Some(c) => Some(get(c, "role")?.to_string()),
+            None => None,
+        };
+        rows.push(TrackRow {
+            frame: int(c_frame, "frame")?,
+            time: num(c_time, "time")?,
+            id: int(c_id, "id")?,
+            pos: [num(c_x, "x")?, num(c_y, "y")?, z],
+            vel,
+            role,
+        });
+        if let [.., p, r] = rows.as_slice() {
+            if r.frame < p.frame {
+                return Err(Error::file(
+                    path,
+                    format!(
+                        "line {line_no}: frame {} after frame {} (rows must be ordered by frame)",
+                        r.frame, p.frame
+                    ),
+                ));
+            }
+        }
+    }
+    if rows.is_empty() {
+        return Err(Error::file(path, "no rows (empty tracks)"));
+    }
+    // Within a frame the file may list ids in any order; duplicates are caught by `check`.
+    rows.sort_by_key(|r| (r.frame, r.id));
+    Ok((rows, c_z.is_some()))
+}
+
+/// Reads the ETH/UCY pedestrian text format: whitespace-separated `frame id x y` rows, no header,
+/// positions in metres. Video frames are numbered in steps of `frame_step` (10 in the standard
+/// files, one row every 0.4 s); they become consecutive frames `frame / frame_step` at
+/// `fps` (2.5 in the standard files). Rows may come in any order.
+pub fn read_eth_ucy(path: &Path, fps: f64) -> Result<Tracks> {
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(Error::invalid(format!("fps = {fps} must be positive")));
+    }
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+    let mut raw: Vec<(f64, f64, f64, f64)> = Vec::new();
+    for (ln, line) in text.lines().enumerate() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        if f.is_empty() {
+            continue;
+        }
+        if f.len() != 4 {
+            return Err(Error::file(
+                path,
+                format!(
+                    "line {}: expected 4 fields (frame id x y), found {}",
+                    ln + 1,
+                    f.len()
+                ),
+            ));
+        }
+        let mut v = [0.0f64; 4];
+        for (k, name) in ["frame", "id", "x", "y"].iter().enumerate() {
+            v[k] = f[k].parse().map_err(|_| {
+                Error::file(
+                    path,
+                    format!("line {}: {name} = '{}' is not a number", ln + 1, f[k]),
+                )
+            })?;
+            if !v[k].is_finite() {
+                return Err(Error::file(
+                    path,
+                    format!("line {}: {name} is {}", ln + 1, v[k]),
+                ));
+            }
+        }
+        for (k, name) in [(0, "frame"), (1, "id")] {
+            if v[k] < 0.0 || v[k].fract() != 0.0 || v[k] > 1e15 {
+                return Err(Error::file(
+                    path,
+                    format!(
+                        "line {}: {name} = {} is not a non-negative integer",
+                        ln + 1,
+                        v[k]
+                    ),
+                ));
+            }
+        }
+        raw.push((v[0], v[1], v[2], v[3]));
+    }
+    if raw.is_empty() {
+        return Err(Error::file(path, "no rows (empty tracks)"));
+    }
+    let mut frames: Vec<u64> = raw.iter().map(|r| r.0 as u64).collect();
+    frames.sort_unstable();
+    frames.dedup();
+    let step = frames
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(0u64, gcd)
+        .max(1);
+    let first = frames[0];
+    let rows = raw
+        .iter()
+        .map(|&(fr, id, x, y)| {
+            let frame = (fr as u64 - first) / step;
+            TrackRow {
+                frame,
+                time: frame as f64 / fps,
+                id: id as u64,
+                pos: [x, y, 0.0],
+                vel: None,
+                role: None,
+            }
+        })
+        .collect();
+    let mut meta = TracksMeta::new(Units::Metres, fps, 2);
+    meta.provenance = serde_json::json!({
+        "format": "eth-ucy",
+        "source": path.display().to_string(),
+        "first_video_frame": first,
+        "video_frames_per_frame": step,
+    });
+    Tracks::new(meta, rows).map_err(|e| e.in_file(path))
+}
+
+fn gcd(a: u64, b: u64) -> u64 {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(frame: u64, id: u64, x: f64, y: f64) -> TrackRow {
+        TrackRow {
+            frame,
+            time: frame as f64 / 25.0,
+            id,
+            pos: [x, y, 0.0],
+            vel: None,
+            role: None,
+        }
+    }
+
+    #[test]
+    fn round_trip_2d_and_3d_with_sidecar() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.csv");
+        let mut rows = vec![
+            row(1, 2, 0.5, -1.0),
+            row(0, 7, 1.0, 2.0),
+            row(0, 2, 0.1, 0.2),
+        ];
+        for r in &mut rows {
+            r.vel = Some([0.25, -0.5, 0.0]);
+            r.role = Some("follower".into());
+        }
+        let t = Tracks::new(TracksMeta::new(Units::Metres, 25.0, 2), rows).unwrap();
+        assert_eq!(t.rows[0].id, 2, "sorted by (frame, id)");
+        t.save(&p).unwrap();
+        let back = Tracks::load(&p).unwrap();
+        assert_eq!(back, t);
+        assert!(std::fs::read_to_string(&p)
+            .unwrap()
+            .starts_with("frame,time,id,x,y,vx,vy,role\n0,0,2,0.1,0.2,0.25,-0.5,follower\n"));
+        let mut t3 = t.clone();
+        t3.meta.dimension = 3;
+        for r in &mut t3.rows {
+            r.pos[2] = 3.5;
+            r.vel = Some([1.0, 2.0, -3.0]);
+        }
+        let p3 = dir.path().join("t3.csv");
+        t3.save(&p3).unwrap();
+        assert_eq!(Tracks::load(&p3).unwrap(), t3);
+        assert_eq!(t3.frames().len(), 2);
+        assert_eq!(t3.by_id()[&2], vec![0, 2]);
+        assert_eq!(t3.ids(), vec![2, 7]);
+    }
+
+    #[test]
+    fn traj_csv_without_sidecar_reads_with_defaults() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("traj.csv");
+        std::fs::write(
+            &p,
+            "frame,time,id,x,y,vx,vy,role\n0,0,0,1,2,1,0,leader\n0,0,1,3,2,1,0,follower\n\
+             1,0.04,0,1.04,2,1,0,leader\n1,0.04,1,3.04,2,1,0,follower\n",
+        )
+        .unwrap();
+        let t = Tracks::load(&p).unwrap();
+        assert_eq!(t.meta.units, Units::BodyLengths);
+        assert_eq!(t.meta.dimension, 2);
+        assert!((t.meta.fps - 25.0).abs() < 1e-9);
+        assert_eq!(t.rows.len(), 4);
+        assert_eq!(t.rows[0].role.as_deref(), Some("leader"));
+    }
+
+    #[test]
+    fn bad_tracks_name_the_line_or_row() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("bad.csv");
+        let cases = [
+            (
+                "frame,time,id,x,y\n1,0.04,0,1,2\n0,0,0,1,2\n",
+                "line 3: frame 0 after frame 1",
+            ),
+            (
+                "frame,time,id,x,y\n0,0,0,1,2\n0,0,0,1,3\n",
+                "duplicate (frame, id)",
+            ),
+            (
+                "frame,time,id,x,y\n0,0,0,NaN,2\n1,0.1,0,1,2\n",
+                "line 2: x is NaN",
+            ),
+            ("frame,time,id,x\n0,0,0,1\n", "lacks column 'y'"),
+            (
+                "frame,time,id,x,y\n0,0,0,1,2\n1,0,0,1,2\n",
+                "does not increase",
+            ),
+            ("frame,time,id,x,y\n0,0,-1,1,2\n", "id = '-1'"),
+            ("", "empty file"),
+            (
+                "frame,time,id,x,y\n0,0,0,1,2\n",
+                "frame rate cannot be read",
+            ),
+        ];
+        for (text, want) in cases {
+            std::fs::write(&p, text).unwrap();
+            let e = Tracks::load(&p).unwrap_err().to_string();
+            assert!(e.contains("bad.csv") && e.contains(want), "{want}: {e}");
+        }
+        // A sidecar that disagrees with the CSV.
+        std::fs::write(&p, "frame,time,id,x,y\n0,0,0,1,2\n").unwrap();
+        std::fs::write(
+            dir.path().join("bad.json"),
+            r#"{"schema":"herdfit.tracks/1","units":"m","fps":10,"dimension":3}"#,
+        )
+        .unwrap();
+        let e = Tracks::load(&p).unwrap_err().to_string();
+        assert!(e.contains("bad.json") && e.contains("dimension = 3"), "{e}");
+        std::fs::write(
+            dir.path().join("bad.json"),
+            r#"{"schema":"herdfit.tracks/1","units":"furlong","fps":10,"dimension":2}"#,
+        )
+        .unwrap();
+        let e = Tracks::load(&p).unwrap_err().to_string();
+        assert!(e.contains("bad.json") && e.contains("furlong"), "{e}");
+    }
+
+    #[test]
+    fn eth_ucy_frames_become_consecutive_steps() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("scene.txt");
+        std::fs::write(
+            &p,
+            "780\t1.0\t8.46\t3.59\n790\t1.0\t9.0\t3.5\n790\t2.0\t1.5\t2.0\n800\t2.0\t1.9\t2.1\n",
+        )
+        .unwrap();
+        let t = read_eth_ucy(&p, 2.5).unwrap();
+        assert_eq!(t.meta.units, Units::Metres);
+        let f: Vec<(u64, u64)> = t.rows.iter().map(|r| (r.frame, r.id)).collect();
+        assert_eq!(f, vec![(0, 1), (1, 1), (1, 2), (2, 2)]);
+        assert!((t.rows[3].time - 0.8).abs() < 1e-12);
+        std::fs::write(&p, "780 1 2\n").unwrap();
+        let e = read_eth_ucy(&p, 2.5).unwrap_err().to_string();
+        assert!(e.contains("line 1: expected 4 fields"), "{e}");
+        std::fs::write(&p, "780 1 2 3\n780 1 2 3\n").unwrap();
+        let e = read_eth_ucy(&p, 2.5).unwrap_err().to_string();
+        assert!(e.contains("duplicate (frame, id)"), "{e}");
+    }
+}
