@@ -25,3 +25,4 @@ if ! $PY -c "import numpy, matplotlib, nbclient, nbformat, ipykernel" >/dev/null
   $PY -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}" \
     || $PY -m pip install --quiet --disable-pip-version-check --break-system-packages "${PIP_PACKAGES[@]}"
 fi
+bash "$(dirname "$0")/fetch-testdata.sh"
