@@ -10,7 +10,7 @@
 mod raster;
 mod reference;
 
-pub use raster::{rasterise, speed_density_table};
+pub use raster::{rasterise, speed_density_table, DENSITY_BINS};
 pub use reference::import_reference;
 
 use crate::error::{Error, Result};
