@@ -4,10 +4,10 @@
 //! `cargo run --release --example fit_synthetic`
 
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::fields::Grid;
-use herdfit::params::{param_names, Params};
-use herdfit::synth::{synthesise, SynthConfig};
-use herdfit::train::fit::{fit, FitConfig, LossKind};
+use herdfit::data::Grid;
+use herdfit::herd::fit::{fit, FitConfig, LossKind};
+use herdfit::herd::params::{param_names, Params};
+use herdfit::herd::synth::{synthesise, SynthConfig};
 
 fn main() -> herdfit::Result<()> {
     let device = cpu_device(Precision::F32)?;

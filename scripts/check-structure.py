@@ -26,12 +26,11 @@ KNOWN = {
     "src/cli/mod.rs",
     "src/cli/mod.rs fn fit_cmd",
     "src/cli/mod.rs fn validate_cmd",
-    "src/data/tracks.rs",
-    "src/train/fit.rs",
-    "src/train/fit.rs fn fit_inner",
+    "src/herd/fit/mod.rs",
+    "src/herd/fit/mod.rs fn fit_inner",
     "src/video/extract.rs",
     "src/video/extract.rs fn extract",
-    "src/author/scene.rs fn new",
+    "src/herd/author/scene.rs fn new",
 }
 
 

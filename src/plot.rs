@@ -45,7 +45,7 @@ pub fn line_chart(
     series: &[Series],
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
@@ -106,7 +106,7 @@ pub fn line_chart(
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }
 
 /// A heat map of `values[row][col]` (row 0 at the bottom) written atomically as PNG.
@@ -121,7 +121,7 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max)
         .max(1e-12);
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     {
         let root = BitMapBackend::new(tmp.path(), (640, 560)).into_drawing_area();
@@ -164,7 +164,7 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }
 
 /// A top view of a scene: obstacle cells (grey), optional per-cell vectors (a navigation field,
@@ -174,7 +174,7 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
 pub fn scene_plot(
     path: &Path,
     title: &str,
-    grid: &crate::fields::Grid,
+    grid: &crate::data::Grid,
     obstacles: &ndarray::Array2<u8>,
     vectors: Option<&[[f64; 2]]>,
     lines: &[Vec<[f64; 2]>],
@@ -182,7 +182,7 @@ pub fn scene_plot(
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
     let size = grid.size();
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let wpx = 1000u32;
     let hpx = ((wpx as f64 - 80.0) * size[1] / size[0] + 90.0).clamp(200.0, 1400.0) as u32;
@@ -274,5 +274,5 @@ pub fn scene_plot(
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }

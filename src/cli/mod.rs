@@ -2,16 +2,15 @@
 //! call the library and turn its typed errors into one-line messages (in `main.rs`).
 
 use crate::backend::{cpu_device, Precision};
-use crate::bench::run_bench;
+use crate::data::agents::{push_traj_frame, read_init_csv, TRAJ_HEADER};
+use crate::data::atomic::{check_writable, write_atomic, AtomicFile};
 use crate::error::{Error, Result};
-use crate::io::{
-    check_writable, push_traj_frame, read_init_csv, write_atomic, AtomicFile, TRAJ_HEADER,
-};
-use crate::params::Params;
-use crate::sim::{
+use crate::herd::bench::run_bench;
+use crate::herd::gradcheck::{default_scenario, gradcheck, record, Scenario};
+use crate::herd::params::Params;
+use crate::herd::sim::{
     random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, Recording, World,
 };
-use crate::train::gradcheck::{default_scenario, gradcheck, record, Scenario};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
@@ -142,8 +141,8 @@ pub struct FitArgs {
     pub var_weight: f64,
     #[arg(long, value_name = "X", default_value_t = 0.02)]
     pub lr: f64,
-    #[arg(long, value_enum, default_value_t = crate::train::fit::Optimizer::Adam)]
-    pub optimizer: crate::train::fit::Optimizer,
+    #[arg(long, value_enum, default_value_t = crate::herd::fit::Optimizer::Adam)]
+    pub optimizer: crate::herd::fit::Optimizer,
     /// Frames used, a..b (b exclusive); all frames when omitted.
     #[arg(long, value_name = "a..b", value_parser = parse_range)]
     pub frames: Option<(usize, usize)>,
@@ -160,13 +159,13 @@ pub struct FitArgs {
     #[arg(long)]
     pub cell_mean: bool,
     /// Objective: the paper's losses, or matching the density and momentum fields.
-    #[arg(long, value_enum, default_value_t = crate::train::fit::LossKind::Paper)]
-    pub loss: crate::train::fit::LossKind,
+    #[arg(long, value_enum, default_value_t = crate::herd::fit::LossKind::Paper)]
+    pub loss: crate::herd::fit::LossKind,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
     /// Iterations settling each epoch's starting herd into the model's spacing (0: none).
-    #[arg(long, value_name = "N", default_value_t = crate::train::fit::Settle::default().iterations)]
+    #[arg(long, value_name = "N", default_value_t = crate::herd::fit::Settle::default().iterations)]
     pub settle: usize,
     /// Herds simulated side by side from the same fields (losses averaged; `--loss ensemble`
     /// compares their mean fields with the clip's).
@@ -178,7 +177,7 @@ pub struct FitArgs {
     pub eval_seeds: usize,
     /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
     /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
-    #[arg(long, value_name = "S", default_value_t = crate::train::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
+    #[arg(long, value_name = "S", default_value_t = crate::herd::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
     pub guidance_scale: f64,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
@@ -297,7 +296,7 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "K", default_value_t = 3)]
     pub seeds: usize,
     /// Iterations settling the starting herd into the model's spacing (0: none).
-    #[arg(long, value_name = "N", default_value_t = crate::train::fit::Settle::default().iterations)]
+    #[arg(long, value_name = "N", default_value_t = crate::herd::fit::Settle::default().iterations)]
     pub settle: usize,
     /// Start the herd this many frames before the held-out part (from those fields) and simulate
     /// through them unrecorded (0: start from the fields of the first held-out frame).
@@ -305,7 +304,7 @@ pub struct ValidateArgs {
     pub warmup: usize,
     /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
     /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
-    #[arg(long, value_name = "S", default_value_t = crate::train::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
+    #[arg(long, value_name = "S", default_value_t = crate::herd::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
     pub guidance_scale: f64,
     /// Compare the seeds' mean prediction with the clip (counts, momenta and each measure
     /// averaged over the seeds frame by frame) instead of averaging each seed's own errors.
@@ -446,8 +445,8 @@ pub struct GradcheckArgs {
     #[arg(long, value_name = "CLIP/", required_if_eq("objective", "loss"))]
     pub clip: Option<PathBuf>,
     /// Which of the fit's losses `--objective loss` checks.
-    #[arg(long, value_enum, default_value_t = crate::train::fit::LossKind::Paper)]
-    pub loss: crate::train::fit::LossKind,
+    #[arg(long, value_enum, default_value_t = crate::herd::fit::LossKind::Paper)]
+    pub loss: crate::herd::fit::LossKind,
     /// Herds for `--loss ensemble`.
     #[arg(long, value_name = "K", default_value_t = 1)]
     pub replicas: usize,
@@ -519,7 +518,7 @@ fn initial_herd(
     params: &Params,
     world: &World,
     seed: u64,
-) -> Result<Vec<crate::io::AgentRow>> {
+) -> Result<Vec<crate::data::agents::AgentRow>> {
     match (&src.init, src.agents) {
         (Some(p), _) => read_init_csv(p),
         (None, Some(n)) => random_herd(&HerdSpec::standard(n), &params.speed, world, seed),
@@ -637,10 +636,10 @@ fn gradcheck_cmd(a: GradcheckArgs) -> Result<()> {
             .clip
             .clone()
             .ok_or_else(|| Error::invalid("--objective loss needs --clip"))?;
-        let clip = crate::fields::ClipFields::load(&path)?;
+        let clip = crate::data::ClipFields::load(&path)?;
         check_writable(&a.json)?;
         let device = cpu_device(a.precision)?;
-        let sc = crate::train::gradcheck::LossScenario::record(
+        let sc = crate::herd::gradcheck::LossScenario::record(
             &clip,
             &params,
             0,
@@ -691,7 +690,7 @@ fn gradcheck_cmd(a: GradcheckArgs) -> Result<()> {
 }
 
 fn print_grad_report(
-    report: &crate::train::gradcheck::GradReport,
+    report: &crate::herd::gradcheck::GradReport,
     json: &std::path::Path,
 ) -> Result<()> {
     println!(
@@ -747,7 +746,7 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
 }
 
 fn demo(a: DemoArgs) -> Result<()> {
-    use crate::train::fit::{fit, FitConfig};
+    use crate::herd::fit::{fit, FitConfig};
     std::fs::create_dir_all(&a.out)
         .map_err(|e| Error::file(&a.out, format!("cannot create folder: {e}")))?;
     let t0 = std::time::Instant::now();
@@ -801,7 +800,7 @@ fn demo(a: DemoArgs) -> Result<()> {
     } else {
         synth_dir.clone()
     };
-    let clip = crate::fields::ClipFields::load(&clip_dir)?;
+    let clip = crate::data::ClipFields::load(&clip_dir)?;
     // 3. Fit on the first half from a generic start.
     let half = clip.frames() / 2;
     let start = Params::neutral();
@@ -814,8 +813,8 @@ fn demo(a: DemoArgs) -> Result<()> {
         epochs: 6,
         frames: 0..half,
         seed: 1,
-        loss: crate::train::fit::LossKind::Fields,
-        optimizer: crate::train::fit::Optimizer::Normalized,
+        loss: crate::herd::fit::LossKind::Fields,
+        optimizer: crate::herd::fit::Optimizer::Normalized,
         ..FitConfig::default()
     };
     let pb = progress_bar((cfg.epochs * (half - 1).div_ceil(cfg.window)) as u64, "fit");
@@ -833,7 +832,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         "settings": cfg,
     }));
     fitted.save(&params_path)?;
-    crate::train::fit::write_log(&a.out.join("fit.log.csv"), &res.log)?;
+    crate::herd::fit::write_log(&a.out.join("fit.log.csv"), &res.log)?;
     // 4. Validation on the second half, fitted vs the generic start.
     let report_dir = a.out.join("report");
     let report = validate_cmd(ValidateArgs {
@@ -843,9 +842,9 @@ fn demo(a: DemoArgs) -> Result<()> {
         split: 0.5,
         grid: 10,
         seeds: 3,
-        settle: crate::train::fit::Settle::default().iterations,
+        settle: crate::herd::fit::Settle::default().iterations,
         warmup: 0,
-        guidance_scale: crate::train::fit::GUIDANCE_SCALE,
+        guidance_scale: crate::herd::fit::GUIDANCE_SCALE,
         ensemble_mean: false,
         no_video: false,
         out: report_dir.clone(),
@@ -855,7 +854,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         "{:<20} {:>8} {:>8} {:>8}",
         "parameter", "true", "start", "fitted"
     );
-    for (i, n) in crate::params::param_names().iter().enumerate() {
+    for (i, n) in crate::herd::params::param_names().iter().enumerate() {
         println!(
             "{n:<20} {:>8.3} {:>8.3} {:>8.3}",
             truth.to_vec()[i],
@@ -902,19 +901,19 @@ fn synth_cmd(a: SynthArgs) -> Result<()> {
         )));
     }
     let (nx, ny) = a.grid;
-    let grid = crate::fields::Grid {
+    let grid = crate::data::Grid {
         origin: [0.0, 0.0],
         cell_size: a.cell_size,
         nx,
         ny,
     };
     let obstacles = match &a.obstacles {
-        Some(p) => crate::synth::read_cells(p, nx, ny)?,
+        Some(p) => crate::data::cells::read_cells(p, nx, ny)?,
         None => ndarray::Array2::zeros((ny, nx)),
     };
-    crate::io::AtomicDir::create(&a.out)?; // fail early on an unusable --out
+    crate::data::atomic::AtomicDir::create(&a.out)?; // fail early on an unusable --out
     let device = cpu_device(a.precision)?;
-    let cfg = crate::synth::SynthConfig {
+    let cfg = crate::herd::synth::SynthConfig {
         params: params.clone(),
         agents: a.agents,
         frames: a.frames,
@@ -926,7 +925,7 @@ fn synth_cmd(a: SynthArgs) -> Result<()> {
         precision: a.precision,
     };
     let pb = progress_bar(a.frames.saturating_sub(1) as u64, "synth");
-    let syn = crate::synth::synthesise(&cfg, &device, || pb.inc(1))?;
+    let syn = crate::herd::synth::synthesise(&cfg, &device, || pb.inc(1))?;
     pb.finish_and_clear();
     let mut truth = params.clone();
     truth.physical = Some(params.physical_values());
@@ -975,7 +974,7 @@ fn synth_cmd(a: SynthArgs) -> Result<()> {
 }
 
 fn import_cmd(a: ImportArgs) -> Result<()> {
-    let clip = crate::fields::import_reference(&a.prefix)?;
+    let clip = crate::data::reference::import_reference(&a.prefix)?;
     clip.save(&a.out, &[])?;
     println!(
         "import-reference: {} frames, {}×{} cells of {:.4} BL, {:.3} fps; wrote {}",
@@ -990,12 +989,12 @@ fn import_cmd(a: ImportArgs) -> Result<()> {
 }
 
 fn fields_info(a: FieldsInfoArgs) -> Result<()> {
-    let clip = crate::fields::ClipFields::load(&a.clip)?;
+    let clip = crate::data::ClipFields::load(&a.clip)?;
     if let Some(j) = &a.json {
         check_writable(j)?;
     }
     let m = &clip.meta;
-    let measures = crate::metrics::clip_measures(&clip);
+    let measures = crate::measure::emergent::clip_measures(&clip);
     let counts: Vec<f64> = measures.iter().map(|x| x.agents).collect();
     let mean = counts.iter().sum::<f64>() / counts.len() as f64;
     let obstacles = clip.obstacles.iter().filter(|&&v| v != 0).count();
@@ -1074,7 +1073,7 @@ type Pending = ();
 #[cfg(feature = "video")]
 fn render_synth_video(
     a: &SynthArgs,
-    syn: &crate::synth::Synth,
+    syn: &crate::herd::synth::Synth,
     path: &std::path::Path,
 ) -> Result<(Vec<serde_json::Value>, Pending, serde_json::Value)> {
     check_writable(path)?;
@@ -1110,7 +1109,7 @@ fn render_synth_video(
 #[cfg(not(feature = "video"))]
 fn render_synth_video(
     _a: &SynthArgs,
-    _syn: &crate::synth::Synth,
+    _syn: &crate::herd::synth::Synth,
     path: &std::path::Path,
 ) -> Result<(Vec<serde_json::Value>, Pending, serde_json::Value)> {
     Err(Error::file(
@@ -1130,7 +1129,7 @@ fn commit_video(_p: Pending) -> Result<()> {
 }
 
 fn fit_cmd(a: FitArgs) -> Result<()> {
-    use crate::train::fit::{evaluate, fit_clips, write_log, CheckpointDir, FitConfig};
+    use crate::herd::fit::{evaluate, fit_clips, write_log, CheckpointDir, FitConfig};
     if a.eval_seeds == 0 || a.eval_seeds > 64 {
         return Err(Error::invalid(format!(
             "--eval-seeds {} is out of range 1..=64",
@@ -1140,9 +1139,9 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     let loaded = a
         .clips
         .iter()
-        .map(|p| crate::fields::ClipFields::load(p))
+        .map(|p| crate::data::ClipFields::load(p))
         .collect::<Result<Vec<_>>>()?;
-    let clips: Vec<&crate::fields::ClipFields> = loaded.iter().collect();
+    let clips: Vec<&crate::data::ClipFields> = loaded.iter().collect();
     let init = match &a.init {
         Some(p) => Params::load(p)?,
         None => Params::neutral(),
@@ -1166,7 +1165,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         cell_mean: a.cell_mean,
         loss: a.loss,
         checkpointing: a.checkpointing,
-        settle: crate::train::fit::Settle::with_iterations(a.settle),
+        settle: crate::herd::fit::Settle::with_iterations(a.settle),
         replicas: a.replicas,
         guidance_scale: a.guidance_scale,
     };
@@ -1197,7 +1196,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     if let Some(c) = &ckpt {
         if c.resume {
             if let Ok(text) = std::fs::read_to_string(c.dir.join("checkpoint.json")) {
-                if let Ok(k) = serde_json::from_str::<crate::train::fit::Checkpoint>(&text) {
+                if let Ok(k) = serde_json::from_str::<crate::herd::fit::Checkpoint>(&text) {
                     pb.set_position((k.epochs_done * windows_per_epoch) as u64);
                 }
             }
@@ -1218,18 +1217,18 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     pb.finish_and_clear();
     let mut start_params = init.clone();
     start_params.speed = res.params.speed.clone();
-    let loss_before = crate::train::fit::loss_of(&clips, &start_params, &cfg)?;
-    let loss_after = crate::train::fit::loss_of(&clips, &res.params, &cfg)?;
+    let loss_before = crate::herd::fit::loss_of(&clips, &start_params, &cfg)?;
+    let loss_after = crate::herd::fit::loss_of(&clips, &res.params, &cfg)?;
     // Density and velocity errors, averaged over the clips (each simulated with its own speeds).
-    let guidance: Vec<Vec<crate::sim::Guidance>> = clips
+    let guidance: Vec<Vec<crate::herd::sim::Guidance>> = clips
         .iter()
-        .map(|c| crate::train::fit::guidance_fields(c, cfg.guidance_scale))
+        .map(|c| crate::herd::fit::guidance_fields(c, cfg.guidance_scale))
         .collect();
     let errors = |p: &Params| -> Result<(f64, f64)> {
         let (mut d, mut v) = (0.0, 0.0);
         for (c, guidance) in clips.iter().zip(&guidance) {
             let mut q = p.clone();
-            q.speed = c.speed_model(&init.speed);
+            q.speed = crate::herd::params::SpeedModel::of_clip(c, &init.speed);
             for k in 0..a.eval_seeds {
                 let (x, y) = evaluate(
                     c,
@@ -1250,9 +1249,9 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
     let before = errors(&start_params)?;
     let after = errors(&res.params)?;
     let last_epoch = res.log.last().map_or(0, |r| r.epoch);
-    let last: Vec<&crate::train::fit::LogRow> =
+    let last: Vec<&crate::herd::fit::LogRow> =
         res.log.iter().filter(|r| r.epoch == last_epoch).collect();
-    let mean = |f: &dyn Fn(&crate::train::fit::LogRow) -> f64| {
+    let mean = |f: &dyn Fn(&crate::herd::fit::LogRow) -> f64| {
         last.iter().map(|r| f(r)).sum::<f64>() / last.len().max(1) as f64
     };
     let mut out = res.params.clone();
@@ -1283,7 +1282,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         },
     }));
     write_log(&log_path, &res.log)?;
-    let per_epoch = |f: &dyn Fn(&crate::train::fit::LogRow) -> f64| -> Vec<(f64, f64)> {
+    let per_epoch = |f: &dyn Fn(&crate::herd::fit::LogRow) -> f64| -> Vec<(f64, f64)> {
         (0..a.epochs)
             .filter_map(|e| {
                 let rows: Vec<_> = res.log.iter().filter(|r| r.epoch == e).collect();
@@ -1342,7 +1341,7 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
             .join(", ")
     );
     println!("{:<20} {:>8} {:>8}", "parameter", "start", "fitted");
-    for (n, (s0, s1)) in crate::params::param_names()
+    for (n, (s0, s1)) in crate::herd::params::param_names()
         .iter()
         .zip(res.start.iter().zip(res.params.to_vec()))
     {
@@ -1453,9 +1452,9 @@ fn extract_cmd(a: ExtractArgs) -> Result<()> {
             *r = [w * 3 / 8, h * 3 / 8, w / 4, h / 4];
         }
     }
-    crate::io::AtomicDir::create(&a.out)?;
+    crate::data::atomic::AtomicDir::create(&a.out)?;
     if let Some(d) = &a.preview {
-        crate::io::AtomicDir::create(d)?;
+        crate::data::atomic::AtomicDir::create(d)?;
     }
     let pb = progress_bar(0, "extract");
     let ex = extract(
@@ -1476,7 +1475,7 @@ fn extract_cmd(a: ExtractArgs) -> Result<()> {
     ex.clip
         .save(&a.out, &[("camera.json", format!("{cams}\n").into_bytes())])?;
     if let Some(d) = &a.preview {
-        let dir = crate::io::AtomicDir::create(d)?;
+        let dir = crate::data::atomic::AtomicDir::create(d)?;
         for (name, bytes) in &ex.previews {
             dir.write(name, bytes)?;
         }
@@ -1503,24 +1502,24 @@ fn extract_cmd(a: ExtractArgs) -> Result<()> {
 }
 
 /// Runs `validate` and returns the report.
-fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
-    use crate::validate::{markdown, validate};
-    let clip = crate::fields::ClipFields::load(&a.clip)?;
+fn validate_cmd(a: ValidateArgs) -> Result<crate::herd::validate::Report> {
+    use crate::herd::validate::{markdown, validate};
+    let clip = crate::data::ClipFields::load(&a.clip)?;
     let mut sets = vec![("fitted".to_string(), Params::load(&a.params)?)];
     if let Some(b) = &a.baseline {
         sets.push(("baseline".to_string(), Params::load(b)?));
     }
-    let out = crate::io::AtomicDir::create(&a.out)?;
+    let out = crate::data::atomic::AtomicDir::create(&a.out)?;
     let pb = progress_bar((sets.len() * a.seeds) as u64, "validate");
     let (report, runs) = validate(
         &clip,
         &a.clip.display().to_string(),
         &sets,
-        &crate::validate::ValidateConfig {
+        &crate::herd::validate::ValidateConfig {
             split: a.split,
             grid: a.grid,
             seeds: a.seeds,
-            settle: crate::train::fit::Settle::with_iterations(a.settle),
+            settle: crate::herd::fit::Settle::with_iterations(a.settle),
             warmup: a.warmup,
             guidance_scale: a.guidance_scale,
             ensemble_mean: a.ensemble_mean,
@@ -1671,9 +1670,9 @@ fn validate_cmd(a: ValidateArgs) -> Result<crate::validate::Report> {
 }
 
 fn author_cmd(a: AuthorArgs) -> Result<()> {
-    use crate::author::{run, Scene};
+    use crate::herd::author::{run, Scene};
     let scene = Scene::load(&a.scene)?;
-    let out = crate::io::AtomicDir::create(&a.out)?;
+    let out = crate::data::atomic::AtomicDir::create(&a.out)?;
     let device = cpu_device(Precision::F32)?;
     let steps = (scene.file.duration * scene.file.fps).round() as u64;
     let pb = progress_bar(steps, "author");
@@ -1734,7 +1733,7 @@ fn author_cmd(a: AuthorArgs) -> Result<()> {
         let (mut pol, mut asp, mut frames) = (0.0, 0.0, 0usize);
         let mut agents_seen = 0usize;
         for (rows, reg) in r.frames.iter().zip(&r.regions) {
-            let sel: Vec<&crate::io::AgentRow> = rows
+            let sel: Vec<&crate::data::agents::AgentRow> = rows
                 .iter()
                 .zip(reg)
                 .filter(|(_, &x)| x == g)
@@ -1746,8 +1745,8 @@ fn author_cmd(a: AuthorArgs) -> Result<()> {
             let pos: Vec<[f64; 2]> = sel.iter().map(|a| [a.x, a.y]).collect();
             let vel: Vec<[f64; 2]> = sel.iter().map(|a| [a.vx, a.vy]).collect();
             let w = vec![1.0; sel.len()];
-            pol += crate::metrics::polarization(&vel, &w);
-            asp += crate::metrics::aspect_ratio(&pos, &vel, &w).unwrap_or(f64::NAN);
+            pol += crate::measure::emergent::polarization(&vel, &w);
+            asp += crate::measure::emergent::aspect_ratio(&pos, &vel, &w).unwrap_or(f64::NAN);
             frames += 1;
             agents_seen += sel.len();
         }

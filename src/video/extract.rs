@@ -7,8 +7,9 @@
 //! `herdfit synth --video` maps back onto the world of its trajectories. The grid has square cells
 //! of max(W, H) / N pixels, `nx = ⌈W / cell⌉` by `ny = ⌈H / cell⌉`, origin at the bottom-left corner.
 
+use crate::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
 use crate::error::{Error, Result};
-use crate::fields::{speed_density_table, ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
+use crate::measure::speed_density_table;
 use ndarray::{Array2, Array3, Array4};
 use opencv::core::{Mat, Point, Rect, Scalar, Size, Vec3b, CV_8UC1};
 use opencv::prelude::*;

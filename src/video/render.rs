@@ -3,9 +3,9 @@
 //! and rotation starting from the identity at frame 0). Used by `synth --video` to make test
 //! videos with known truth for extraction.
 
+use crate::data::agents::AgentRow;
+use crate::data::Grid;
 use crate::error::{Error, Result};
-use crate::fields::Grid;
-use crate::io::AgentRow;
 use ndarray::Array2;
 use opencv::core::{Mat, Point, Scalar, Size, CV_8UC3};
 use opencv::prelude::*;
@@ -157,7 +157,7 @@ pub struct PendingVideo {
 impl PendingVideo {
     /// Renames the video into place.
     pub fn commit(self) -> Result<()> {
-        crate::io::persist(self.tmp, &self.path)
+        crate::data::atomic::persist(self.tmp, &self.path)
     }
 }
 
@@ -185,7 +185,7 @@ pub fn render_video(
             "a {w}×{h} video frame is too large"
         )));
     }
-    let tmp = crate::io::temp_sibling(path, ".avi")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
     let tmp_name = tmp.path().to_string_lossy().into_owned();
     let mut writer =
@@ -298,8 +298,8 @@ pub fn render_video(
 /// frames `start..start + sim_frames.len()` of the clip. MJPG AVI, written atomically.
 pub fn render_comparison(
     path: &Path,
-    clip: &crate::fields::ClipFields,
-    sim: &crate::fields::ClipFields,
+    clip: &crate::data::ClipFields,
+    sim: &crate::data::ClipFields,
     sim_frames: &[Vec<AgentRow>],
     start: usize,
 ) -> Result<()> {
@@ -307,7 +307,7 @@ pub fn render_comparison(
     let size = g.size();
     let s = (400.0 / size[0].max(size[1])).max(2.0);
     let (w, h) = frame_size(&g, s);
-    let tmp = crate::io::temp_sibling(path, ".avi")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
     let name = tmp.path().to_string_lossy().into_owned();
     let mut writer = videoio::VideoWriter::new(

@@ -1,9 +1,9 @@
 //! Built-in random herds.
 
 use super::World;
+use crate::data::agents::AgentRow;
 use crate::error::{Error, Result};
-use crate::io::AgentRow;
-use crate::params::SpeedModel;
+use crate::herd::params::SpeedModel;
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 

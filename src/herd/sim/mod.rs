@@ -15,11 +15,12 @@ mod herd;
 mod world;
 
 pub use herd::{random_herd, HerdSpec};
-pub use world::{Guidance, World};
+pub use world::{obstacle_map, Guidance, World};
 
+use crate::data::agents::AgentRow;
+use crate::data::atomic::write_atomic;
 use crate::error::{Error, Result};
-use crate::io::{write_atomic, AgentRow};
-use crate::params::{Constants, Params, N_PARAMS};
+use crate::herd::params::{Constants, Params, N_PARAMS};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use herdfit_kernels::{
     perceive, Capsule, Perception, PerceptionConfig, BRANCH_BEHIND, BRANCH_RIGHT, P2,
@@ -229,7 +230,7 @@ pub struct ForceTensors {
 }
 
 impl ForceTensors {
-    /// From the `[12]` parameter tensor `theta` (normalised values, [`crate::params::param_names`]
+    /// From the `[12]` parameter tensor `theta` (normalised values, [`crate::herd::params::param_names`]
     /// order). Gradients flow from the forces back to `theta`.
     pub fn new(theta: &Tensor<1>, c: &Constants) -> Self {
         assert_eq!(theta.dims()[0], N_PARAMS, "theta must hold 12 values");

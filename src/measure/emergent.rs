@@ -3,7 +3,7 @@
 //! points, so the same code measures a simulated herd (weight 1 per agent) and a clip's fields
 //! (one point per occupied cell, weight = agents in the cell).
 
-use crate::fields::ClipFields;
+use crate::data::ClipFields;
 
 type P2 = [f64; 2];
 

@@ -7,15 +7,8 @@
 //! `clip.json` (schema `herdfit.clip/1`). Row 0 of every grid is the bottom row (y up); cell
 //! `(ix, iy)` covers `origin + [ix, ix+1) × [iy, iy+1) · cell_size`.
 
-mod raster;
-mod reference;
-
-pub use raster::{rasterise, speed_density_table, DENSITY_BINS};
-pub use reference::import_reference;
-
+use crate::data::atomic::AtomicDir;
 use crate::error::{Error, Result};
-use crate::io::AtomicDir;
-use crate::params::SpeedModel;
 use ndarray::{Array2, Array3, Array4};
 use ndarray_npy::{NpzReader, NpzWriter};
 use serde::{Deserialize, Serialize};
@@ -105,6 +98,19 @@ pub struct ClipMeta {
     pub provenance: serde_json::Value,
 }
 
+impl ClipMeta {
+    /// The temporal window (frames) over which the clip's velocities were averaged: the extraction's
+    /// `smooth` setting for clips extracted from video, 1 otherwise.
+    pub fn velocity_window(&self) -> usize {
+        let p = &self.provenance;
+        if p["source"] == "extract" {
+            p["settings"]["smooth"].as_u64().unwrap_or(9).max(1) as usize
+        } else {
+            1
+        }
+    }
+}
+
 /// A clip's fields in memory.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClipFields {
@@ -144,25 +150,6 @@ impl ClipFields {
             .iter()
             .map(|&d| d as f64 * a)
             .sum()
-    }
-
-    /// The speed model of the clip (stage 2, §6.2), for a parameter set; `max` is kept from
-    /// `base`.
-    pub fn speed_model(&self, base: &SpeedModel) -> SpeedModel {
-        let s = &self.meta.speed;
-        SpeedModel {
-            mean: s.mean,
-            // The clip measures the spread of speeds, which for the OU process of eq. 6 is
-            // v_σ / √(2 θ_OU): the noise that reproduces it is v_σ = spread · √(2 θ_OU).
-            std: if base.reversion > 0.0 {
-                s.std * (2.0 * base.reversion).sqrt()
-            } else {
-                s.std
-            },
-            max: base.max.max(s.mean + 4.0 * s.std),
-            reversion: base.reversion,
-            density_table: (!s.density_table.is_empty()).then(|| s.density_table.clone()),
-        }
     }
 
     /// Checks shapes and values; messages name the array or key.

@@ -1,9 +1,9 @@
 //! Rasterising a herd (positions and velocities over frames) into clip fields. Synthetic clips,
 //! validation and the reference import all produce fields with these definitions.
 
-use super::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
+use crate::data::agents::AgentRow;
+use crate::data::clip::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
 use crate::error::{Error, Result};
-use crate::io::AgentRow;
 use ndarray::{Array2, Array3, Array4};
 
 /// Bins of the speed–density table.

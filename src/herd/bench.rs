@@ -3,9 +3,8 @@
 
 use crate::backend::{cpu_device, Precision};
 use crate::error::Result;
-use crate::params::Params;
-use crate::sim::{random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, World};
-use crate::train::gradcheck::objective;
+use crate::herd::scenario::{bench_model, objective};
+use crate::herd::sim::{theta_tensor, Decide, HerdState};
 use rand::SeedableRng;
 use serde::Serialize;
 use std::time::Instant;
@@ -25,25 +24,6 @@ pub struct BenchReport {
     pub k: usize,
     /// burn's balanced gradient checkpointing was on for the forward+backward pass.
     pub checkpointing: bool,
-}
-
-/// The benchmark scene: the standard herd (one agent per 2 BL²), default parameters, occlusion on,
-/// a uniform guidance direction (so the leader rule is active), 25 fps.
-pub fn bench_model(agents: usize, seed: u64) -> Result<(Model, Vec<crate::io::AgentRow>)> {
-    let params = Params::default();
-    let world = World {
-        obstacles: None,
-        guidance: Guidance::Uniform([1.0, 0.0]),
-    };
-    let init = random_herd(&HerdSpec::standard(agents), &params.speed, &world, seed)?;
-    Ok((
-        Model {
-            params,
-            world,
-            dt: 1.0 / 25.0,
-        },
-        init,
-    ))
 }
 
 fn median(mut v: Vec<f64>) -> f64 {

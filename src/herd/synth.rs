@@ -2,42 +2,17 @@
 //! trajectories into clip fields, keep the parameters as `truth.json`.
 
 use crate::backend::Precision;
+use crate::data::agents::{push_traj_frame, AgentRow, TRAJ_HEADER};
+use crate::data::{ClipFields, Grid};
 use crate::error::{Error, Result};
-use crate::fields::{rasterise, ClipFields, Grid};
-use crate::io::{push_traj_frame, AgentRow, TRAJ_HEADER};
-use crate::params::Params;
-use crate::sim::{random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, World};
-use herdfit_kernels::ObstacleMap;
+use crate::herd::params::Params;
+use crate::herd::sim::obstacle_map;
+use crate::herd::sim::{
+    random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, World,
+};
+use crate::measure::rasterise;
 use ndarray::Array2;
 use rand::SeedableRng;
-use serde::Deserialize;
-use std::path::Path;
-
-/// Obstacle cells file: `{"cells": [[ix, iy], …]}` (row 0 at the bottom).
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CellsFile {
-    cells: Vec<[i64; 2]>,
-}
-
-/// Reads an obstacle-cells file for an `nx × ny` grid.
-pub fn read_cells(path: &Path, nx: usize, ny: usize) -> Result<Array2<u8>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
-    let f: CellsFile = serde_json::from_str(&text)
-        .map_err(|e| Error::file(path, format!("expected {{\"cells\": [[ix, iy], …]}}: {e}")))?;
-    let mut m = Array2::<u8>::zeros((ny, nx));
-    for (k, &[ix, iy]) in f.cells.iter().enumerate() {
-        if ix < 0 || iy < 0 || ix as usize >= nx || iy as usize >= ny {
-            return Err(Error::file(
-                path,
-                format!("cells[{k}] = [{ix}, {iy}] is outside the {nx}×{ny} grid"),
-            ));
-        }
-        m[[iy as usize, ix as usize]] = 1;
-    }
-    Ok(m)
-}
 
 /// Settings of a synthetic clip.
 #[derive(Clone, Debug)]
@@ -59,15 +34,6 @@ pub struct Synth {
     pub clip: ClipFields,
     pub frames: Vec<Vec<AgentRow>>,
     pub roles: Vec<Vec<bool>>,
-}
-
-/// The obstacle map of the simulation from the clip's obstacle cells.
-pub fn obstacle_map(grid: &Grid, obstacles: &Array2<u8>) -> ObstacleMap {
-    let mut m = ObstacleMap::empty(grid.origin, grid.cell_size, grid.nx, grid.ny);
-    for ((iy, ix), &v) in obstacles.indexed_iter() {
-        m.blocked[iy * grid.nx + ix] = v != 0;
-    }
-    m
 }
 
 /// Runs the model with the known parameters: a herd crossing the field behind a uniform guidance

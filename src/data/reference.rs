@@ -11,7 +11,7 @@
 //! [L − 1, L) (only cells with n ≥ 0.5 are written), so we place it at n = L − 0.5 (0.75 for L = 1)
 //! animals per cell. Rows `0 0` mark empty bins and are skipped.
 
-use super::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
+use super::clip::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
 use crate::error::{Error, Result};
 use ndarray::{Array2, Array3, Array4};
 use std::path::{Path, PathBuf};

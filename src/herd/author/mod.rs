@@ -7,11 +7,11 @@ pub mod scene;
 
 pub use scene::Scene;
 
+use crate::data::agents::AgentRow;
 use crate::error::Result;
-use crate::io::AgentRow;
-use crate::params::N_PARAMS;
-use crate::sim::{ForceTensors, Guidance, HerdState, Model, World};
-use crate::synth::obstacle_map;
+use crate::herd::params::N_PARAMS;
+use crate::herd::sim::obstacle_map;
+use crate::herd::sim::{ForceTensors, Guidance, HerdState, Model, World};
 use burn::tensor::Device;
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;

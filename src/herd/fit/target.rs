@@ -2,8 +2,8 @@
 //! ρ' by bilinear splatting of the agents onto the clip grid, D = −∇(ρ' − ρ) by central
 //! differences over accessible cells, U = β N(D) + (1 − β) N(V̄).
 
-use crate::fields::{ClipFields, Grid};
-use crate::sim::read_vec;
+use crate::data::{ClipFields, Grid};
+use crate::herd::sim::read_vec;
 use crate::Result;
 use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
 use herdfit_kernels::P2;

@@ -1,8 +1,9 @@
 //! The herd model's parameters (paper §5.2–5.4, DESIGN §4): the 12 normalised force parameters,
 //! the fixed constants and the speed model, with validation and the `herdfit.params/1` file format.
 
+use crate::data::atomic::write_atomic;
+use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::io::write_atomic;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -132,6 +133,26 @@ impl SpeedModel {
             self.std / (2.0 * self.reversion).sqrt()
         } else {
             self.std
+        }
+    }
+
+    /// The speed model of a clip (stage 2, §6.2) for a parameter set whose model is `base`: the
+    /// clip's mean, spread and speed–density table, `base`'s reversion rate, and a cap of at least
+    /// `base.max`.
+    pub fn of_clip(clip: &ClipFields, base: &SpeedModel) -> SpeedModel {
+        let s = &clip.meta.speed;
+        SpeedModel {
+            mean: s.mean,
+            // The clip measures the spread of speeds, which for the OU process of eq. 6 is
+            // v_σ / √(2 θ_OU): the noise that reproduces it is v_σ = spread · √(2 θ_OU).
+            std: if base.reversion > 0.0 {
+                s.std * (2.0 * base.reversion).sqrt()
+            } else {
+                s.std
+            },
+            max: base.max.max(s.mean + 4.0 * s.std),
+            reversion: base.reversion,
+            density_table: (!s.density_table.is_empty()).then(|| s.density_table.clone()),
         }
     }
 

@@ -10,42 +10,31 @@
 //! are removed and, when the density error exceeds a threshold or the clip has more agents than
 //! the simulation, the population is rebalanced from the fields.
 
-use super::loss::{step_loss, StepTarget};
-use super::target::{target_directions, Stencil};
+pub mod loss;
+pub mod target;
+
+pub use crate::optim::{OptState, Optimizer};
+
 use crate::backend::{cpu_device, Precision};
+use crate::data::agents::AgentRow;
+use crate::data::atomic::write_atomic;
+use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::fields::ClipFields;
-use crate::io::{write_atomic, AgentRow};
-use crate::params::{param_names, Params, N_PARAMS};
-use crate::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model, StepDecisions, World};
-use crate::synth::obstacle_map;
+use crate::herd::params::{param_names, Params, N_PARAMS};
+use crate::herd::sim::obstacle_map;
+use crate::herd::sim::{
+    theta_tensor, ForceTensors, Guidance, HerdState, Model, StepDecisions, World,
+};
+use crate::measure::fields::{cell_counts, field_errors};
 use burn::tensor::{Device, Tensor};
+use loss::{step_loss, StepTarget};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-
-/// The optimiser.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Optimizer {
-    /// Adam (β₁ 0.9, β₂ 0.999, ε 1e-8).
-    Adam,
-    /// The paper's normalised gradient step θ ← θ − lr · g/‖g‖.
-    Normalized,
-    /// The normalised step on averaged gradients, scaled by their agreement:
-    /// θ ← θ − lr · (‖m‖/√s) · m/√s, m the running mean of g (β 0.98, about one epoch of 50
-    /// windows), s that of ‖g‖² (β 0.999), both bias-corrected. Where successive gradients agree
-    /// it steps lr along them, as the normalised step does; where they are noise about a minimum,
-    /// ‖m‖/√s falls to about 0.1 and the steps to a hundredth of lr (averaging alone would not
-    /// do: the sum of averaged noise random-walks as far as the noise itself).
-    #[value(
-        help = "The normalised step on a running mean of the gradients, scaled by how well they agree (about lr where they agree, a hundredth of it where they are noise)"
-    )]
-    Averaged,
-}
+use target::{target_directions, Stencil};
 
 /// Settings of a fit (the `fit` command's flags).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -109,7 +98,7 @@ pub enum LossKind {
     /// Field matching: after every step, the simulated density and momentum fields (bilinear
     /// splatting of the agents and of their velocities) against the clip's,
     /// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖², plus λ_var E_var, where K blurs the
-    /// clip's box-binned fields as splatting blurs points ([`super::target::blur_like_splat`]).
+    /// clip's box-binned fields as splatting blurs points ([`target::blur_like_splat`]).
     Fields,
     /// Field matching of the *expected* simulated fields: the replicas' mean fields against the
     /// clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖², see
@@ -278,7 +267,7 @@ fn gauss_smooth(v: &[f64], nx: usize, ny: usize, sigma: f64) -> Vec<f64> {
     let w: Vec<f64> = (-reach..=reach)
         .map(|d| (-0.5 * (d as f64 / sigma).powi(2)).exp())
         .collect();
-    super::target::separable_filter(v, nx, ny, &w)
+    target::separable_filter(v, nx, ny, &w)
 }
 
 /// Checks a `--guidance-scale` value: ≥ 0, ∞ allowed.
@@ -397,56 +386,6 @@ pub fn guidance_field(clip: &ClipFields, f: usize, scale: f64) -> Guidance {
     }
 }
 
-fn cell_counts(clip: &ClipFields, rows: &[AgentRow]) -> (Vec<f64>, Vec<[f64; 2]>) {
-    let g = clip.grid();
-    let mut n = vec![0.0; g.nx * g.ny];
-    let mut v = vec![[0.0; 2]; g.nx * g.ny];
-    for r in rows {
-        if let Some((ix, iy)) = g.cell_of([r.x, r.y]) {
-            let c = iy * g.nx + ix;
-            n[c] += 1.0;
-            v[c][0] += r.vx;
-            v[c][1] += r.vy;
-        }
-    }
-    (n, v)
-}
-
-/// Density and velocity errors of a herd against frame `f` of the clip, by cell counts:
-/// density Σ|n'_c − n_c| / Σ n_c (n = ρ·area), velocity Σ n_c ‖V'_c − V_c‖ / Σ n_c ‖V_c‖ over the
-/// clip's occupied cells (V'_c = 0 where the simulation has nobody).
-pub fn field_errors(clip: &ClipFields, f: usize, rows: &[AgentRow]) -> (f64, f64) {
-    let g = clip.grid();
-    let a = g.cell_area();
-    let (n_sim, v_sum) = cell_counts(clip, rows);
-    let (mut dn, mut tn, mut dv, mut tv) = (0.0, 0.0, 0.0, 0.0);
-    for iy in 0..g.ny {
-        for ix in 0..g.nx {
-            let c = iy * g.nx + ix;
-            let n = clip.density[[f, iy, ix]] as f64 * a;
-            dn += (n_sim[c] - n).abs();
-            tn += n;
-            if n > 0.0 {
-                let v = [
-                    clip.velocity[[f, iy, ix, 0]] as f64,
-                    clip.velocity[[f, iy, ix, 1]] as f64,
-                ];
-                let vs = if n_sim[c] > 0.0 {
-                    [v_sum[c][0] / n_sim[c], v_sum[c][1] / n_sim[c]]
-                } else {
-                    [0.0, 0.0]
-                };
-                dv += n * ((vs[0] - v[0]).powi(2) + (vs[1] - v[1]).powi(2)).sqrt();
-                tv += n * (v[0] * v[0] + v[1] * v[1]).sqrt();
-            }
-        }
-    }
-    (
-        if tn > 0.0 { dn / tn } else { 0.0 },
-        if tv > 0.0 { dv / tv } else { 0.0 },
-    )
-}
-
 fn new_agent(
     clip: &ClipFields,
     f: usize,
@@ -492,7 +431,7 @@ fn new_agent(
 pub fn init_herd(
     clip: &ClipFields,
     f: usize,
-    speed: &crate::params::SpeedModel,
+    speed: &crate::herd::params::SpeedModel,
     rng: &mut impl Rng,
 ) -> Vec<AgentRow> {
     let g = clip.grid();
@@ -538,7 +477,7 @@ pub fn population_control(
     f: usize,
     mut rows: Vec<AgentRow>,
     threshold: f64,
-    speed: &crate::params::SpeedModel,
+    speed: &crate::herd::params::SpeedModel,
     next_id: &mut u64,
     rng: &mut impl Rng,
 ) -> Vec<AgentRow> {
@@ -650,8 +589,8 @@ pub fn window_loss(
     for (dec, tgt) in plans {
         state = model.step(f, &state, dec)?;
         let l = step_loss(&state.hx, &state.hy, tgt);
-        em += crate::sim::read_vec(&l.e_mean.clone().detach())?[0];
-        ev += crate::sim::read_vec(&l.e_var.clone().detach())?[0];
+        em += crate::herd::sim::read_vec(&l.e_mean.clone().detach())?[0];
+        ev += crate::herd::sim::read_vec(&l.e_var.clone().detach())?[0];
         let step = l.e_mean.mul_scalar(mean_weight) + l.e_var.mul_scalar(var_weight);
         total = Some(match total {
             None => step,
@@ -665,17 +604,8 @@ pub fn window_loss(
     Ok((state, total, em / k, ev / k))
 }
 
-/// Optimiser state: Adam's moments; the averaged step's mean gradient (`m`) and mean ‖g‖²
-/// (`v[0]`); nothing for the normalised step.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
-pub struct OptState {
-    pub m: [f64; N_PARAMS],
-    pub v: [f64; N_PARAMS],
-    pub t: u64,
-}
-
-/// One optimiser step on `theta` with gradient `g` and step size `lr` (then clamped to the
-/// parameters' ranges); a vanishing gradient takes `cfg.zero_grad_step` in a random direction.
+/// One optimiser step on `theta` with gradient `g` and step size `lr` ([`crate::optim::step`]
+/// with `cfg.optimizer` and `cfg.zero_grad_step`), then clamped to the parameters' ranges.
 pub fn update(
     theta: &mut [f64; N_PARAMS],
     g: &[f64; N_PARAMS],
@@ -684,51 +614,7 @@ pub fn update(
     lr: f64,
     rng: &mut impl Rng,
 ) {
-    let norm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
-    if norm.is_nan() || norm <= 1e-12 || !norm.is_finite() {
-        // Flat region (§6.1): a fixed-size step in a random direction.
-        let d: Vec<f64> = (0..N_PARAMS).map(|_| rng.sample(StandardNormal)).collect();
-        let l = d.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
-        for (t, x) in theta.iter_mut().zip(d) {
-            *t += cfg.zero_grad_step * x / l;
-        }
-    } else {
-        match cfg.optimizer {
-            Optimizer::Normalized => {
-                for (t, x) in theta.iter_mut().zip(g) {
-                    *t -= lr * x / norm;
-                }
-            }
-            Optimizer::Averaged => {
-                let (b1, b2): (f64, f64) = (0.98, 0.999);
-                opt.t += 1;
-                let (c1, c2) = (1.0 - b1.powi(opt.t as i32), 1.0 - b2.powi(opt.t as i32));
-                // One running mean of ‖g‖² for all parameters (kept in v[0]): each parameter
-                // moves by its share of the averaged gradient, as in the normalised step.
-                opt.v[0] = b2 * opt.v[0] + (1.0 - b2) * norm * norm;
-                let rms = (opt.v[0] / c2).sqrt();
-                for (m, x) in opt.m.iter_mut().zip(g) {
-                    *m = b1 * *m + (1.0 - b1) * x;
-                }
-                // Signal-to-noise of the averaged gradient, ‖m‖/√s: 1 for a steady gradient,
-                // about √((1 − β₁)/(1 + β₁)) = 0.1 for pure noise.
-                let snr = opt.m.iter().map(|m| (m / c1).powi(2)).sum::<f64>().sqrt() / rms;
-                for (t, m) in theta.iter_mut().zip(&opt.m) {
-                    *t -= lr * snr * (m / c1) / rms;
-                }
-            }
-            Optimizer::Adam => {
-                let (b1, b2, eps): (f64, f64, f64) = (0.9, 0.999, 1e-8);
-                opt.t += 1;
-                let (c1, c2) = (1.0 - b1.powi(opt.t as i32), 1.0 - b2.powi(opt.t as i32));
-                for p in 0..N_PARAMS {
-                    opt.m[p] = b1 * opt.m[p] + (1.0 - b1) * g[p];
-                    opt.v[p] = b2 * opt.v[p] + (1.0 - b2) * g[p] * g[p];
-                    theta[p] -= lr * (opt.m[p] / c1) / ((opt.v[p] / c2).sqrt() + eps);
-                }
-            }
-        }
-    }
+    crate::optim::step(cfg.optimizer, theta, g, opt, lr, cfg.zero_grad_step, rng);
     Params::clamp_vec(theta);
 }
 
@@ -840,7 +726,7 @@ fn fit_inner(
     let mut params = init.clone();
     // Stage 2 (§6.2) first: the forces are learnt with each clip's own speeds; the exported speed
     // model is the first clip's.
-    params.speed = clips[0].speed_model(&init.speed);
+    params.speed = crate::herd::params::SpeedModel::of_clip(clips[0], &init.speed);
     let per_clip: Vec<(Vec<Guidance>, Stencil)> = clips
         .iter()
         .map(|clip| {
@@ -866,16 +752,7 @@ fn fit_inner(
             }
             (k.theta, k.opt, k.log, k.epochs_done)
         }
-        _ => (
-            start,
-            OptState {
-                m: [0.0; N_PARAMS],
-                v: [0.0; N_PARAMS],
-                t: 0,
-            },
-            Vec::new(),
-            0,
-        ),
+        _ => (start, OptState::new(N_PARAMS), Vec::new(), 0),
     };
     let (a, b) = (cfg.frames.start, cfg.frames.end);
     let replicas = cfg.replicas.max(1);
@@ -883,7 +760,7 @@ fn fit_inner(
         let mut rng = epoch_rng(cfg.seed, epoch);
         for (ci, (clip, (guidance, stencil))) in clips.iter().zip(&per_clip).enumerate() {
             let mut speed_params = params.clone();
-            speed_params.speed = clip.speed_model(&init.speed);
+            speed_params.speed = crate::herd::params::SpeedModel::of_clip(clip, &init.speed);
             let mut model = clip_model(speed_params.with_vec(&theta), clip);
             // K independent herds (replicas) from the same fields, side by side.
             let mut herds: Vec<Vec<AgentRow>> = Vec::with_capacity(replicas);
@@ -958,7 +835,7 @@ fn fit_inner(
                         let loss = match cfg.loss {
                             LossKind::Fields => {
                                 let fl = fields_loss(clip, &state, f + s + 1)?;
-                                ef += crate::sim::read_vec(&fl.clone().detach())?[0]
+                                ef += crate::herd::sim::read_vec(&fl.clone().detach())?[0]
                                     / (w as f64 * kr);
                                 loss + fl
                             }
@@ -969,7 +846,7 @@ fn fit_inner(
                             LossKind::Paper => {
                                 // Logged only: evaluated off the autodiff graph.
                                 let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
-                                ef += crate::sim::read_vec(&fl)?[0] / (w as f64 * kr);
+                                ef += crate::herd::sim::read_vec(&fl)?[0] / (w as f64 * kr);
                                 loss
                             }
                         };
@@ -981,7 +858,7 @@ fn fit_inner(
                 if cfg.loss == LossKind::Ensemble {
                     for (s, states) in per_step.iter().enumerate() {
                         let l = ensemble_loss(clip, states, f + s + 1)?;
-                        ef += crate::sim::read_vec(&l.clone().detach())?[0] / w as f64;
+                        ef += crate::herd::sim::read_vec(&l.clone().detach())?[0] / w as f64;
                         add(&mut total, l);
                     }
                 }
@@ -992,7 +869,7 @@ fn fit_inner(
                     let grads = loss.backward();
                     let gv = th
                         .grad(&grads)
-                        .map(|t| crate::sim::read_vec(&t))
+                        .map(|t| crate::herd::sim::read_vec(&t))
                         .transpose()?
                         .unwrap_or_else(|| vec![0.0; N_PARAMS]);
                     let mut g = [0.0; N_PARAMS];
@@ -1133,7 +1010,7 @@ pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
 /// Field-matching loss of a state against frame `f` of the clip:
 /// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖² with ρ' and ρ'V' by bilinear
 /// splatting and K the blur that splatting applies to points uniform in a cell
-/// ([`super::target::blur_like_splat`]), so that a herd matching the clip scores 0 on average.
+/// ([`target::blur_like_splat`]), so that a herd matching the clip scores 0 on average.
 pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
     let ([rho, mx, my], norm_d, norm_m) = field_targets(clip, f, &state.x.device())?;
     let [rho_s, mx_s, my_s] = splatted_fields(state, &clip.grid())?;
@@ -1145,23 +1022,23 @@ pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Ten
 }
 
 /// The clip's splat-comparable density and momentum of frame `f`
-/// ([`super::target::splat_comparable_targets`]) and their normalisers Σρ², Σ‖m‖².
+/// ([`target::splat_comparable_targets`]) and their normalisers Σρ², Σ‖m‖².
 fn field_targets(
     clip: &ClipFields,
     f: usize,
     device: &Device,
 ) -> Result<([Tensor<1>; 3], f64, f64)> {
-    let [rho, mx, my] = super::target::splat_comparable_targets(clip, f, device);
-    let norm_d = crate::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
-    let norm_m =
-        crate::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0].max(1e-12);
+    let [rho, mx, my] = target::splat_comparable_targets(clip, f, device);
+    let norm_d = crate::herd::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
+    let norm_m = crate::herd::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0]
+        .max(1e-12);
     Ok(([rho, mx, my], norm_d, norm_m))
 }
 
 /// A herd's density and momentum fields by bilinear splatting (differentiable in positions,
 /// headings and speeds).
-fn splatted_fields(state: &HerdState, g: &crate::fields::Grid) -> Result<[Tensor<1>; 3]> {
-    use super::target::splat;
+fn splatted_fields(state: &HerdState, g: &crate::data::Grid) -> Result<[Tensor<1>; 3]> {
+    use target::splat;
     let snap = state.snapshot()?;
     let vx = state.hx.clone() * state.speed.clone();
     let vy = state.hy.clone() * state.speed.clone();
@@ -1253,8 +1130,8 @@ pub fn settle(
         let state = HerdState::from_rows(rows, device);
         let dec = quiet.decide(&state.snapshot()?, &mut rng);
         let (fx, fy) = quiet.forces(&forces, &state, &dec);
-        let fx = crate::sim::read_vec(&fx.reshape([n]))?;
-        let fy = crate::sim::read_vec(&fy.reshape([n]))?;
+        let fx = crate::herd::sim::read_vec(&fx.reshape([n]))?;
+        let fy = crate::herd::sim::read_vec(&fy.reshape([n]))?;
         for (i, r) in rows.iter_mut().enumerate() {
             let b = bounds[i];
             let fl = (fx[i] * fx[i] + fy[i] * fy[i]).sqrt();

@@ -2,9 +2,9 @@
 //! optional destination, behaviour regions with their parameter sets and speed caps, the herd's
 //! spawn, duration, fps and seed. Validation names the JSON path of every problem.
 
+use crate::data::Grid;
 use crate::error::{Error, Result};
-use crate::fields::Grid;
-use crate::params::Params;
+use crate::herd::params::Params;
 use ndarray::Array2;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};

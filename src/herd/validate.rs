@@ -6,13 +6,14 @@
 //! over seeds (the paper's Tables 1–5).
 
 use crate::backend::{cpu_device, Precision};
+use crate::data::agents::AgentRow;
+use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::fields::{rasterise, ClipFields};
-use crate::io::AgentRow;
-use crate::metrics::{angular_momentum, aspect_ratio, centroid, field_points, polarization};
-use crate::params::Params;
-use crate::sim::{theta_tensor, ForceTensors, HerdState};
-use crate::train::fit::{guidance_fields, start_herd, Settle};
+use crate::herd::fit::{guidance_fields, start_herd, Settle};
+use crate::herd::params::Params;
+use crate::herd::sim::{theta_tensor, ForceTensors, HerdState};
+use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocity, Emergent};
+use crate::measure::rasterise;
 use rand::SeedableRng;
 use serde::Serialize;
 
@@ -25,142 +26,6 @@ pub const MEASURES: [&str; 6] = [
     "angular_momentum_frame_centre",
     "aspect_ratio",
 ];
-
-/// Per-frame emergent measures of a set of fields.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct Emergent {
-    pub polarization: f64,
-    pub angular_momentum_centroid: f64,
-    pub angular_momentum_frame_centre: f64,
-    /// NaN when the herd has no mean direction.
-    pub aspect_ratio: f64,
-}
-
-impl Emergent {
-    /// [polarization, angular momentum about the centroid, about the frame centre, aspect ratio]
-    /// (the order of [`MEASURES`] after the two errors).
-    pub fn values(&self) -> [f64; 4] {
-        [
-            self.polarization,
-            self.angular_momentum_centroid,
-            self.angular_momentum_frame_centre,
-            self.aspect_ratio,
-        ]
-    }
-}
-
-/// The emergent measures of frame `f` of `c`, from its fields.
-pub fn emergent(c: &ClipFields, f: usize) -> Emergent {
-    let (pos, vel, w) = field_points(c, f);
-    let g = c.grid();
-    let size = g.size();
-    let centre = [g.origin[0] + size[0] / 2.0, g.origin[1] + size[1] / 2.0];
-    Emergent {
-        polarization: polarization(&vel, &w),
-        angular_momentum_centroid: angular_momentum(&pos, &vel, &w, centroid(&pos, &w)),
-        angular_momentum_frame_centre: angular_momentum(&pos, &vel, &w, centre),
-        aspect_ratio: aspect_ratio(&pos, &vel, &w).unwrap_or(f64::NAN),
-    }
-}
-
-/// Agents and momentum of frame `f` of `c` summed into the cells of a coarse `k × k` grid (fewer
-/// along an axis with fewer cells): `[n, n·Vx, n·Vy]` per coarse cell, row-major.
-pub fn coarse_cells(c: &ClipFields, f: usize, k: usize) -> Vec<[f64; 3]> {
-    let g = c.grid();
-    let a = g.cell_area();
-    let kx = k.min(g.nx).max(1);
-    let ky = k.min(g.ny).max(1);
-    let mut n = vec![[0.0f64; 3]; kx * ky];
-    for iy in 0..g.ny {
-        for ix in 0..g.nx {
-            let cell = (iy * ky / g.ny) * kx + ix * kx / g.nx;
-            let d = c.density[[f, iy, ix]] as f64 * a;
-            n[cell][0] += d;
-            n[cell][1] += d * c.velocity[[f, iy, ix, 0]] as f64;
-            n[cell][2] += d * c.velocity[[f, iy, ix, 1]] as f64;
-        }
-    }
-    n
-}
-
-/// Density and velocity errors of simulated coarse cells `sim` against the clip's `clip` (from
-/// [`coarse_cells`]): density Σ|n' − n| / Σ n, velocity Σ n ‖V' − V‖ / Σ n ‖V‖.
-pub fn cell_errors(clip: &[[f64; 3]], sim: &[[f64; 3]]) -> (f64, f64) {
-    let (mut dn, mut tn, mut dv, mut tv) = (0.0, 0.0, 0.0, 0.0);
-    for (c, s) in clip.iter().zip(sim) {
-        dn += (s[0] - c[0]).abs();
-        tn += c[0];
-        if c[0] > 0.0 {
-            let v = [c[1] / c[0], c[2] / c[0]];
-            let vs = if s[0] > 0.0 {
-                [s[1] / s[0], s[2] / s[0]]
-            } else {
-                [0.0, 0.0]
-            };
-            dv += c[0] * (vs[0] - v[0]).hypot(vs[1] - v[1]);
-            tv += c[0] * v[0].hypot(v[1]);
-        }
-    }
-    (
-        if tn > 0.0 { dn / tn } else { 0.0 },
-        if tv > 0.0 { dv / tv } else { 0.0 },
-    )
-}
-
-/// Density and velocity errors of frame `fs` of `sim` against frame `f` of `clip` (same grid), on
-/// a coarse `k × k` grid ([`coarse_cells`], [`cell_errors`]).
-pub fn coarse_errors(
-    clip: &ClipFields,
-    f: usize,
-    sim: &ClipFields,
-    fs: usize,
-    k: usize,
-) -> (f64, f64) {
-    cell_errors(&coarse_cells(clip, f, k), &coarse_cells(sim, fs, k))
-}
-
-/// The temporal window (frames) over which the clip's velocities were averaged: the extraction's
-/// `smooth` setting for clips extracted from video, 1 otherwise.
-pub fn velocity_window(clip: &ClipFields) -> usize {
-    let p = &clip.meta.provenance;
-    if p["source"] == "extract" {
-        p["settings"]["smooth"].as_u64().unwrap_or(9).max(1) as usize
-    } else {
-        1
-    }
-}
-
-/// Averages each cell's velocity over a centred window of `window` frames, weighted by density —
-/// what extraction does to the flow — so a simulation is compared with a clip like with like.
-pub fn smooth_velocity(c: &mut ClipFields, window: usize) {
-    if window <= 1 {
-        return;
-    }
-    let (nf, ny, nx) = c.density.dim();
-    let half = window / 2;
-    let src_v = c.velocity.clone();
-    for f in 0..nf {
-        let (lo, hi) = (f.saturating_sub(half), (f + half + 1).min(nf));
-        for iy in 0..ny {
-            for ix in 0..nx {
-                if c.density[[f, iy, ix]] <= 0.0 {
-                    continue;
-                }
-                let (mut sx, mut sy, mut w) = (0.0f64, 0.0f64, 0.0f64);
-                for g in lo..hi {
-                    let d = c.density[[g, iy, ix]] as f64;
-                    sx += d * src_v[[g, iy, ix, 0]] as f64;
-                    sy += d * src_v[[g, iy, ix, 1]] as f64;
-                    w += d;
-                }
-                if w > 0.0 {
-                    c.velocity[[f, iy, ix, 0]] = (sx / w) as f32;
-                    c.velocity[[f, iy, ix, 1]] = (sy / w) as f32;
-                }
-            }
-        }
-    }
-}
 
 /// A run of the model over frames `range` of a clip from the first frame's fields: the agents of
 /// every frame and their rasterisation on the clip's grid.
@@ -181,14 +46,14 @@ pub fn simulate_clip(
     range: std::ops::Range<usize>,
     seed: u64,
     cfg: &ValidateConfig,
-    guidance: &[crate::sim::Guidance],
+    guidance: &[crate::herd::sim::Guidance],
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
     let (warmup, settle) = (cfg.warmup, &cfg.settle);
     let g = clip.grid();
     let mut params = params.clone();
-    params.speed = clip.speed_model(&params.speed);
-    let mut model = crate::train::fit::clip_model(params, clip);
+    params.speed = crate::herd::params::SpeedModel::of_clip(clip, &params.speed);
+    let mut model = crate::herd::fit::clip_model(params, clip);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let first = range.start - warmup.min(range.start);
     let rows = start_herd(&model, clip, first, settle, &mut rng, device)?;
@@ -221,7 +86,7 @@ pub fn simulate_clip(
         clip.obstacles.clone(),
         serde_json::json!({"source": "validate simulation", "seed": seed}),
     )?;
-    smooth_velocity(&mut fields, velocity_window(clip));
+    smooth_velocity(&mut fields, clip.meta.velocity_window());
     Ok(SimRun { frames, fields })
 }
 
@@ -310,7 +175,7 @@ pub struct ValidateConfig {
     /// from the fields of the first held-out frame).
     pub warmup: usize,
     /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
-    /// ([`crate::train::fit::guidance_field`]).
+    /// ([`crate::herd::fit::guidance_field`]).
     pub guidance_scale: f64,
     /// Compare the seeds' mean prediction (coarse counts and momenta, each measure averaged over
     /// the seeds frame by frame) with the clip, instead of averaging each seed's own errors. A
@@ -328,7 +193,7 @@ pub fn validate(
     mut progress: impl FnMut(),
 ) -> Result<(Report, Vec<Vec<SimRun>>)> {
     let (split, grid, seeds) = (cfg.split, cfg.grid, cfg.seeds);
-    crate::train::fit::check_guidance_scale(cfg.guidance_scale)?;
+    crate::herd::fit::check_guidance_scale(cfg.guidance_scale)?;
     if !(split.is_finite() && (0.0..1.0).contains(&split)) {
         return Err(Error::invalid(format!("--split {split} must be in [0, 1)")));
     }
@@ -518,7 +383,7 @@ pub fn markdown(r: &Report) -> String {
         s.push_str("---:|");
     }
     s.push('\n');
-    for (i, n) in crate::params::param_names().iter().enumerate() {
+    for (i, n) in crate::herd::params::param_names().iter().enumerate() {
         s.push_str(&format!("| {n} |"));
         for set in &r.sets {
             s.push_str(&format!(" {:.4} |", set.params[i]));
@@ -527,50 +392,4 @@ pub fn markdown(r: &Report) -> String {
     }
     s.push_str("\nPlots: `metrics.png` (measures over time), `errors.png` (density and velocity errors over time), `error-map-*.png` (mean |ρ' − ρ| per coarse cell).\n");
     s
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn velocity_smoothing_is_density_weighted_and_centred() {
-        let mut frames = Vec::new();
-        for (f, v) in [[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]].iter().enumerate() {
-            // Frame 2 has two agents in the cell: twice the weight.
-            let n = if f == 2 { 2 } else { 1 };
-            frames.push(
-                (0..n)
-                    .map(|i| AgentRow {
-                        id: i,
-                        x: 0.5,
-                        y: 0.5,
-                        vx: v[0],
-                        vy: v[1],
-                    })
-                    .collect::<Vec<_>>(),
-            );
-        }
-        let g = crate::fields::Grid {
-            origin: [0.0, 0.0],
-            cell_size: 1.0,
-            nx: 1,
-            ny: 1,
-        };
-        let mut c = rasterise(
-            &frames,
-            g,
-            10.0,
-            ndarray::Array2::zeros((1, 1)),
-            serde_json::Value::Null,
-        )
-        .unwrap();
-        smooth_velocity(&mut c, 3);
-        // Frame 0 averages frames 0–1 (weights 1, 1); frame 1 frames 0–2 (1, 1, 2).
-        assert_eq!(c.velocity[[0, 0, 0, 0]], 0.5);
-        assert_eq!(c.velocity[[0, 0, 0, 1]], 0.5);
-        assert_eq!(c.velocity[[1, 0, 0, 0]], 0.25);
-        assert_eq!(c.velocity[[1, 0, 0, 1]], 0.75);
-        assert_eq!(velocity_window(&c), 1);
-    }
 }

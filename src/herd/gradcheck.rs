@@ -3,74 +3,15 @@
 //! same (replayed) perception, roles and noise.
 
 use crate::backend::{cpu_device, Precision};
+use crate::data::agents::AgentRow;
 use crate::error::{Error, Result};
-use crate::io::AgentRow;
-use crate::params::{param_names, Params, N_PARAMS};
-use crate::sim::{
-    random_herd, read_vec, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, Recording,
-    World,
-};
+use crate::herd::params::{param_names, Params, N_PARAMS};
+use crate::herd::sim::{read_vec, theta_tensor, Decide, HerdState, Model, Recording};
 use burn::tensor::{Device, Tensor};
-use herdfit_kernels::ObstacleMap;
 use rand::SeedableRng;
 use serde::Serialize;
 
-/// A herd, its surroundings and a time step: what a gradient check (or a benchmark) unrolls.
-#[derive(Clone, Debug)]
-pub struct Scenario {
-    pub model: Model,
-    pub init: Vec<AgentRow>,
-}
-
-/// The default scenario: `agents` agents (one per 2 BL², heading +x ± 20°) on a 2-BL grid with two
-/// obstacle blocks inside the herd and a uniform guidance direction, so that all four forces and
-/// the leader rule take part. 25 fps.
-pub fn default_scenario(params: Params, agents: usize, seed: u64) -> Result<Scenario> {
-    let spec = HerdSpec::standard(agents);
-    let half = spec.side() / 2.0;
-    let cell = 2.0;
-    let n = ((2.0 * half + 8.0) / cell).ceil() as usize;
-    let origin = [-(n as f64) * cell / 2.0; 2];
-    let mut map = ObstacleMap::empty(origin, cell, n, n);
-    // A 1×2 block ahead of the herd's centre and a single cell behind-left of it.
-    let mut block = |x: f64, y: f64| {
-        if let Some((ix, iy)) = map.cell_of([x, y]) {
-            map.blocked[iy * n + ix] = true;
-        }
-    };
-    block(0.4 * half, 0.1);
-    block(0.4 * half, -cell + 0.1);
-    block(-0.5 * half, 0.5 * half);
-    let world = World {
-        obstacles: Some(map),
-        guidance: Guidance::Uniform([0.98, 0.2]),
-    };
-    let init = random_herd(&spec, &params.speed, &world, seed)?;
-    Ok(Scenario {
-        model: Model {
-            params,
-            world,
-            dt: 1.0 / 25.0,
-        },
-        init,
-    })
-}
-
-/// The documented objective of `gradcheck`, on the final state of the unrolled run:
-///
-/// J(θ) = (1/N) Σ_i ‖p_i − p̄‖² / R_perc² + (1/N) Σ_i ⟨d_i, ĝ⟩,
-///
-/// the herd's spread (shaped by cohesion, avoidance and obstacles) plus the mean heading along
-/// ĝ = (0.6, 0.8) (shaped by alignment and obstacles). Returns a `[1]` tensor.
-pub fn objective(s: &HerdState, perception_radius: f64) -> Tensor<1> {
-    let cx = s.x.clone().mean();
-    let cy = s.y.clone().mean();
-    let spread = ((s.x.clone() - cx).square() + (s.y.clone() - cy).square())
-        .mean()
-        .div_scalar(perception_radius * perception_radius);
-    let heading = (s.hx.clone().mul_scalar(0.6) + s.hy.clone().mul_scalar(0.8)).mean();
-    spread + heading
-}
+pub use super::scenario::{default_scenario, objective, Scenario};
 
 /// Records the decisions of `steps` live steps at the scenario's parameters.
 pub fn record(sc: &Scenario, steps: usize, seed: u64, device: &Device) -> Result<Recording> {
@@ -246,12 +187,17 @@ pub fn gradcheck(
 /// for every evaluation.
 pub struct LossScenario {
     pub model: Model,
-    pub clip: crate::fields::ClipFields,
+    pub clip: crate::data::ClipFields,
     pub start: usize,
     pub kind: super::fit::LossKind,
     /// One initial herd and one plan per replica.
     pub init: Vec<Vec<AgentRow>>,
-    pub plans: Vec<Vec<(crate::sim::StepDecisions, super::loss::StepTarget)>>,
+    pub plans: Vec<
+        Vec<(
+            crate::herd::sim::StepDecisions,
+            super::fit::loss::StepTarget,
+        )>,
+    >,
     pub var_weight: f64,
 }
 
@@ -260,7 +206,7 @@ impl LossScenario {
     /// `replicas` herds (1 unless `kind` is the ensemble objective).
     #[allow(clippy::too_many_arguments)]
     pub fn record(
-        clip: &crate::fields::ClipFields,
+        clip: &crate::data::ClipFields,
         params: &Params,
         start: usize,
         steps: usize,
@@ -284,13 +230,13 @@ impl LossScenario {
             ));
         }
         let mut params = params.clone();
-        params.speed = clip.speed_model(&params.speed);
+        params.speed = crate::herd::params::SpeedModel::of_clip(clip, &params.speed);
         let mut model = super::fit::clip_model(params, clip);
         let guidance = guidance_fields(clip, super::fit::GUIDANCE_SCALE);
-        let stencil = super::target::Stencil::new(clip);
+        let stencil = super::fit::target::Stencil::new(clip);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let theta = theta_tensor(&model.params.to_vec(), device);
-        let f = crate::sim::ForceTensors::new(&theta, &model.params.constants);
+        let f = crate::herd::sim::ForceTensors::new(&theta, &model.params.constants);
         let (mut inits, mut all_plans) = (Vec::new(), Vec::new());
         for _ in 0..replicas {
             let init = init_herd(clip, start, &model.params.speed, &mut rng);
@@ -338,7 +284,7 @@ impl LossScenario {
         } else {
             t
         };
-        let f = crate::sim::ForceTensors::new(&t, &self.model.params.constants);
+        let f = crate::herd::sim::ForceTensors::new(&t, &self.model.params.constants);
         let k = self.init.len() as f64;
         let steps = self.plans[0].len();
         let mean_weight = if self.kind == LossKind::Paper {

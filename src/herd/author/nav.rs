@@ -2,7 +2,7 @@
 //! decay, the cancelling field around obstacles (eq. 14), a destination field by Dijkstra on the
 //! grid around obstacles (after Patil et al.), and their blend.
 
-use crate::fields::Grid;
+use crate::data::Grid;
 use ndarray::Array2;
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, VecDeque};

@@ -1,6 +1,8 @@
 //! The static surroundings of a herd: obstacle cells and the guidance field leaders follow.
 
+use crate::data::Grid;
 use herdfit_kernels::{ObstacleMap, P2};
+use ndarray::Array2;
 
 /// Direction field that leaders follow (DESIGN §4.2): during fitting the clip's velocity field
 /// propagated into empty cells, during authoring the navigation field.
@@ -66,6 +68,15 @@ impl World {
                 .is_some_and(|(ix, iy)| m.blocked[iy * m.nx + ix])
         })
     }
+}
+
+/// The obstacle map of a simulation from a grid's obstacle cells (non-zero = obstacle).
+pub fn obstacle_map(grid: &Grid, obstacles: &Array2<u8>) -> ObstacleMap {
+    let mut m = ObstacleMap::empty(grid.origin, grid.cell_size, grid.nx, grid.ny);
+    for ((iy, ix), &v) in obstacles.indexed_iter() {
+        m.blocked[iy * grid.nx + ix] = v != 0;
+    }
+    m
 }
 
 #[cfg(test)]
