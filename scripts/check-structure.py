@@ -26,11 +26,6 @@ KNOWN = {
     "src/cli/mod.rs",
     "src/cli/mod.rs fn fit_cmd",
     "src/cli/mod.rs fn validate_cmd",
-    "src/herd/fit/mod.rs",
-    "src/herd/fit/mod.rs fn fit_inner",
-    "src/video/extract.rs",
-    "src/video/extract.rs fn extract",
-    "src/herd/author/scene.rs fn new",
 }
 
 

@@ -293,7 +293,7 @@ impl LossScenario {
             0.0
         };
         let mut total: Option<Tensor<1>> = None;
-        let mut add = |l: Tensor<1>| super::fit::add(&mut total, l);
+        let mut add = |l: Tensor<1>| super::fit::loss::add(&mut total, l);
         let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); steps];
         for (init, plans) in self.init.iter().zip(&self.plans) {
             let mut state = HerdState::from_rows(init, device);

@@ -9,10 +9,13 @@
 
 pub mod author;
 pub mod bench;
+pub mod eval;
 pub mod fit;
 pub mod gradcheck;
+pub mod guidance;
 pub mod params;
 pub mod scenario;
 pub mod sim;
+pub mod start;
 pub mod synth;
 pub mod validate;

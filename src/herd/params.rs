@@ -16,6 +16,8 @@ pub const FORCES: [&str; 4] = ["cohesion", "avoidance", "alignment", "obstacle"]
 pub const FIELDS: [&str; 3] = ["weight", "radial", "angular"];
 /// Number of optimisable parameters.
 pub const N_PARAMS: usize = 12;
+/// Indices of the alignment parameters in the θ vector.
+pub const ALIGNMENT: [usize; 3] = [6, 7, 8];
 
 /// `force.field` names of the 12 parameters in vector order
 /// (cohesion.weight, cohesion.radial, cohesion.angular, avoidance.weight, …).

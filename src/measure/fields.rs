@@ -185,6 +185,27 @@ pub fn field_errors(clip: &ClipFields, f: usize, rows: &[AgentRow]) -> (f64, f64
     )
 }
 
+/// A cell field (row-major `[ny·nx]`) filtered by a symmetric kernel of odd length, centred on
+/// each cell, along x then along y; weights falling outside the grid are dropped.
+pub fn separable_filter(field: &[f64], nx: usize, ny: usize, kernel: &[f64]) -> Vec<f64> {
+    let half = (kernel.len() / 2) as i64;
+    // One pass along x (stride 1, length nx), one along y (stride nx, length ny).
+    let pass = |v: &[f64], stride: usize, len: usize| -> Vec<f64> {
+        let mut out = vec![0.0; v.len()];
+        for (c, &x) in v.iter().enumerate() {
+            let i = (c / stride) % len;
+            for (d, k) in kernel.iter().enumerate() {
+                let j = i as i64 + d as i64 - half;
+                if j >= 0 && (j as usize) < len {
+                    out[c + j as usize * stride - i * stride] += k * x;
+                }
+            }
+        }
+        out
+    };
+    pass(&pass(field, 1, nx), nx, ny)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

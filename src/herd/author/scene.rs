@@ -198,192 +198,18 @@ impl Scene {
 
     /// Validates a parsed scene (`path` names it in errors and anchors relative file paths).
     pub fn new(file: SceneFile, path: &Path) -> Result<Scene> {
-        let bad = |at: &str, msg: &str| Error::file(path, format!("{at}: {msg}"));
         if file.schema != SCENE_SCHEMA {
             return Err(bad(
+                path,
                 "schema",
                 &format!("is '{}', expected '{SCENE_SCHEMA}'", file.schema),
             ));
         }
-        let w = &file.world;
-        for (k, v) in [
-            ("world.width", w.width),
-            ("world.height", w.height),
-            ("world.cell_size", w.cell_size),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(bad(k, "must be > 0"));
-            }
-        }
-        let nx = (w.width / w.cell_size).ceil() as usize;
-        let ny = (w.height / w.cell_size).ceil() as usize;
-        if nx * ny > 4_000_000 {
-            return Err(bad("world", "more than 4 million grid cells"));
-        }
-        let grid = Grid {
-            origin: [0.0, 0.0],
-            cell_size: w.cell_size,
-            nx,
-            ny,
-        };
-        let inside = |p: P2| {
-            p[0] >= 0.0
-                && p[1] >= 0.0
-                && p[0] <= w.width
-                && p[1] <= w.height
-                && p[0].is_finite()
-                && p[1].is_finite()
-        };
-        let mut obstacles = Array2::<u8>::zeros((ny, nx));
-        let o = &file.obstacles;
-        for (k, c) in o.cells.iter().enumerate() {
-            if c[0] < 0 || c[1] < 0 || c[0] as usize >= nx || c[1] as usize >= ny {
-                return Err(bad(
-                    &format!("obstacles.cells[{k}]"),
-                    &format!("{c:?} is outside the {nx}×{ny} grid"),
-                ));
-            }
-            obstacles[[c[1] as usize, c[0] as usize]] = 1;
-        }
-        for (k, poly) in o.polygons.iter().enumerate() {
-            if poly.len() < 3 {
-                return Err(bad(
-                    &format!("obstacles.polygons[{k}]"),
-                    "a polygon needs at least 3 points",
-                ));
-            }
-            for iy in 0..ny {
-                for ix in 0..nx {
-                    if in_polygon(grid.centre(ix, iy), poly) {
-                        obstacles[[iy, ix]] = 1;
-                    }
-                }
-            }
-        }
-        for (k, c) in o.circles.iter().enumerate() {
-            if !(c.radius.is_finite() && c.radius > 0.0) {
-                return Err(bad(
-                    &format!("obstacles.circles[{k}].radius"),
-                    "must be > 0",
-                ));
-            }
-            for iy in 0..ny {
-                for ix in 0..nx {
-                    let p = grid.centre(ix, iy);
-                    if (p[0] - c.centre[0]).hypot(p[1] - c.centre[1]) <= c.radius {
-                        obstacles[[iy, ix]] = 1;
-                    }
-                }
-            }
-        }
-        if let Some(m) = &o.mask {
-            let mp = path.parent().unwrap_or(Path::new(".")).join(m);
-            mask_cells(&mp, &mut obstacles).map_err(|e| match e {
-                Error::File { msg, .. } => {
-                    bad("obstacles.mask", &format!("{}: {msg}", mp.display()))
-                }
-                other => other,
-            })?;
-        }
-        for (k, arrow) in file.arrows.iter().enumerate() {
-            if arrow.len() < 2 {
-                return Err(bad(
-                    &format!("arrows[{k}]"),
-                    "an arrow needs at least 2 points",
-                ));
-            }
-            if let Some((j, p)) = arrow.iter().enumerate().find(|(_, p)| !inside(**p)) {
-                return Err(bad(
-                    &format!("arrows[{k}][{j}]"),
-                    &format!("{p:?} is outside the {}×{} world", w.width, w.height),
-                ));
-            }
-        }
-        let n = &file.navigation;
-        for (k, v) in [
-            ("navigation.radius", n.radius),
-            ("navigation.decay", n.decay),
-            ("navigation.cancel_radius", n.cancel_radius),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(bad(k, "must be ≥ 0"));
-            }
-        }
-        if let Some(d) = &file.destination {
-            if !inside(d.point) {
-                return Err(bad("destination.point", "is outside the world"));
-            }
-            if let Some((ix, iy)) = grid.cell_of(d.point) {
-                if obstacles[[iy, ix]] != 0 {
-                    return Err(bad("destination.point", "is inside an obstacle"));
-                }
-            }
-            if !(d.weight.is_finite() && d.weight >= 0.0) {
-                return Err(bad("destination.weight", "must be ≥ 0"));
-            }
-        }
-        if file.arrows.is_empty() && file.destination.is_none() {
-            return Err(bad("arrows", "give guidance arrows or a destination"));
-        }
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let load_params = |at: &str, p: &Path| -> Result<Params> {
-            Params::load(&dir.join(p)).map_err(|e| bad(at, &e.to_string()))
-        };
-        let mut params = vec![match &file.default_params {
-            Some(p) => load_params("default_params", p)?,
-            None => Params::default(),
-        }];
-        for (k, r) in file.regions.iter().enumerate() {
-            if r.polygon.len() < 3 {
-                return Err(bad(
-                    &format!("regions[{k}].polygon"),
-                    "a polygon needs at least 3 points",
-                ));
-            }
-            if let Some(c) = r.speed_cap {
-                if !(c.is_finite() && c > 0.0) {
-                    return Err(bad(&format!("regions[{k}].speed_cap"), "must be > 0"));
-                }
-            }
-            params.push(load_params(&format!("regions[{k}].params"), &r.params)?);
-        }
-        if let Some(c) = file.default_speed_cap {
-            if !(c.is_finite() && c > 0.0) {
-                return Err(bad("default_speed_cap", "must be > 0"));
-            }
-        }
-        let s = &file.spawn;
-        if s.count == 0 {
-            return Err(bad("spawn.count", "the herd is empty"));
-        }
-        if !inside(s.centre) {
-            return Err(bad("spawn.centre", "is outside the world"));
-        }
-        if let Some((ix, iy)) = grid.cell_of(s.centre) {
-            if obstacles[[iy, ix]] != 0 {
-                return Err(bad("spawn.centre", "is inside an obstacle"));
-            }
-        }
-        if !(s.size[0] > 0.0 && s.size[1] > 0.0 && s.size[0].is_finite() && s.size[1].is_finite()) {
-            return Err(bad("spawn.size", "must be > 0"));
-        }
-        if !(file.duration.is_finite() && file.duration > 0.0) {
-            return Err(bad("duration", "must be > 0"));
-        }
-        if !(file.fps.is_finite() && file.fps > 0.0) {
-            return Err(bad("fps", "must be > 0"));
-        }
-        if let Some(p) = &file.predator {
-            if p.path.len() < 2 {
-                return Err(bad("predator.path", "needs at least 2 points"));
-            }
-            if !(p.speed >= 0.0 && p.radius > 0.0 && p.strength >= 0.0) {
-                return Err(bad(
-                    "predator",
-                    "speed ≥ 0, radius > 0 and strength ≥ 0 are required",
-                ));
-            }
-        }
+        let grid = world_grid(&file, path)?;
+        let obstacles = obstacle_cells(&file, &grid, path)?;
+        check_guidance(&file, &grid, &obstacles, path)?;
+        let params = region_params(&file, path)?;
+        check_spawn_and_run(&file, &grid, &obstacles, path)?;
         Ok(Scene {
             path: path.to_path_buf(),
             grid,
@@ -453,4 +279,234 @@ fn mask_cells(path: &Path, _obstacles: &mut Array2<u8>) -> Result<()> {
         path,
         "mask images need the `video` feature (OpenCV)",
     ))
+}
+
+/// An error at JSON path `at` of the scene file `path`.
+fn bad(path: &Path, at: &str, msg: &str) -> Error {
+    Error::file(path, format!("{at}: {msg}"))
+}
+
+/// Is `p` inside the world (and finite)?
+fn in_world(w: &WorldSpec, p: P2) -> bool {
+    p[0] >= 0.0
+        && p[1] >= 0.0
+        && p[0] <= w.width
+        && p[1] <= w.height
+        && p[0].is_finite()
+        && p[1].is_finite()
+}
+
+/// The world's grid (`world.*` checked).
+fn world_grid(file: &SceneFile, path: &Path) -> Result<Grid> {
+    let bad = |at: &str, msg: &str| bad(path, at, msg);
+    let w = &file.world;
+    for (k, v) in [
+        ("world.width", w.width),
+        ("world.height", w.height),
+        ("world.cell_size", w.cell_size),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(bad(k, "must be > 0"));
+        }
+    }
+    let nx = (w.width / w.cell_size).ceil() as usize;
+    let ny = (w.height / w.cell_size).ceil() as usize;
+    if nx * ny > 4_000_000 {
+        return Err(bad("world", "more than 4 million grid cells"));
+    }
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        cell_size: w.cell_size,
+        nx,
+        ny,
+    };
+    Ok(grid)
+}
+
+/// The obstacle cells: `obstacles.cells`, polygons, circles and mask.
+fn obstacle_cells(file: &SceneFile, grid: &Grid, path: &Path) -> Result<Array2<u8>> {
+    let bad = |at: &str, msg: &str| bad(path, at, msg);
+    let (nx, ny) = (grid.nx, grid.ny);
+    let mut obstacles = Array2::<u8>::zeros((ny, nx));
+    let o = &file.obstacles;
+    for (k, c) in o.cells.iter().enumerate() {
+        if c[0] < 0 || c[1] < 0 || c[0] as usize >= nx || c[1] as usize >= ny {
+            return Err(bad(
+                &format!("obstacles.cells[{k}]"),
+                &format!("{c:?} is outside the {nx}×{ny} grid"),
+            ));
+        }
+        obstacles[[c[1] as usize, c[0] as usize]] = 1;
+    }
+    for (k, poly) in o.polygons.iter().enumerate() {
+        if poly.len() < 3 {
+            return Err(bad(
+                &format!("obstacles.polygons[{k}]"),
+                "a polygon needs at least 3 points",
+            ));
+        }
+        for iy in 0..ny {
+            for ix in 0..nx {
+                if in_polygon(grid.centre(ix, iy), poly) {
+                    obstacles[[iy, ix]] = 1;
+                }
+            }
+        }
+    }
+    for (k, c) in o.circles.iter().enumerate() {
+        if !(c.radius.is_finite() && c.radius > 0.0) {
+            return Err(bad(
+                &format!("obstacles.circles[{k}].radius"),
+                "must be > 0",
+            ));
+        }
+        for iy in 0..ny {
+            for ix in 0..nx {
+                let p = grid.centre(ix, iy);
+                if (p[0] - c.centre[0]).hypot(p[1] - c.centre[1]) <= c.radius {
+                    obstacles[[iy, ix]] = 1;
+                }
+            }
+        }
+    }
+    if let Some(m) = &o.mask {
+        let mp = path.parent().unwrap_or(Path::new(".")).join(m);
+        mask_cells(&mp, &mut obstacles).map_err(|e| match e {
+            Error::File { msg, .. } => bad("obstacles.mask", &format!("{}: {msg}", mp.display())),
+            other => other,
+        })?;
+    }
+    Ok(obstacles)
+}
+
+/// Guidance: `arrows` inside the world, `navigation` ranges, the `destination`; one of arrows
+/// or destination is required.
+fn check_guidance(
+    file: &SceneFile,
+    grid: &Grid,
+    obstacles: &Array2<u8>,
+    path: &Path,
+) -> Result<()> {
+    let bad = |at: &str, msg: &str| bad(path, at, msg);
+    let w = &file.world;
+    let inside = |p: P2| in_world(w, p);
+    for (k, arrow) in file.arrows.iter().enumerate() {
+        if arrow.len() < 2 {
+            return Err(bad(
+                &format!("arrows[{k}]"),
+                "an arrow needs at least 2 points",
+            ));
+        }
+        if let Some((j, p)) = arrow.iter().enumerate().find(|(_, p)| !inside(**p)) {
+            return Err(bad(
+                &format!("arrows[{k}][{j}]"),
+                &format!("{p:?} is outside the {}×{} world", w.width, w.height),
+            ));
+        }
+    }
+    let n = &file.navigation;
+    for (k, v) in [
+        ("navigation.radius", n.radius),
+        ("navigation.decay", n.decay),
+        ("navigation.cancel_radius", n.cancel_radius),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(bad(k, "must be ≥ 0"));
+        }
+    }
+    if let Some(d) = &file.destination {
+        if !inside(d.point) {
+            return Err(bad("destination.point", "is outside the world"));
+        }
+        if let Some((ix, iy)) = grid.cell_of(d.point) {
+            if obstacles[[iy, ix]] != 0 {
+                return Err(bad("destination.point", "is inside an obstacle"));
+            }
+        }
+        if !(d.weight.is_finite() && d.weight >= 0.0) {
+            return Err(bad("destination.weight", "must be ≥ 0"));
+        }
+    }
+    if file.arrows.is_empty() && file.destination.is_none() {
+        return Err(bad("arrows", "give guidance arrows or a destination"));
+    }
+    Ok(())
+}
+
+/// The parameter sets: `default_params` (the built-in set when absent), then one per region
+/// (`regions[k]` checked); `default_speed_cap` checked.
+fn region_params(file: &SceneFile, path: &Path) -> Result<Vec<Params>> {
+    let bad = |at: &str, msg: &str| bad(path, at, msg);
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let load_params = |at: &str, p: &Path| -> Result<Params> {
+        Params::load(&dir.join(p)).map_err(|e| bad(at, &e.to_string()))
+    };
+    let mut params = vec![match &file.default_params {
+        Some(p) => load_params("default_params", p)?,
+        None => Params::default(),
+    }];
+    for (k, r) in file.regions.iter().enumerate() {
+        if r.polygon.len() < 3 {
+            return Err(bad(
+                &format!("regions[{k}].polygon"),
+                "a polygon needs at least 3 points",
+            ));
+        }
+        if let Some(c) = r.speed_cap {
+            if !(c.is_finite() && c > 0.0) {
+                return Err(bad(&format!("regions[{k}].speed_cap"), "must be > 0"));
+            }
+        }
+        params.push(load_params(&format!("regions[{k}].params"), &r.params)?);
+    }
+    if let Some(c) = file.default_speed_cap {
+        if !(c.is_finite() && c > 0.0) {
+            return Err(bad("default_speed_cap", "must be > 0"));
+        }
+    }
+    Ok(params)
+}
+
+/// `spawn`, `duration`, `fps` and `predator`.
+fn check_spawn_and_run(
+    file: &SceneFile,
+    grid: &Grid,
+    obstacles: &Array2<u8>,
+    path: &Path,
+) -> Result<()> {
+    let bad = |at: &str, msg: &str| bad(path, at, msg);
+    let inside = |p: P2| in_world(&file.world, p);
+    let s = &file.spawn;
+    if s.count == 0 {
+        return Err(bad("spawn.count", "the herd is empty"));
+    }
+    if !inside(s.centre) {
+        return Err(bad("spawn.centre", "is outside the world"));
+    }
+    if let Some((ix, iy)) = grid.cell_of(s.centre) {
+        if obstacles[[iy, ix]] != 0 {
+            return Err(bad("spawn.centre", "is inside an obstacle"));
+        }
+    }
+    if !(s.size[0] > 0.0 && s.size[1] > 0.0 && s.size[0].is_finite() && s.size[1].is_finite()) {
+        return Err(bad("spawn.size", "must be > 0"));
+    }
+    if !(file.duration.is_finite() && file.duration > 0.0) {
+        return Err(bad("duration", "must be > 0"));
+    }
+    if !(file.fps.is_finite() && file.fps > 0.0) {
+        return Err(bad("fps", "must be > 0"));
+    }
+    if let Some(p) = &file.predator {
+        if p.path.len() < 2 {
+            return Err(bad("predator.path", "needs at least 2 points"));
+        }
+        if !(p.speed >= 0.0 && p.radius > 0.0 && p.strength >= 0.0) {
+            return Err(bad(
+                "predator",
+                "speed ≥ 0, radius > 0 and strength ≥ 0 are required",
+            ));
+        }
+    }
+    Ok(())
 }

@@ -6,6 +6,10 @@
 //! of |Var_cell − S_cell| over cells holding ≥ 2 followers (rad²). Norms and absolute values are
 //! smoothed, √(x² + 1e-12), so the gradient exists everywhere.
 
+use super::target;
+use crate::data::ClipFields;
+use crate::error::{Error, Result};
+use crate::herd::sim::HerdState;
 use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
 use herdfit_kernels::P2;
 use serde::{Deserialize, Serialize};
@@ -150,4 +154,99 @@ pub fn step_loss(hx: &Tensor<1>, hy: &Tensor<1>, t: &StepTarget) -> StepLoss {
         .sqrt();
     let e_var = (dev_c * floats(weight, &device)).sum();
     StepLoss { e_mean, e_var }
+}
+
+/// Field-matching loss of a state against frame `f` of the clip:
+/// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖² with ρ' and ρ'V' by bilinear
+/// splatting and K the blur that splatting applies to points uniform in a cell
+/// ([`target::blur_like_splat`]), so that a herd matching the clip scores 0 on average.
+pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
+    let ([rho, mx, my], norm_d, norm_m) = field_targets(clip, f, &state.x.device())?;
+    let [rho_s, mx_s, my_s] = splatted_fields(state, &clip.grid())?;
+    let ed = (rho_s - rho).square().sum().div_scalar(norm_d);
+    let em = ((mx_s - mx).square() + (my_s - my).square())
+        .sum()
+        .div_scalar(norm_m);
+    Ok(ed + em)
+}
+
+/// The clip's splat-comparable density and momentum of frame `f`
+/// ([`target::splat_comparable_targets`]) and their normalisers Σρ², Σ‖m‖².
+fn field_targets(
+    clip: &ClipFields,
+    f: usize,
+    device: &Device,
+) -> Result<([Tensor<1>; 3], f64, f64)> {
+    let [rho, mx, my] = target::splat_comparable_targets(clip, f, device);
+    let norm_d = crate::herd::sim::read_vec(&rho.clone().square().sum())?[0].max(1e-12);
+    let norm_m = crate::herd::sim::read_vec(&(mx.clone().square() + my.clone().square()).sum())?[0]
+        .max(1e-12);
+    Ok(([rho, mx, my], norm_d, norm_m))
+}
+
+/// A herd's density and momentum fields by bilinear splatting (differentiable in positions,
+/// headings and speeds).
+fn splatted_fields(state: &HerdState, g: &crate::data::Grid) -> Result<[Tensor<1>; 3]> {
+    use target::splat;
+    let snap = state.snapshot()?;
+    let vx = state.hx.clone() * state.speed.clone();
+    let vy = state.hy.clone() * state.speed.clone();
+    Ok([
+        splat(&state.x, &state.y, &snap.pos, g, None),
+        splat(&state.x, &state.y, &snap.pos, g, Some(&vx)),
+        splat(&state.x, &state.y, &snap.pos, g, Some(&vy)),
+    ])
+}
+
+/// Adds a loss term to a running total (the first term starts it).
+pub(crate) fn add(total: &mut Option<Tensor<1>>, l: Tensor<1>) {
+    *total = Some(match total.take() {
+        None => l,
+        Some(t) => t + l,
+    });
+}
+
+/// The ensemble objective for one frame: with ρ_k, m_k the density and momentum fields splatted
+/// from replica k (k = 1..K) and ρ̄, m̄ their means,
+///
+/// L = [‖ρ̄ − ρ‖² − S_ρ / K] / Σρ² + [‖m̄ − m‖² − S_m / K] / Σ‖m‖²,
+/// S = Σ_k ‖x_k − x̄‖² / (K − 1),
+///
+/// an unbiased estimate of ‖E[ρ'] − ρ‖² / Σρ² + … : the replicas' own spread is subtracted, so a
+/// parameter set is not rewarded for making the herd less variable (which matching one
+/// simulated herd to one clip does: E‖ρ' − ρ‖² = ‖E ρ' − ρ‖² + Var ρ' + …; RESULTS.md §1).
+pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Result<Tensor<1>> {
+    let k = states.len();
+    if k < 2 {
+        return Err(Error::invalid(
+            "the ensemble loss needs at least 2 replicas",
+        ));
+    }
+    let ([rho, mx, my], norm_d, norm_m) = field_targets(clip, f, &states[0].x.device())?;
+    let g = clip.grid();
+    let fields = states
+        .iter()
+        .map(|st| splatted_fields(st, &g))
+        .collect::<Result<Vec<_>>>()?;
+    let kf = k as f64;
+    // k ≥ 2: sums start from zeros shaped like the first replica's.
+    let mean = |i: usize| {
+        fields
+            .iter()
+            .fold(fields[0][i].zeros_like(), |a, x| a + x[i].clone())
+            .div_scalar(kf)
+    };
+    let (rb, mxb, myb) = (mean(0), mean(1), mean(2));
+    let spread = |i: usize, m: &Tensor<1>| {
+        fields
+            .iter()
+            .map(|x| (x[i].clone() - m.clone()).square().sum())
+            .fold(fields[0][i].zeros_like().sum(), |a, b| a + b)
+            .div_scalar((kf - 1.0) * kf)
+    };
+    let sd = spread(0, &rb);
+    let sm = spread(1, &mxb) + spread(2, &myb);
+    let ed = ((rb - rho).square().sum() - sd).div_scalar(norm_d);
+    let em = ((mxb - mx).square().sum() + (myb - my).square().sum() - sm).div_scalar(norm_m);
+    Ok(ed + em)
 }
