@@ -2,11 +2,14 @@
 //! steps on the standard random herd, and the process's peak resident memory.
 
 use crate::backend::{cpu_device, Precision};
+use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::Result;
 use crate::herd::scenario::{bench_model, objective};
 use crate::herd::sim::{theta_tensor, Decide, HerdState};
+use crate::progress::Progress;
 use rand::SeedableRng;
 use serde::Serialize;
+use std::path::Path;
 use std::time::Instant;
 
 /// The JSON written by `herdfit bench`.
@@ -141,4 +144,73 @@ pub fn run_bench(
         k,
         checkpointing,
     })
+}
+
+/// Settings of a benchmark.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BenchConfig {
+    pub agents: usize,
+    pub steps: usize,
+    /// Skip the forward + backward measurement.
+    pub sim_only: bool,
+    /// Forward + backward repetitions (median reported).
+    pub repeats: usize,
+    /// burn's balanced gradient checkpointing in the backward pass.
+    pub checkpointing: bool,
+}
+
+impl Default for BenchConfig {
+    fn default() -> Self {
+        BenchConfig {
+            agents: 1500,
+            steps: 20,
+            sim_only: false,
+            repeats: 3,
+            checkpointing: false,
+        }
+    }
+}
+
+/// Runs the benchmark ([`run_bench`]) and writes its JSON report to `json`.
+pub fn run(cfg: &BenchConfig, json: &Path, progress: &mut dyn Progress) -> Result<BenchReport> {
+    if cfg.agents == 0 {
+        return Err(crate::Error::invalid(
+            "the herd is empty: --agents must be ≥ 1",
+        ));
+    }
+    check_writable(json)?;
+    let total = cfg.steps + 1 + if cfg.sim_only { 0 } else { cfg.repeats.max(1) };
+    progress.start("bench", total as u64);
+    let r = run_bench(
+        cfg.agents,
+        cfg.steps,
+        cfg.sim_only,
+        cfg.repeats,
+        cfg.checkpointing,
+        || progress.inc(1),
+    )?;
+    progress.finish();
+    let text = serde_json::to_string_pretty(&r)
+        .map_err(|e| crate::Error::Internal(format!("serialising report: {e}")))?;
+    write_atomic(json, format!("{text}\n").as_bytes())?;
+    Ok(r)
+}
+
+impl std::fmt::Display for BenchReport {
+    /// The line `herdfit bench` prints.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "bench: {} agents, {} steps: simulation {:.3} ms/step{}, peak RSS {:.1} MB (K = {}, {:.1} visible neighbours/agent)",
+            self.agents,
+            self.steps,
+            self.sim_ms_per_step,
+            self.grad_ms_per_step
+                .map_or(String::new(), |g| format!(", forward+backward {g:.3} ms/step")),
+            self.peak_rss_mb,
+            self.k,
+            self.mean_neighbours
+        )
+    }
 }

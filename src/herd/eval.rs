@@ -31,7 +31,7 @@ pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
 /// Simulates the frames `range` of the clip from its first frame's fields with `params`
 /// (leaders following the clip's velocity field, no population control) and returns the mean
 /// density and velocity errors over the frames after the first. `guidance` holds the leaders'
-/// guidance of every frame ([`guidance_fields`]).
+/// guidance of every frame ([`crate::herd::guidance::guidance_fields`]).
 pub fn evaluate(
     clip: &ClipFields,
     params: &Params,

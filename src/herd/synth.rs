@@ -1,8 +1,10 @@
 //! Synthetic clips with known truth: simulate the herd model with given parameters, rasterise the
 //! trajectories into clip fields, keep the parameters as `truth.json`.
 
-use crate::backend::Precision;
+use crate::backend::{cpu_device, Precision};
 use crate::data::agents::{push_traj_frame, AgentRow, TRAJ_HEADER};
+use crate::data::atomic::AtomicDir;
+use crate::data::cells::read_cells;
 use crate::data::{ClipFields, Grid};
 use crate::error::{Error, Result};
 use crate::herd::params::Params;
@@ -10,9 +12,12 @@ use crate::herd::sim::obstacle_map;
 use crate::herd::sim::{
     random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, World,
 };
+use crate::herd::simulate::load_params;
 use crate::measure::rasterise;
+use crate::progress::Progress;
 use ndarray::Array2;
 use rand::SeedableRng;
+use std::path::PathBuf;
 
 /// Settings of a synthetic clip.
 #[derive(Clone, Debug)]
@@ -129,5 +134,213 @@ impl Synth {
             push_traj_frame(&mut s, f, f as f64 / fps, rows, roles);
         }
         s
+    }
+}
+
+/// A synthetic clip with its files: the truth (the built-in set when absent), the herd and grid,
+/// the obstacle cells, and the optional overhead video.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SynthJob {
+    pub params: Option<PathBuf>,
+    pub agents: usize,
+    /// Number of frames (frame 0 included).
+    pub frames: usize,
+    pub fps: f64,
+    /// Grid size in cells.
+    pub grid: (usize, usize),
+    /// Cell side (BL).
+    pub cell_size: f64,
+    /// Obstacle cells file (`{"cells": [[ix, iy], …]}`).
+    pub obstacles: Option<PathBuf>,
+    /// Direction of travel of the herd and its guidance, degrees from +x.
+    pub heading_deg: f64,
+    pub seed: u64,
+    pub precision: Precision,
+    /// The clip folder written: fields.npz, clip.json, truth.json, trajectories.csv (+
+    /// camera.json with a video).
+    pub out: PathBuf,
+    /// An overhead MJPG video of the run, and how it is rendered (`seed` is taken from the job).
+    pub video: Option<(PathBuf, SynthVideo)>,
+}
+
+/// How `synth` renders its video.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SynthVideo {
+    /// Pixels per body length.
+    pub px_per_bl: f64,
+    /// Body colour, RGB.
+    pub body_colour: [u8; 3],
+    /// Smooth pan, zoom and rotation of the camera (identity at frame 0).
+    pub camera_motion: bool,
+}
+
+/// Makes the synthetic clip and writes its folder (and video); returns it.
+pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> {
+    let params = load_params(job.params.as_deref())?;
+    if !(job.cell_size.is_finite() && job.cell_size > 0.0) {
+        return Err(Error::invalid(format!(
+            "--cell-size {} must be > 0",
+            job.cell_size
+        )));
+    }
+    let (nx, ny) = job.grid;
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        cell_size: job.cell_size,
+        nx,
+        ny,
+    };
+    let obstacles = match &job.obstacles {
+        Some(p) => read_cells(p, nx, ny)?,
+        None => Array2::zeros((ny, nx)),
+    };
+    AtomicDir::create(&job.out)?; // fail early on an unusable output folder
+    let device = cpu_device(job.precision)?;
+    let cfg = SynthConfig {
+        params: params.clone(),
+        agents: job.agents,
+        frames: job.frames,
+        fps: job.fps,
+        grid,
+        obstacles,
+        seed: job.seed,
+        heading_deg: job.heading_deg,
+        precision: job.precision,
+    };
+    progress.start("synth", job.frames.saturating_sub(1) as u64);
+    let syn = synthesise(&cfg, &device, || progress.inc(1))?;
+    progress.finish();
+    let mut truth = params.clone();
+    truth.physical = Some(params.physical_values());
+    truth.provenance = Some(serde_json::json!({"source": "synth truth", "seed": job.seed}));
+    let truth = serde_json::to_string_pretty(&truth)
+        .map_err(|e| Error::Internal(format!("serialising truth: {e}")))?;
+    let traj = syn.trajectories_csv(job.fps);
+    let mut clip = syn.clip.clone();
+    let mut extra = vec![
+        ("truth.json", format!("{truth}\n").into_bytes()),
+        ("trajectories.csv", traj.into_bytes()),
+    ];
+    let pending = match &job.video {
+        None => None,
+        Some((path, v)) => {
+            let (cameras, pending, settings) = render::video(job, v, &syn, path, progress)?;
+            let s = v.px_per_bl;
+            clip.meta.body_length_px = Some(s);
+            clip.meta.body_pixel_coverage =
+                Some(std::f64::consts::PI * 0.5 * s * 0.5 * render::BODY_WIDTH_BL * s);
+            if let serde_json::Value::Object(m) = &mut clip.meta.provenance {
+                m.insert("video".into(), settings);
+            }
+            let cams = serde_json::to_string_pretty(&cameras)
+                .map_err(|e| Error::Internal(format!("serialising cameras: {e}")))?;
+            extra.push(("camera.json", format!("{cams}\n").into_bytes()));
+            Some(pending)
+        }
+    };
+    clip.save(&job.out, &extra)?;
+    if let Some(p) = pending {
+        render::commit(p)?;
+    }
+    Ok(syn)
+}
+
+impl Synth {
+    /// The line `herdfit synth` prints.
+    pub fn summary(&self, job: &SynthJob) -> String {
+        let counts: Vec<f64> = (0..self.clip.frames())
+            .map(|f| self.clip.count(f))
+            .collect();
+        format!(
+            "synth: {} agents, {} frames at {} fps on a {}×{} grid of {} BL cells; {:.0}–{:.0} agents inside the grid; wrote {}",
+            job.agents,
+            job.frames,
+            job.fps,
+            job.grid.0,
+            job.grid.1,
+            job.cell_size,
+            counts.iter().cloned().fold(f64::INFINITY, f64::min),
+            counts.iter().cloned().fold(0.0, f64::max),
+            job.out.display()
+        )
+    }
+}
+
+/// Rendering the synthetic clip's video (OpenCV), or refusing to without the `video` feature.
+mod render {
+    use super::{Synth, SynthJob, SynthVideo};
+    use crate::error::Result;
+    use crate::progress::Progress;
+    use std::path::Path;
+
+    pub const BODY_WIDTH_BL: f64 = 0.4;
+
+    #[cfg(feature = "video")]
+    pub type Pending = crate::video::PendingVideo;
+    #[cfg(not(feature = "video"))]
+    pub type Pending = ();
+
+    /// Renders the video into a pending file; returns the cameras, the pending file and the
+    /// settings recorded in the clip's provenance.
+    #[cfg(feature = "video")]
+    pub fn video(
+        job: &SynthJob,
+        v: &SynthVideo,
+        syn: &Synth,
+        path: &Path,
+        progress: &mut dyn Progress,
+    ) -> Result<(Vec<serde_json::Value>, Pending, serde_json::Value)> {
+        crate::data::atomic::check_writable(path)?;
+        let cfg = crate::video::RenderConfig {
+            px_per_bl: v.px_per_bl,
+            body_rgb: v.body_colour,
+            camera_motion: v.camera_motion,
+            seed: job.seed,
+        };
+        progress.start("render", syn.frames.len() as u64);
+        let (cams, pending) = crate::video::render_video(
+            path,
+            &syn.frames,
+            &syn.clip.grid(),
+            &syn.clip.obstacles,
+            job.fps,
+            &cfg,
+            || progress.inc(1),
+        )?;
+        progress.finish();
+        let cams = cams
+            .iter()
+            .map(|c| serde_json::to_value(c).unwrap_or_default())
+            .collect();
+        let settings = serde_json::json!({
+            "file": path.display().to_string(),
+            "render": cfg,
+            "frame_size": crate::video::render::frame_size(&syn.clip.grid(), v.px_per_bl),
+        });
+        Ok((cams, pending, settings))
+    }
+
+    #[cfg(not(feature = "video"))]
+    pub fn video(
+        _job: &SynthJob,
+        _v: &SynthVideo,
+        _syn: &Synth,
+        path: &Path,
+        _progress: &mut dyn Progress,
+    ) -> Result<(Vec<serde_json::Value>, Pending, serde_json::Value)> {
+        Err(crate::error::Error::file(
+            path,
+            "this herdfit was built without the `video` feature (OpenCV)",
+        ))
+    }
+
+    #[cfg(feature = "video")]
+    pub fn commit(p: Pending) -> Result<()> {
+        p.commit()
+    }
+
+    #[cfg(not(feature = "video"))]
+    pub fn commit(_p: Pending) -> Result<()> {
+        Ok(())
     }
 }

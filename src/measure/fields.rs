@@ -21,7 +21,7 @@ pub struct Emergent {
 
 impl Emergent {
     /// [polarization, angular momentum about the centroid, about the frame centre, aspect ratio]
-    /// (the order of [`MEASURES`] after the two errors).
+    /// (the order of validation's measures after the two errors).
     pub fn values(&self) -> [f64; 4] {
         [
             self.polarization,

@@ -4,6 +4,7 @@
 
 pub mod emergent;
 pub mod fields;
+pub mod info;
 pub mod raster;
 
 pub use emergent::{angular_momentum, aspect_ratio, centroid, polarization};

@@ -2,9 +2,11 @@
 //! obstacles, guidance arrows or a destination, behaviour regions with their parameter sets and
 //! speed caps, a spawn — and `herdfit author` simulates it.
 
+pub mod job;
 pub mod nav;
 pub mod scene;
 
+pub use job::{AuthorJob, AuthorSummary};
 pub use scene::Scene;
 
 use crate::data::agents::AgentRow;

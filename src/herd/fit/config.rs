@@ -32,7 +32,7 @@ pub struct FitConfig {
     /// The paper's split (§6.1): alignment parameters follow ∇E_var, the others ∇E_mean.
     /// Off: every parameter follows ∇(E_mean + λ E_var).
     pub split_gradients: bool,
-    /// E_mean on cell means rather than per agent (see [`StepTarget::cell_mean`]).
+    /// E_mean on cell means rather than per agent (see [`crate::herd::fit::loss::StepTarget::cell_mean`]).
     pub cell_mean: bool,
     /// The objective: the paper's E_mean + λ E_var, or field matching.
     #[serde(default)]
@@ -40,7 +40,7 @@ pub struct FitConfig {
     /// burn's balanced gradient checkpointing (less memory for long windows, more time).
     #[serde(default)]
     pub checkpointing: bool,
-    /// How each epoch's starting herd is settled (see [`settle`]).
+    /// How each epoch's starting herd is settled (see [`crate::herd::start::settle`]).
     #[serde(default)]
     pub settle: Settle,
     /// Independent herds simulated side by side from the same fields (each its own sampling and
@@ -48,7 +48,7 @@ pub struct FitConfig {
     #[serde(default = "one_replica")]
     pub replicas: usize,
     /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
-    /// ([`guidance_field`]).
+    /// ([`crate::herd::guidance::guidance_field`]).
     #[serde(default = "default_guidance_scale")]
     pub guidance_scale: f64,
 }
@@ -71,11 +71,11 @@ pub enum LossKind {
     /// Field matching: after every step, the simulated density and momentum fields (bilinear
     /// splatting of the agents and of their velocities) against the clip's,
     /// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖², plus λ_var E_var, where K blurs the
-    /// clip's box-binned fields as splatting blurs points ([`target::blur_like_splat`]).
+    /// clip's box-binned fields as splatting blurs points ([`crate::herd::fit::target::blur_like_splat`]).
     Fields,
     /// Field matching of the *expected* simulated fields: the replicas' mean fields against the
     /// clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖², see
-    /// [`ensemble_loss`]), plus λ_var E_var. Needs `replicas` ≥ 2.
+    /// [`crate::herd::fit::ensemble_loss`]), plus λ_var E_var. Needs `replicas` ≥ 2.
     Ensemble,
 }
 

@@ -12,6 +12,7 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod job;
 pub mod log;
 pub mod loss;
 pub mod plan;
@@ -26,6 +27,7 @@ pub use crate::herd::start::{init_herd, population_control, settle, start_herd, 
 pub use crate::optim::{OptState, Optimizer};
 pub use checkpoint::{Checkpoint, CheckpointDir};
 pub use config::{FitConfig, LossKind, ALIGNMENT};
+pub use job::{FitJob, FitSummary};
 pub use log::{log_csv, write_log, LogRow};
 pub use loss::{ensemble_loss, fields_loss};
 pub use plan::{plan_step, window_loss};

@@ -7,18 +7,20 @@
 //! `herdfit synth --video` maps back onto the world of its trajectories. The grid has square cells
 //! of max(W, H) / N pixels, `nx = ⌈W / cell⌉` by `ny = ⌈H / cell⌉`, origin at the bottom-left corner.
 //!
-//! The stages, in order: [`decode`] (the video and frame hand-over), [`camera`] (pass A, the
-//! camera path), [`background`] (processing frame, background, grid, obstacles), [`fields`]
-//! (pass C: segmentation, flow, per-cell sums and fields), [`preview`].
+//! The stages, in order: `decode` (the video and frame hand-over), `camera` (pass A, the camera
+//! path), `background` (processing frame, background, grid, obstacles), `fields` (pass C:
+//! segmentation, flow, per-cell sums and fields), `preview`, and `job` (the files).
 
 mod background;
 mod camera;
 mod decode;
 mod fields;
+mod job;
 mod preview;
 
 pub use camera::Similarity;
 pub use decode::quietly;
+pub use job::{run, ExtractJob, CENTRE_ANCHOR};
 
 use crate::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
 use crate::error::{Error, Result};

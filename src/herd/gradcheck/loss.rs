@@ -1,184 +1,15 @@
-//! Gradient check (DESIGN §7): the gradient of a scalar objective of an unrolled run with respect
-//! to all 12 parameters, by reverse-mode autodiff and by central finite differences with the
-//! same (replayed) perception, roles and noise.
+//! The gradient check of the fit's losses (`gradcheck --objective loss`): herds started from a
+//! clip's fields, their planned decisions and targets recorded once and replayed for every
+//! evaluation.
 
+use super::{rel_err, GradReport, GradRow};
 use crate::backend::{cpu_device, Precision};
 use crate::data::agents::AgentRow;
 use crate::error::{Error, Result};
 use crate::herd::params::{param_names, Params, N_PARAMS};
-use crate::herd::sim::{read_vec, theta_tensor, Decide, HerdState, Model, Recording};
+use crate::herd::sim::{read_vec, theta_tensor, HerdState, Model};
 use burn::tensor::{Device, Tensor};
 use rand::SeedableRng;
-use serde::Serialize;
-
-pub use super::scenario::{default_scenario, objective, Scenario};
-
-/// Records the decisions of `steps` live steps at the scenario's parameters.
-pub fn record(sc: &Scenario, steps: usize, seed: u64, device: &Device) -> Result<Recording> {
-    let theta = theta_tensor(&sc.model.params.to_vec(), device);
-    let state = HerdState::from_rows(&sc.init, device);
-    let mut rec = Recording::new(sc.init.len());
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    sc.model.rollout(
-        &theta,
-        state,
-        steps,
-        Decide::Live {
-            rng: &mut rng,
-            record: Some(&mut rec),
-        },
-        |_, _, _| Ok(()),
-    )?;
-    Ok(rec)
-}
-
-/// J(θ) with replayed decisions, no gradient.
-pub fn objective_value(
-    sc: &Scenario,
-    theta: &[f64; N_PARAMS],
-    rec: &Recording,
-    steps: usize,
-    device: &Device,
-) -> Result<f64> {
-    let state = HerdState::from_rows(&sc.init, device);
-    let t = theta_tensor(theta, device);
-    let end = sc.model.rollout::<rand_chacha::ChaCha8Rng>(
-        &t,
-        state,
-        steps,
-        Decide::Replay(rec),
-        |_, _, _| Ok(()),
-    )?;
-    Ok(read_vec(&objective(
-        &end,
-        sc.model.params.constants.perception_radius,
-    ))?[0])
-}
-
-/// ∇J by reverse-mode autodiff through the unrolled steps (replayed decisions).
-pub fn autodiff_gradient(
-    sc: &Scenario,
-    theta: &[f64; N_PARAMS],
-    rec: &Recording,
-    steps: usize,
-    device: &Device,
-) -> Result<(f64, [f64; N_PARAMS])> {
-    let ad = device.clone().autodiff();
-    let t = theta_tensor(theta, &ad).require_grad();
-    let state = HerdState::from_rows(&sc.init, &ad);
-    let end = sc.model.rollout::<rand_chacha::ChaCha8Rng>(
-        &t,
-        state,
-        steps,
-        Decide::Replay(rec),
-        |_, _, _| Ok(()),
-    )?;
-    let j = objective(&end, sc.model.params.constants.perception_radius);
-    let value = read_vec(&j.clone().detach())?[0];
-    let grads = j.backward();
-    let g = t
-        .grad(&grads)
-        .ok_or_else(|| Error::Internal("no gradient reached the parameters".into()))?;
-    let g = read_vec(&g)?;
-    let mut out = [0.0; N_PARAMS];
-    out.copy_from_slice(&g);
-    Ok((value, out))
-}
-
-/// ∂J/∂θ_p by the 4-point central difference
-/// (8(J(θ+h) − J(θ−h)) − (J(θ+2h) − J(θ−2h))) / 12h, error O(h⁴).
-pub fn finite_difference_gradient(
-    sc: &Scenario,
-    theta: &[f64; N_PARAMS],
-    rec: &Recording,
-    steps: usize,
-    h: f64,
-    device: &Device,
-    mut progress: impl FnMut(),
-) -> Result<[f64; N_PARAMS]> {
-    let mut g = [0.0; N_PARAMS];
-    for (p, gp) in g.iter_mut().enumerate() {
-        let at = |off: f64| -> Result<f64> {
-            let mut th = *theta;
-            th[p] += off;
-            objective_value(sc, &th, rec, steps, device)
-        };
-        let (p1, m1, p2, m2) = (at(h)?, at(-h)?, at(2.0 * h)?, at(-2.0 * h)?);
-        *gp = (8.0 * (p1 - m1) - (p2 - m2)) / (12.0 * h);
-        progress();
-    }
-    Ok(g)
-}
-
-/// One row of the gradcheck report.
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct GradRow {
-    pub name: String,
-    pub autodiff: f64,
-    pub finite_difference: f64,
-    pub rel_err: f64,
-}
-
-/// The gradcheck report (the JSON written by `herdfit gradcheck`).
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct GradReport {
-    pub steps: usize,
-    pub agents: usize,
-    pub precision: Precision,
-    pub objective: f64,
-    pub fd_step: f64,
-    pub parameters: Vec<GradRow>,
-    pub max_rel_err: f64,
-}
-
-/// Relative error |a − f| / max(|a|, |f|, 1e-12).
-pub fn rel_err(a: f64, f: f64) -> f64 {
-    (a - f).abs() / a.abs().max(f.abs()).max(1e-12)
-}
-
-/// Runs the check: records (or takes) the decisions, then autodiff and finite differences.
-pub fn gradcheck(
-    sc: &Scenario,
-    steps: usize,
-    precision: Precision,
-    fd_step: f64,
-    rec: &Recording,
-    mut progress: impl FnMut(),
-) -> Result<GradReport> {
-    if !(fd_step.is_finite() && fd_step > 0.0) {
-        return Err(Error::invalid("--fd-step must be > 0"));
-    }
-    let device = cpu_device(precision)?;
-    let theta = sc.model.params.to_vec();
-    let (value, ad) = autodiff_gradient(sc, &theta, rec, steps, &device)?;
-    progress();
-    let fd = finite_difference_gradient(sc, &theta, rec, steps, fd_step, &device, progress)?;
-    let parameters: Vec<GradRow> = param_names()
-        .into_iter()
-        .enumerate()
-        .map(|(p, name)| GradRow {
-            name,
-            autodiff: ad[p],
-            finite_difference: fd[p],
-            rel_err: rel_err(ad[p], fd[p]),
-        })
-        .collect();
-    let max_rel_err = parameters.iter().map(|r| r.rel_err).fold(0.0, f64::max);
-    if !max_rel_err.is_finite() || !value.is_finite() {
-        return Err(Error::Internal(
-            "the objective or a gradient is not finite".into(),
-        ));
-    }
-    Ok(GradReport {
-        steps,
-        agents: sc.init.len(),
-        precision,
-        objective: value,
-        fd_step,
-        parameters,
-        max_rel_err,
-    })
-}
 
 /// The fit's loss as the objective: the mean over `steps` steps of the loss of `kind` — E_mean +
 /// λ E_var (eq. 7–8), field matching + λ E_var, or the ensemble objective + λ E_var over
@@ -189,13 +20,13 @@ pub struct LossScenario {
     pub model: Model,
     pub clip: crate::data::ClipFields,
     pub start: usize,
-    pub kind: super::fit::LossKind,
+    pub kind: crate::herd::fit::LossKind,
     /// One initial herd and one plan per replica.
     pub init: Vec<Vec<AgentRow>>,
     pub plans: Vec<
         Vec<(
             crate::herd::sim::StepDecisions,
-            super::fit::loss::StepTarget,
+            crate::herd::fit::loss::StepTarget,
         )>,
     >,
     pub var_weight: f64,
@@ -212,11 +43,11 @@ impl LossScenario {
         steps: usize,
         beta: f64,
         var_weight: f64,
-        (kind, replicas): (super::fit::LossKind, usize),
+        (kind, replicas): (crate::herd::fit::LossKind, usize),
         seed: u64,
         device: &Device,
     ) -> Result<Self> {
-        use super::fit::{guidance_fields, init_herd, plan_step, LossKind};
+        use crate::herd::fit::{guidance_fields, init_herd, plan_step, LossKind};
         if start + steps >= clip.frames() {
             return Err(Error::invalid(format!(
                 "{steps} steps from frame {start} need {} frames; the clip has {}",
@@ -231,9 +62,9 @@ impl LossScenario {
         }
         let mut params = params.clone();
         params.speed = crate::herd::params::SpeedModel::of_clip(clip, &params.speed);
-        let mut model = super::fit::clip_model(params, clip);
-        let guidance = guidance_fields(clip, super::fit::GUIDANCE_SCALE);
-        let stencil = super::fit::target::Stencil::new(clip);
+        let mut model = crate::herd::fit::clip_model(params, clip);
+        let guidance = guidance_fields(clip, crate::herd::fit::GUIDANCE_SCALE);
+        let stencil = crate::herd::fit::target::Stencil::new(clip);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let theta = theta_tensor(&model.params.to_vec(), device);
         let f = crate::herd::sim::ForceTensors::new(&theta, &model.params.constants);
@@ -277,7 +108,7 @@ impl LossScenario {
     }
 
     fn loss(&self, theta: &[f64; N_PARAMS], device: &Device) -> Result<(Tensor<1>, Tensor<1>)> {
-        use super::fit::{ensemble_loss, fields_loss, window_loss, LossKind};
+        use crate::herd::fit::{ensemble_loss, fields_loss, window_loss, LossKind};
         let t = theta_tensor(theta, device);
         let t = if device.is_autodiff() {
             t.require_grad()
@@ -293,7 +124,7 @@ impl LossScenario {
             0.0
         };
         let mut total: Option<Tensor<1>> = None;
-        let mut add = |l: Tensor<1>| super::fit::loss::add(&mut total, l);
+        let mut add = |l: Tensor<1>| crate::herd::fit::loss::add(&mut total, l);
         let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); steps];
         for (init, plans) in self.init.iter().zip(&self.plans) {
             let mut state = HerdState::from_rows(init, device);

@@ -9,13 +9,18 @@ use crate::backend::{cpu_device, Precision};
 use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::fit::{guidance_fields, start_herd, Settle};
+use crate::herd::guidance::guidance_fields;
 use crate::herd::params::Params;
 use crate::herd::sim::{theta_tensor, ForceTensors, HerdState};
+use crate::herd::start::{start_herd, Settle};
 use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocity, Emergent};
 use crate::measure::rasterise;
 use rand::SeedableRng;
 use serde::Serialize;
+
+mod report;
+
+pub use report::{markdown, run, ValidateJob};
 
 /// The measures compared, in report order.
 pub const MEASURES: [&str; 6] = [
@@ -53,7 +58,7 @@ pub fn simulate_clip(
     let g = clip.grid();
     let mut params = params.clone();
     params.speed = crate::herd::params::SpeedModel::of_clip(clip, &params.speed);
-    let mut model = crate::herd::fit::clip_model(params, clip);
+    let mut model = crate::herd::eval::clip_model(params, clip);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let first = range.start - warmup.min(range.start);
     let rows = start_herd(&model, clip, first, settle, &mut rng, device)?;
@@ -175,7 +180,7 @@ pub struct ValidateConfig {
     /// from the fields of the first held-out frame).
     pub warmup: usize,
     /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
-    /// ([`crate::herd::fit::guidance_field`]).
+    /// ([`crate::herd::guidance::guidance_field`]).
     pub guidance_scale: f64,
     /// Compare the seeds' mean prediction (coarse counts and momenta, each measure averaged over
     /// the seeds frame by frame) with the clip, instead of averaging each seed's own errors. A
@@ -193,7 +198,7 @@ pub fn validate(
     mut progress: impl FnMut(),
 ) -> Result<(Report, Vec<Vec<SimRun>>)> {
     let (split, grid, seeds) = (cfg.split, cfg.grid, cfg.seeds);
-    crate::herd::fit::check_guidance_scale(cfg.guidance_scale)?;
+    crate::herd::guidance::check_guidance_scale(cfg.guidance_scale)?;
     if !(split.is_finite() && (0.0..1.0).contains(&split)) {
         return Err(Error::invalid(format!("--split {split} must be in [0, 1)")));
     }
@@ -319,77 +324,4 @@ pub fn validate(
         },
         runs_all,
     ))
-}
-
-/// The report as Markdown, opening with the comparison table.
-pub fn markdown(r: &Report) -> String {
-    let mut s = String::new();
-    s.push_str(&format!(
-        "# herdfit validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid, {}.\n\n",
-        r.clip,
-        r.frames[0],
-        r.frames[1],
-        r.split,
-        r.seeds,
-        r.grid,
-        r.grid,
-        if r.ensemble_mean {
-            "of the seeds' mean prediction"
-        } else {
-            "averaged over the seeds' own errors"
-        }
-    ));
-    s.push_str("| measure | video mean ± STD |");
-    for set in &r.sets {
-        s.push_str(&format!(
-            " {} simulation mean ± STD | {} error mean ± STD |",
-            set.name, set.name
-        ));
-    }
-    s.push_str("\n|---|---:|");
-    for _ in &r.sets {
-        s.push_str("---:|---:|");
-    }
-    s.push('\n');
-    let f = |x: &Option<Stat>| match x {
-        Some(st) => format!("{:.4} ± {:.4}", st.mean, st.std),
-        None => "—".into(),
-    };
-    for (m, name) in MEASURES.iter().enumerate() {
-        let video = r
-            .sets
-            .first()
-            .map(|s| f(&s.rows[m].video))
-            .unwrap_or_default();
-        s.push_str(&format!("| {name} | {video} |"));
-        for set in &r.sets {
-            let row = &set.rows[m];
-            s.push_str(&format!(
-                " {} | {:.4} ± {:.4} |",
-                f(&row.simulation),
-                row.error.mean,
-                row.error.std
-            ));
-        }
-        s.push('\n');
-    }
-    s.push_str("\nThe simulation's velocities are averaged over the same window of frames as the clip's (the extraction's smoothing) before they are compared. Density and velocity errors are relative (Σ|n' − n| / Σn and Σn‖V' − V‖ / Σn‖V‖ over coarse cells); the other errors are |simulation − video| per frame. Measures come from the fields of the video and of the rasterised simulation (paper §7.1.2).\n\n");
-    s.push_str("| parameter |");
-    for set in &r.sets {
-        s.push_str(&format!(" {} |", set.name));
-    }
-    s.push_str("\n|---|");
-    for _ in &r.sets {
-        s.push_str("---:|");
-    }
-    s.push('\n');
-    for (i, n) in crate::herd::params::param_names().iter().enumerate() {
-        s.push_str(&format!("| {n} |"));
-        for set in &r.sets {
-            s.push_str(&format!(" {:.4} |", set.params[i]));
-        }
-        s.push('\n');
-    }
-    s.push_str("\nPlots: `metrics.png` (measures over time), `errors.png` (density and velocity errors over time), `error-map-*.png` (mean |ρ' − ρ| per coarse cell).\n");
-    s
 }

@@ -1,0 +1,149 @@
+//! `herdfit extract`: a settings file and flags → `ExtractJob` → `video::extract::run` → one line.
+
+use crate::cli::args::{parse_range, parse_rgb};
+use crate::error::{Error, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ExtractArgs {
+    #[arg(value_name = "VIDEO")]
+    pub video: PathBuf,
+    /// Output clip folder.
+    #[arg(long, value_name = "CLIP/")]
+    pub out: PathBuf,
+    /// Settings file (the `settings` object a previous extraction recorded in clip.json); flags
+    /// given on the command line override it.
+    #[arg(long, value_name = "extract.json")]
+    pub config: Option<PathBuf>,
+    /// Cells along the longer side of the frame.
+    #[arg(long, value_name = "N")]
+    pub grid: Option<usize>,
+    /// Body length in pixels.
+    #[arg(long, value_name = "L")]
+    pub body_length_px: Option<f64>,
+    /// Body colour R,G,B (herd pixels must also be within --colour-threshold of it).
+    #[arg(long, value_name = "R,G,B", value_parser = parse_rgb)]
+    pub body_colour: Option<[u8; 3]>,
+    #[arg(long, value_name = "T")]
+    pub colour_threshold: Option<f64>,
+    /// Per-channel difference to the background above which a pixel can be herd.
+    #[arg(long, value_name = "T")]
+    pub background_threshold: Option<f64>,
+    /// Body pixels per animal (default: an ellipse of L × 0.4 L).
+    #[arg(long, value_name = "NBP")]
+    pub body_pixels: Option<f64>,
+    /// Anchor rectangle x,y,w,h of the first frame tracked with CSRT (repeat for several;
+    /// `center` for the central quarter of the frame). None: a static camera.
+    #[arg(long, value_name = "x,y,w,h")]
+    pub anchor: Vec<String>,
+    /// `auto` (temporal median of stabilised frames) or a background image.
+    #[arg(long, value_name = "auto|IMAGE")]
+    pub background: Option<String>,
+    /// Obstacle mask image (non-zero = obstacle), the size of the video frame.
+    #[arg(long, value_name = "MASK.png")]
+    pub obstacles: Option<PathBuf>,
+    /// Frames used, a..b (b exclusive).
+    #[arg(long, value_name = "a..b", value_parser = parse_range)]
+    pub frames: Option<(usize, usize)>,
+    /// Smoothing window (frames) for the camera path and velocities.
+    #[arg(long, value_name = "K")]
+    pub smooth: Option<usize>,
+    /// Write preview PNGs (density and velocity over the stabilised frame) into DIR.
+    #[arg(long, value_name = "DIR")]
+    pub preview: Option<PathBuf>,
+    /// One preview every N frames.
+    #[arg(long, value_name = "N", default_value_t = 25)]
+    pub preview_every: usize,
+}
+
+#[cfg(not(feature = "video"))]
+pub fn exec(a: ExtractArgs) -> Result<()> {
+    Err(Error::file(
+        &a.video,
+        "this herdfit was built without the `video` feature (OpenCV)",
+    ))
+}
+
+/// An `--anchor` value: `x,y,w,h`, or `center` / `centre`.
+#[cfg(feature = "video")]
+fn parse_anchor(s: &str) -> Result<[i32; 4]> {
+    if s == "center" || s == "centre" {
+        return Ok(crate::video::extract::CENTRE_ANCHOR);
+    }
+    let v: Vec<i32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<i32>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| Error::invalid(format!("--anchor '{s}' is not x,y,w,h")))?;
+    if v.len() != 4 {
+        return Err(Error::invalid(format!("--anchor '{s}' is not x,y,w,h")));
+    }
+    Ok([v[0], v[1], v[2], v[3]])
+}
+
+#[cfg(feature = "video")]
+pub fn exec(a: ExtractArgs) -> Result<()> {
+    use crate::video::extract::{run, ExtractConfig, ExtractJob};
+    let mut cfg = match &a.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
+            serde_json::from_str::<ExtractConfig>(&text)
+                .map_err(|e| Error::file(p, format!("not an extraction settings file: {e}")))?
+        }
+        None => ExtractConfig::default(),
+    };
+    if let Some(v) = a.grid {
+        cfg.grid = v;
+    }
+    if let Some(v) = a.body_length_px {
+        cfg.body_length_px = v;
+    }
+    if a.body_colour.is_some() {
+        cfg.body_colour = a.body_colour;
+    }
+    if let Some(v) = a.colour_threshold {
+        cfg.colour_threshold = v;
+    }
+    if let Some(v) = a.background_threshold {
+        cfg.background_threshold = v;
+    }
+    if a.body_pixels.is_some() {
+        cfg.body_pixels = a.body_pixels;
+    }
+    if let Some(v) = a.smooth {
+        cfg.smooth = v;
+    }
+    if let Some((x, y)) = a.frames {
+        cfg.frames = Some([x, y]);
+    }
+    if a.obstacles.is_some() {
+        cfg.obstacles = a.obstacles.clone();
+    }
+    match a.background.as_deref() {
+        None => {}
+        Some("auto") => cfg.background = None,
+        Some(p) => cfg.background = Some(PathBuf::from(p)),
+    }
+    if a.config.is_none() && a.body_length_px.is_none() {
+        return Err(Error::invalid("give --body-length-px (or --config)"));
+    }
+    if !a.anchor.is_empty() {
+        cfg.anchors = a
+            .anchor
+            .iter()
+            .map(|s| parse_anchor(s))
+            .collect::<Result<_>>()?;
+    }
+    let job = ExtractJob {
+        video: a.video,
+        out: a.out,
+        preview: a.preview,
+        preview_every: a.preview_every,
+        config: cfg,
+    };
+    let ex = run(&job, &mut crate::cli::Bars::default())?;
+    println!("{}", ex.summary(&job.out));
+    Ok(())
+}

@@ -1,0 +1,64 @@
+//! `herdfit simulate`: flags → [`SimulateJob`] → [`simulate`].
+
+use crate::backend::Precision;
+use crate::cli::args::{parse_pair, HerdArgs};
+use crate::cli::Bars;
+use crate::error::Result;
+use crate::herd::simulate::{simulate, SimulateConfig, SimulateJob};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Parameter set (herdfit.params/1 JSON); the built-in default set when omitted.
+    #[arg(long, value_name = "P.json")]
+    pub params: Option<PathBuf>,
+    #[command(flatten)]
+    pub herd: HerdArgs,
+    /// Number of steps (frames after frame 0).
+    #[arg(long, value_name = "T")]
+    pub steps: usize,
+    /// Frames per second; Δt = 1 / fps.
+    #[arg(long, value_name = "F", default_value_t = 25.0)]
+    pub fps: f64,
+    /// Speed noise v_σ (BL/s) of eq. 6, overriding the parameter set's speed.std; 0 makes the run
+    /// deterministic.
+    #[arg(long, value_name = "S")]
+    pub speed_noise: Option<f64>,
+    /// Uniform guidance direction DX,DY for leaders; without it leaders act as followers.
+    #[arg(long, value_name = "DX,DY", value_parser = parse_pair)]
+    pub guidance: Option<(f64, f64)>,
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    pub precision: Precision,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Write the run's perception, roles and noise to this file (JSON).
+    #[arg(long, value_name = "REC.json")]
+    pub record: Option<PathBuf>,
+    /// Replay the perception, roles and noise of a recorded run instead of computing them.
+    #[arg(long, value_name = "REC.json", conflicts_with = "record")]
+    pub replay: Option<PathBuf>,
+    /// Output trajectories: frame,time,id,x,y,vx,vy,role.
+    #[arg(long, value_name = "TRAJ.csv")]
+    pub out: PathBuf,
+}
+
+pub fn exec(a: SimulateArgs) -> Result<()> {
+    let job = SimulateJob {
+        params: a.params,
+        herd: a.herd.source(),
+        record: a.record,
+        replay: a.replay,
+        out: a.out,
+        config: SimulateConfig {
+            steps: a.steps,
+            fps: a.fps,
+            speed_noise: a.speed_noise,
+            guidance: a.guidance.map(|(x, y)| [x, y]),
+            precision: a.precision,
+            seed: a.seed,
+        },
+    };
+    simulate(&job, &mut Bars::default())?;
+    Ok(())
+}
