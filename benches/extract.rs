@@ -26,7 +26,7 @@ fn bench(c: &mut Criterion) {
     let cfg = SynthConfig {
         params: Params::default(),
         agents: 1000,
-        frames: 50,
+        frame_count: 50,
         fps: 25.0,
         grid,
         obstacles: ndarray::Array2::zeros((18, 32)),

@@ -116,7 +116,7 @@ fn fit_frames(c: &mut Criterion) {
         let cfg = SynthConfig {
             params: Params::default(),
             agents: n,
-            frames: 11,
+            frame_count: 11,
             fps: 25.0,
             grid: Grid {
                 origin: [0.0, 0.0],

@@ -20,9 +20,9 @@ fn main() -> herdfit::Result<()> {
     let synth = SynthJob {
         params: None,
         agents: 200,
-        frames: 60,
+        frame_count: 60,
         fps: 25.0,
-        grid: (14, 8),
+        grid_size: (14, 8),
         cell_size: 3.0,
         obstacles: None,
         heading_deg: 0.0,

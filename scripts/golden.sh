@@ -11,7 +11,9 @@
 # the same whatever OUTDIR is. Threads are pinned (RAYON_NUM_THREADS) because the bytes may
 # depend on the thread count (DESIGN: "same inputs, seed and thread count"). Files whose bytes
 # are not deterministic even for one binary are listed in NONDETERMINISTIC below with the reason,
-# and hashed anyway (a diff there is expected).
+# and hashed anyway (a diff there is expected). The commands use the flag names of the base
+# (pre-#13) binary, so one script runs both; the renamed flags keep those names as aliases.
+# scripts/golden-diff.py BASE_OUT NEW_OUT explains a difference file by file.
 set -euo pipefail
 if [ $# -lt 2 ]; then
     echo "usage: $0 BIN OUTDIR [BASE_HASHES]" >&2

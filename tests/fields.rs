@@ -18,7 +18,7 @@ fn small_synth(seed: u64) -> (SynthConfig, herdfit::herd::synth::Synth) {
     let cfg = SynthConfig {
         params: Params::default(),
         agents: 80,
-        frames: 12,
+        frame_count: 12,
         fps: 25.0,
         grid: Grid {
             origin: [0.0, 0.0],

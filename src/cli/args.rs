@@ -1,6 +1,7 @@
 //! Flag parsing shared by the commands: value parsers (pairs, ranges, grids, colours) and the
 //! flag groups several verbs take.
 
+use crate::error::Error;
 use crate::herd::simulate::HerdSource;
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -62,15 +63,6 @@ pub fn parse_rgb(s: &str) -> std::result::Result<[u8; 3], String> {
     Ok(out)
 }
 
-/// `out` with its extension replaced by `suffix` (`params.json` → `params.log.csv`).
-pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "params".into());
-    out.with_file_name(format!("{stem}{suffix}"))
-}
-
 /// Where the initial herd comes from.
 #[derive(Args, Debug, Clone)]
 #[group(required = false, multiple = false)]
@@ -91,5 +83,115 @@ impl HerdArgs {
             (None, Some(n)) => Some(HerdSource::Agents(n)),
             (None, None) => None,
         }
+    }
+}
+
+/// The values of an enum flag with their help, `(name, help)` (empty help: none); the library
+/// type parses the name.
+pub fn choice<T>(
+    values: &'static [(&'static str, &'static str)],
+) -> impl clap::builder::TypedValueParser<Value = T>
+where
+    T: std::str::FromStr<Err = String> + Clone + Send + Sync + 'static,
+{
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(values.iter().map(|&(name, help)| {
+        let v = PossibleValue::new(name);
+        if help.is_empty() {
+            v
+        } else {
+            v.help(help)
+        }
+    }))
+    .try_map(|s: String| s.parse::<T>())
+}
+
+/// `--precision`.
+pub const PRECISIONS: &[(&str, &str)] = &[("f32", ""), ("f64", "")];
+
+/// `--optimizer`.
+pub const OPTIMIZERS: &[(&str, &str)] = &[
+    ("adam", "Adam (β₁ 0.9, β₂ 0.999, ε 1e-8)"),
+    (
+        "normalized",
+        "The paper's normalised gradient step θ ← θ − lr · g/‖g‖",
+    ),
+    (
+        "averaged",
+        "The normalised step on a running mean of the gradients, scaled by how well they agree (about lr where they agree, a hundredth of it where they are noise)",
+    ),
+];
+
+/// `--loss`.
+pub const LOSSES: &[(&str, &str)] = &[
+    (
+        "paper",
+        "E_mean (eq. 7) + λ_var E_var (eq. 8) against the target field U (eq. 10–11)",
+    ),
+    (
+        "fields",
+        "Field matching: after every step, the simulated density and momentum fields (bilinear splatting of the agents and of their velocities) against the clip's, Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖², plus λ_var E_var, where K blurs the clip's box-binned fields as splatting blurs points",
+    ),
+    (
+        "ensemble",
+        "Field matching of the *expected* simulated fields: the replicas' mean fields against the clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖²), plus λ_var E_var. Needs --replicas ≥ 2",
+    ),
+];
+
+/// `--objective` of gradcheck.
+pub const OBJECTIVES: &[(&str, &str)] = &[
+    (
+        "herd",
+        "Spread + mean heading of the default scenario's herd after T steps",
+    ),
+    (
+        "loss",
+        "The fit's loss (--loss: E_mean + λ E_var, eq. 7–8, or field matching, or the ensemble objective) over T steps on a clip",
+    ),
+];
+
+/// The flag of a config key: `--key-with-dashes`, or the flag `renamed` gives it. A key inside a
+/// table (`settle.eta`) has no flag and stays as it is.
+pub fn flag(key: &str, renamed: &[(&str, &str)]) -> String {
+    if let Some((_, f)) = renamed.iter().find(|(k, _)| *k == key) {
+        return f.to_string();
+    }
+    if key.contains('.') {
+        return key.to_string();
+    }
+    format!("--{}", key.replace('_', "-"))
+}
+
+/// A library error with its config keys named as this command's flags (ripgrep's rule: the
+/// library names keys, the parser adds flags).
+pub fn with_flags(e: Error, renamed: &[(&str, &str)]) -> Error {
+    match e {
+        Error::Config { file, err } => {
+            let msg = err.render(&|k| flag(k, renamed));
+            match file {
+                Some(p) => Error::file(p, msg),
+                None => Error::invalid(msg),
+            }
+        }
+        other => other,
+    }
+}
+
+/// [`with_flags`] for a command whose settings may come from a file: a bad value that `settings`
+/// (the file's top-level keys) holds and `given(key)` says no flag overrode is named by the file
+/// and its key (`extract.json: grid: must be ≥ 1`).
+pub fn with_settings(
+    e: Error,
+    renamed: &[(&str, &str)],
+    settings: Option<(&Path, &serde_json::Value)>,
+    given: &dyn Fn(&str) -> bool,
+) -> Error {
+    match (e, settings) {
+        (Error::Config { err, .. }, Some((path, file)))
+            if file.get(&err.key).is_some() && !given(&err.key) =>
+        {
+            Error::file(path, err.to_string())
+        }
+        (e, _) => with_flags(e, renamed),
     }
 }

@@ -12,9 +12,14 @@ use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
 
+/// Schema tag of benchmark reports.
+pub const BENCH_SCHEMA: &str = "herdfit.bench/1";
+
 /// The JSON written by `herdfit bench`.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
+    /// [`BENCH_SCHEMA`].
+    pub schema: String,
     pub agents: usize,
     pub steps: usize,
     pub sim_ms_per_step: f64,
@@ -62,7 +67,7 @@ pub fn run_bench(
     mut progress: impl FnMut(),
 ) -> Result<BenchReport> {
     if steps == 0 {
-        return Err(crate::Error::invalid("--steps must be ≥ 1"));
+        return Err(crate::Error::config("steps", "must be ≥ 1"));
     }
     let device = cpu_device(Precision::F32)?;
     let (model, init) = bench_model(agents, 1)?;
@@ -133,6 +138,7 @@ pub fn run_bench(
         Some(median(per_step))
     };
     Ok(BenchReport {
+        schema: BENCH_SCHEMA.into(),
         agents,
         steps,
         sim_ms_per_step,
@@ -172,13 +178,25 @@ impl Default for BenchConfig {
     }
 }
 
+impl BenchConfig {
+    /// Checks the herd and the steps; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if self.agents == 0 {
+            return Err(crate::Error::config(
+                "agents",
+                "the herd is empty: must be ≥ 1",
+            ));
+        }
+        if self.steps == 0 {
+            return Err(crate::Error::config("steps", "must be ≥ 1"));
+        }
+        Ok(())
+    }
+}
+
 /// Runs the benchmark ([`run_bench`]) and writes its JSON report to `json`.
 pub fn run(cfg: &BenchConfig, json: &Path, progress: &mut dyn Progress) -> Result<BenchReport> {
-    if cfg.agents == 0 {
-        return Err(crate::Error::invalid(
-            "the herd is empty: --agents must be ≥ 1",
-        ));
-    }
+    cfg.check()?;
     check_writable(json)?;
     let total = cfg.steps + 1 + if cfg.sim_only { 0 } else { cfg.repeats.max(1) };
     progress.start("bench", total as u64);

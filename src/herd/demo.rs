@@ -45,9 +45,9 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
     let synth_job = SynthJob {
         params: Some(truth_path.clone()),
         agents: 300,
-        frames: 120,
+        frame_count: 120,
         fps: 25.0,
-        grid: (16, 10),
+        grid_size: (16, 10),
         cell_size: 3.0,
         obstacles: None,
         heading_deg: 0.0,
@@ -111,7 +111,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
             video: true,
             config: ValidateConfig {
                 split: 0.5,
-                grid: 10,
+                coarse_grid: 10,
                 seeds: 3,
                 settle: Settle::default(),
                 warmup: 0,

@@ -21,12 +21,13 @@ fn gauss_smooth(v: &[f64], nx: usize, ny: usize, sigma: f64) -> Vec<f64> {
     crate::measure::fields::separable_filter(v, nx, ny, &w)
 }
 
-/// Checks a `--guidance-scale` value: ≥ 0, ∞ allowed.
+/// Checks a `guidance_scale` value: ≥ 0, ∞ allowed.
 pub fn check_guidance_scale(v: f64) -> Result<()> {
     if v.is_nan() || v < 0.0 {
-        return Err(Error::invalid(format!(
-            "--guidance-scale {v} is out of range: it must be ≥ 0 (or inf)"
-        )));
+        return Err(Error::config(
+            "guidance_scale",
+            format!("{v} is out of range: it must be ≥ 0 (or inf)"),
+        ));
     }
     Ok(())
 }

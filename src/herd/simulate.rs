@@ -45,6 +45,32 @@ impl Default for SimulateConfig {
     }
 }
 
+impl SimulateConfig {
+    /// Checks the steps, frame rate, speed noise and guidance; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if self.steps == 0 {
+            return Err(Error::config("steps", "must be ≥ 1"));
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(Error::config("fps", format!("{} must be > 0", self.fps)));
+        }
+        if let Some(s) = self.speed_noise {
+            if !(s.is_finite() && s >= 0.0) {
+                return Err(Error::config("speed_noise", format!("{s} must be ≥ 0")));
+            }
+        }
+        if let Some([x, y]) = self.guidance {
+            if !(x.is_finite() && y.is_finite()) || (x == 0.0 && y == 0.0) {
+                return Err(Error::config(
+                    "guidance",
+                    "the direction must be finite and non-zero",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Where the initial herd of a run comes from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "lowercase")]
@@ -69,7 +95,8 @@ impl HerdSource {
 
 /// A simulation with its files: the parameter set (the built-in set when absent), the initial
 /// herd (required), an optional recording to write or to replay, and the trajectory CSV.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct SimulateJob {
     pub params: Option<PathBuf>,
     pub herd: Option<HerdSource>,
@@ -77,6 +104,33 @@ pub struct SimulateJob {
     pub replay: Option<PathBuf>,
     pub out: PathBuf,
     pub config: SimulateConfig,
+}
+
+impl Default for SimulateJob {
+    fn default() -> Self {
+        SimulateJob {
+            params: None,
+            herd: None,
+            record: None,
+            replay: None,
+            out: PathBuf::from("traj.csv"),
+            config: SimulateConfig::default(),
+        }
+    }
+}
+
+impl SimulateJob {
+    /// Checks the settings and that there is a herd; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        self.config.check()?;
+        if self.herd.is_none() {
+            return Err(Error::config(
+                "herd",
+                "give the initial herd: an INIT.csv file or a number of agents",
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Loads a parameter set, or the built-in one.
@@ -91,17 +145,9 @@ pub fn load_params(path: Option<&Path>) -> Result<Params> {
 /// agents.
 pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize> {
     let cfg = &job.config;
-    if cfg.steps == 0 {
-        return Err(Error::invalid("--steps must be ≥ 1"));
-    }
-    if !(cfg.fps.is_finite() && cfg.fps > 0.0) {
-        return Err(Error::invalid(format!("--fps {} must be > 0", cfg.fps)));
-    }
+    cfg.check()?;
     let mut params = load_params(job.params.as_deref())?;
     if let Some(s) = cfg.speed_noise {
-        if !(s.is_finite() && s >= 0.0) {
-            return Err(Error::invalid(format!("--speed-noise {s} must be ≥ 0")));
-        }
         params.speed.std = s;
     }
     let world = World {
@@ -111,8 +157,9 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
     let rows = match &job.herd {
         Some(h) => h.rows(&params, &world, cfg.seed)?,
         None => {
-            return Err(Error::invalid(
-                "give the initial herd: --init INIT.csv or --agents N",
+            return Err(Error::config(
+                "herd",
+                "give the initial herd: an INIT.csv file or a number of agents",
             ))
         }
     };

@@ -4,7 +4,7 @@
 
 use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::herd::params::ALIGNMENT;
 use crate::herd::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model};
 use crate::measure::fields::{cell_counts, field_errors};
@@ -162,6 +162,7 @@ pub fn population_control(
 
 /// How a herd initialised from fields is settled (see [`settle`]; off by default).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Settle {
     /// Iterations (0: no settling).
     pub iterations: usize,
@@ -172,6 +173,17 @@ pub struct Settle {
 }
 
 impl Settle {
+    /// Checks the step sizes (finite, ≥ 0); errors name the key (`settle` is a table of a
+    /// config: `iterations`, `eta`, `max_move`).
+    pub fn check(&self) -> Result<()> {
+        for (key, v) in [("settle.eta", self.eta), ("settle.max_move", self.max_move)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::config(key, format!("{v} must be ≥ 0")));
+            }
+        }
+        Ok(())
+    }
+
     /// `iterations` iterations with the default step sizes.
     pub fn with_iterations(iterations: usize) -> Self {
         Settle {

@@ -24,7 +24,8 @@ use std::path::PathBuf;
 pub struct SynthConfig {
     pub params: Params,
     pub agents: usize,
-    pub frames: usize,
+    /// Number of frames (frame 0 included).
+    pub frame_count: usize,
     pub fps: f64,
     pub grid: Grid,
     pub obstacles: Array2<u8>,
@@ -32,6 +33,43 @@ pub struct SynthConfig {
     /// Direction of travel (and of the uniform guidance), degrees from +x.
     pub heading_deg: f64,
     pub precision: Precision,
+}
+
+impl SynthConfig {
+    /// Checks the herd, frames, frame rate and grid; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if self.agents == 0 {
+            return Err(Error::config("agents", "the herd is empty: must be ≥ 1"));
+        }
+        if self.frame_count == 0 {
+            return Err(Error::config("frame_count", "must be ≥ 1"));
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(Error::config("fps", format!("{} must be > 0", self.fps)));
+        }
+        let g = &self.grid;
+        if g.nx == 0 || g.ny == 0 || !(g.cell_size.is_finite() && g.cell_size > 0.0) {
+            return Err(Error::config(
+                "grid",
+                "must have ≥ 1 cell each way and a cell size > 0",
+            ));
+        }
+        if self.obstacles.dim() != (g.ny, g.nx) {
+            return Err(Error::config(
+                "obstacles",
+                format!(
+                    "is {:?}, the grid is {}×{}",
+                    self.obstacles.dim(),
+                    g.ny,
+                    g.nx
+                ),
+            ));
+        }
+        if !self.heading_deg.is_finite() {
+            return Err(Error::config("heading_deg", "must be finite"));
+        }
+        Ok(())
+    }
 }
 
 /// A synthetic clip: the fields, the trajectories (one list per frame) and their CSV text.
@@ -48,21 +86,8 @@ pub fn synthesise(
     device: &burn::tensor::Device,
     mut progress: impl FnMut(),
 ) -> Result<Synth> {
-    if cfg.agents == 0 {
-        return Err(Error::invalid("the herd is empty: --agents must be ≥ 1"));
-    }
-    if cfg.frames == 0 {
-        return Err(Error::invalid("--frames must be ≥ 1"));
-    }
-    if !(cfg.fps.is_finite() && cfg.fps > 0.0) {
-        return Err(Error::invalid(format!("--fps {} must be > 0", cfg.fps)));
-    }
+    cfg.check()?;
     let g = &cfg.grid;
-    if g.nx == 0 || g.ny == 0 || !(g.cell_size.is_finite() && g.cell_size > 0.0) {
-        return Err(Error::invalid(
-            "the grid must have ≥ 1 cell and a cell size > 0",
-        ));
-    }
     let a = cfg.heading_deg.to_radians();
     let dir = [a.cos(), a.sin()];
     let size = g.size();
@@ -91,11 +116,11 @@ pub fn synthesise(
     let theta = theta_tensor(&model.params.to_vec(), device);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005e_ed0f_5eed);
     let mut frames = vec![init.clone()];
-    let mut roles = Vec::with_capacity(cfg.frames);
+    let mut roles = Vec::with_capacity(cfg.frame_count);
     let end = model.rollout(
         &theta,
         HerdState::from_rows(&init, device),
-        cfg.frames - 1,
+        cfg.frame_count - 1,
         Decide::Live {
             rng: &mut rng,
             record: None,
@@ -139,15 +164,16 @@ impl Synth {
 
 /// A synthetic clip with its files: the truth (the built-in set when absent), the herd and grid,
 /// the obstacle cells, and the optional overhead video.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct SynthJob {
     pub params: Option<PathBuf>,
     pub agents: usize,
     /// Number of frames (frame 0 included).
-    pub frames: usize,
+    pub frame_count: usize,
     pub fps: f64,
-    /// Grid size in cells.
-    pub grid: (usize, usize),
+    /// Grid size in cells, (nx, ny).
+    pub grid_size: (usize, usize),
     /// Cell side (BL).
     pub cell_size: f64,
     /// Obstacle cells file (`{"cells": [[ix, iy], …]}`).
@@ -164,7 +190,8 @@ pub struct SynthJob {
 }
 
 /// How `synth` renders its video.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct SynthVideo {
     /// Pixels per body length.
     pub px_per_bl: f64,
@@ -174,16 +201,53 @@ pub struct SynthVideo {
     pub camera_motion: bool,
 }
 
+impl Default for SynthJob {
+    fn default() -> Self {
+        SynthJob {
+            params: None,
+            agents: 300,
+            frame_count: 100,
+            fps: 25.0,
+            grid_size: (24, 12),
+            cell_size: 2.0,
+            obstacles: None,
+            heading_deg: 0.0,
+            seed: 0,
+            precision: Precision::F32,
+            out: PathBuf::from("clip"),
+            video: None,
+        }
+    }
+}
+
+impl Default for SynthVideo {
+    fn default() -> Self {
+        SynthVideo {
+            px_per_bl: 12.0,
+            body_colour: [235, 235, 225],
+            camera_motion: false,
+        }
+    }
+}
+
+impl SynthJob {
+    /// Checks the cell size (the rest is [`SynthConfig::check`]'s and the video's).
+    pub fn check(&self) -> Result<()> {
+        if !(self.cell_size.is_finite() && self.cell_size > 0.0) {
+            return Err(Error::config(
+                "cell_size",
+                format!("{} must be > 0", self.cell_size),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Makes the synthetic clip and writes its folder (and video); returns it.
 pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> {
     let params = load_params(job.params.as_deref())?;
-    if !(job.cell_size.is_finite() && job.cell_size > 0.0) {
-        return Err(Error::invalid(format!(
-            "--cell-size {} must be > 0",
-            job.cell_size
-        )));
-    }
-    let (nx, ny) = job.grid;
+    job.check()?;
+    let (nx, ny) = job.grid_size;
     let grid = Grid {
         origin: [0.0, 0.0],
         cell_size: job.cell_size,
@@ -199,7 +263,7 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
     let cfg = SynthConfig {
         params: params.clone(),
         agents: job.agents,
-        frames: job.frames,
+        frame_count: job.frame_count,
         fps: job.fps,
         grid,
         obstacles,
@@ -207,7 +271,7 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         heading_deg: job.heading_deg,
         precision: job.precision,
     };
-    progress.start("synth", job.frames.saturating_sub(1) as u64);
+    progress.start("synth", job.frame_count.saturating_sub(1) as u64);
     let syn = synthesise(&cfg, &device, || progress.inc(1))?;
     progress.finish();
     let mut truth = params.clone();
@@ -254,10 +318,10 @@ impl Synth {
         format!(
             "synth: {} agents, {} frames at {} fps on a {}×{} grid of {} BL cells; {:.0}–{:.0} agents inside the grid; wrote {}",
             job.agents,
-            job.frames,
+            job.frame_count,
             job.fps,
-            job.grid.0,
-            job.grid.1,
+            job.grid_size.0,
+            job.grid_size.1,
             job.cell_size,
             counts.iter().cloned().fold(f64::INFINITY, f64::min),
             counts.iter().cloned().fold(0.0, f64::max),

@@ -7,6 +7,9 @@ use crate::error::{Error, Result};
 use crate::measure::emergent::{clip_measures, FrameMeasures};
 use std::path::Path;
 
+/// Schema tag of `fields-info --json` files.
+pub const FIELDS_INFO_SCHEMA: &str = "herdfit.fields-info/1";
+
 /// The summary of a clip.
 #[derive(Clone, Debug)]
 pub struct FieldsInfo<'a> {
@@ -32,6 +35,7 @@ impl<'a> FieldsInfo<'a> {
     /// The summary and the per-frame measures as JSON.
     pub fn to_json(&self) -> serde_json::Value {
         serde_json::json!({
+            "schema": FIELDS_INFO_SCHEMA,
             "clip": self.name,
             "meta": self.clip.meta,
             "obstacle_cells": self.obstacle_cells,

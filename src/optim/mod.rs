@@ -7,7 +7,7 @@ use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 /// The optimiser.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Optimizer {
     /// Adam (β₁ 0.9, β₂ 0.999, ε 1e-8).
@@ -20,10 +20,30 @@ pub enum Optimizer {
     /// it steps lr along them, as the normalised step does; where they are noise about a minimum,
     /// ‖m‖/√s falls to about 0.1 and the steps to a hundredth of lr (averaging alone would not
     /// do: the sum of averaged noise random-walks as far as the noise itself).
-    #[value(
-        help = "The normalised step on a running mean of the gradients, scaled by how well they agree (about lr where they agree, a hundredth of it where they are noise)"
-    )]
     Averaged,
+}
+
+impl std::fmt::Display for Optimizer {
+    /// The name used in settings files and on the command line.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Optimizer::Adam => "adam",
+            Optimizer::Normalized => "normalized",
+            Optimizer::Averaged => "averaged",
+        })
+    }
+}
+
+impl std::str::FromStr for Optimizer {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "adam" => Ok(Optimizer::Adam),
+            "normalized" => Ok(Optimizer::Normalized),
+            "averaged" => Ok(Optimizer::Averaged),
+            _ => Err(format!("'{s}' is not one of adam, normalized, averaged")),
+        }
+    }
 }
 
 /// Optimiser state: Adam's moments; the averaged step's mean gradient (`m`) and mean ‖g‖²

@@ -26,6 +26,19 @@ pub struct RenderConfig {
     pub seed: u64,
 }
 
+impl RenderConfig {
+    /// Checks the scale (at least 2 pixels per body length); errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if !(self.px_per_bl.is_finite() && self.px_per_bl >= 2.0) {
+            return Err(Error::config(
+                "px_per_bl",
+                format!("{} must be ≥ 2", self.px_per_bl),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Body ellipse: full length 1 BL, full width 0.4 BL.
 pub const BODY_WIDTH_BL: f64 = 0.4;
 
@@ -173,12 +186,7 @@ pub fn render_video(
     cfg: &RenderConfig,
     mut progress: impl FnMut(),
 ) -> Result<(Vec<Camera>, PendingVideo)> {
-    if !(cfg.px_per_bl.is_finite() && cfg.px_per_bl >= 2.0) {
-        return Err(Error::invalid(format!(
-            "--px-per-bl {} must be ≥ 2",
-            cfg.px_per_bl
-        )));
-    }
+    cfg.check()?;
     let (w, h) = frame_size(grid, cfg.px_per_bl);
     if w * h > 8192 * 8192 {
         return Err(Error::invalid(format!(

@@ -1,5 +1,6 @@
 //! `herdfit author`: flags → [`AuthorJob`] → [`run`] → one line.
 
+use crate::cli::args::with_flags;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::author::job::{run, AuthorJob};
@@ -28,7 +29,7 @@ pub fn exec(a: AuthorArgs) -> Result<()> {
         video: a.video,
         px_per_bl: a.px_per_bl,
     };
-    let summary = run(&job, &mut Bars::default())?;
+    let summary = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     println!("{summary}");
     Ok(())
 }

@@ -1,5 +1,6 @@
 //! `herdfit bench`: flags → [`BenchConfig`] → [`run`] → one line.
 
+use crate::cli::args::with_flags;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::bench::{run, BenchConfig};
@@ -35,7 +36,7 @@ pub fn exec(a: BenchArgs) -> Result<()> {
         repeats: a.repeats,
         checkpointing: a.checkpointing,
     };
-    let r = run(&cfg, &a.json, &mut Bars::default())?;
+    let r = run(&cfg, &a.json, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     println!("{r}");
     Ok(())
 }

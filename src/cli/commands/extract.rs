@@ -84,15 +84,20 @@ fn parse_anchor(s: &str) -> Result<[i32; 4]> {
 
 #[cfg(feature = "video")]
 pub fn exec(a: ExtractArgs) -> Result<()> {
+    use crate::cli::args::with_settings;
     use crate::video::extract::{run, ExtractConfig, ExtractJob};
-    let mut cfg = match &a.config {
+    // The settings file, parsed twice: into the config, and as JSON to know which keys it sets.
+    let (mut cfg, settings) = match &a.config {
         Some(p) => {
             let text = std::fs::read_to_string(p)
                 .map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
-            serde_json::from_str::<ExtractConfig>(&text)
-                .map_err(|e| Error::file(p, format!("not an extraction settings file: {e}")))?
+            let cfg = serde_json::from_str::<ExtractConfig>(&text)
+                .map_err(|e| Error::file(p, format!("not an extraction settings file: {e}")))?;
+            let json: serde_json::Value = serde_json::from_str(&text)
+                .map_err(|e| Error::file(p, format!("not an extraction settings file: {e}")))?;
+            (cfg, Some((p.clone(), json)))
         }
-        None => ExtractConfig::default(),
+        None => (ExtractConfig::default(), None),
     };
     if let Some(v) = a.grid {
         cfg.grid = v;
@@ -143,7 +148,24 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
         preview_every: a.preview_every,
         config: cfg,
     };
-    let ex = run(&job, &mut crate::cli::Bars::default())?;
+    // Which keys the command line set (a bad value there is named by its flag).
+    let given = |key: &str| match key {
+        "grid" => a.grid.is_some(),
+        "body_length_px" => a.body_length_px.is_some(),
+        "body_colour" => a.body_colour.is_some(),
+        "colour_threshold" => a.colour_threshold.is_some(),
+        "background_threshold" => a.background_threshold.is_some(),
+        "body_pixels" => a.body_pixels.is_some(),
+        "anchors" => !a.anchor.is_empty(),
+        "background" => a.background.is_some(),
+        "obstacles" => a.obstacles.is_some(),
+        "frames" => a.frames.is_some(),
+        "smooth" => a.smooth.is_some(),
+        _ => false,
+    };
+    let settings = settings.as_ref().map(|(p, j)| (p.as_path(), j));
+    let ex = run(&job, &mut crate::cli::Bars::default())
+        .map_err(|e| with_settings(e, &[("anchors", "--anchor")], settings, &given))?;
     println!("{}", ex.summary(&job.out));
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! `herdfit fit`: flags → [`FitJob`] → [`run`] → the summary.
 
 use crate::backend::Precision;
-use crate::cli::args::parse_range;
+use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::job::{run, FitJob};
@@ -18,8 +18,8 @@ pub struct FitArgs {
     #[arg(long, value_name = "PARAMS.json")]
     pub out: PathBuf,
     /// Starting parameters; a generic start (every value 0.5) when omitted.
-    #[arg(long, value_name = "P.json")]
-    pub init: Option<PathBuf>,
+    #[arg(long, alias = "init", value_name = "P.json")]
+    pub start: Option<PathBuf>,
     /// Unrolled steps per update (1 = the paper's greedy per-frame scheme).
     #[arg(long, value_name = "W", default_value_t = 4)]
     pub window: usize,
@@ -33,7 +33,7 @@ pub struct FitArgs {
     pub var_weight: f64,
     #[arg(long, value_name = "X", default_value_t = 0.02)]
     pub lr: f64,
-    #[arg(long, value_enum, default_value_t = Optimizer::Adam)]
+    #[arg(long, value_parser = choice::<Optimizer>(OPTIMIZERS), default_value_t = Optimizer::Adam)]
     pub optimizer: Optimizer,
     /// Frames used, a..b (b exclusive); all frames when omitted.
     #[arg(long, value_name = "a..b", value_parser = parse_range)]
@@ -51,7 +51,7 @@ pub struct FitArgs {
     #[arg(long)]
     pub cell_mean: bool,
     /// Objective: the paper's losses, or matching the density and momentum fields.
-    #[arg(long, value_enum, default_value_t = LossKind::Paper)]
+    #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Paper)]
     pub loss: LossKind,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
@@ -71,7 +71,7 @@ pub struct FitArgs {
     /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
     #[arg(long, value_name = "S", default_value_t = GUIDANCE_SCALE, allow_hyphen_values = true)]
     pub guidance_scale: f64,
-    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Write a checkpoint into DIR after every epoch.
     #[arg(long, value_name = "DIR")]
@@ -90,7 +90,7 @@ pub struct FitArgs {
 pub fn exec(a: FitArgs) -> Result<()> {
     let job = FitJob {
         clips: a.clips,
-        start: a.init,
+        start: a.start,
         frames: a.frames.map(|(x, y)| x..y),
         config: FitConfig {
             window: a.window,
@@ -119,7 +119,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
         log: a.log,
         plot: a.plot,
     };
-    let summary = run(&job, &mut Bars::default())?;
+    let summary = run(&job, &mut Bars::default())
+        .map_err(|e| with_flags(e, &[("split_gradients", "--joint-gradients")]))?;
     if let Some(w) = &summary.plot_warning {
         eprintln!("warning: no loss curve: {w}");
     }

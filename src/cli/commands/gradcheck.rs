@@ -1,7 +1,7 @@
 //! `herdfit gradcheck`: flags → [`GradcheckJob`] → [`run`] → the table.
 
 use crate::backend::Precision;
-use crate::cli::args::HerdArgs;
+use crate::cli::args::{choice, with_flags, HerdArgs, LOSSES, OBJECTIVES, PRECISIONS};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::LossKind;
@@ -19,7 +19,7 @@ pub struct GradcheckArgs {
     /// Unrolled steps.
     #[arg(long, value_name = "T", default_value_t = 10)]
     pub steps: usize,
-    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F64)]
     pub precision: Precision,
     /// Step h of the 4-point central difference (default 1e-4 in f64, 1e-2 in f32).
     #[arg(long, value_name = "H")]
@@ -33,13 +33,13 @@ pub struct GradcheckArgs {
     #[arg(long, value_name = "REC.json", conflicts_with = "record")]
     pub replay: Option<PathBuf>,
     /// Objective: the documented herd objective, or the fit's loss on --clip.
-    #[arg(long, value_enum, default_value_t = Objective::Herd)]
+    #[arg(long, value_parser = choice::<Objective>(OBJECTIVES), default_value_t = Objective::Herd)]
     pub objective: Objective,
     /// Clip for `--objective loss` (the herd starts from its first frame's fields).
     #[arg(long, value_name = "CLIP/", required_if_eq("objective", "loss"))]
     pub clip: Option<PathBuf>,
     /// Which of the fit's losses `--objective loss` checks.
-    #[arg(long, value_enum, default_value_t = LossKind::Paper)]
+    #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Paper)]
     pub loss: LossKind,
     /// Herds for `--loss ensemble`.
     #[arg(long, value_name = "K", default_value_t = 1)]
@@ -67,7 +67,7 @@ pub fn exec(a: GradcheckArgs) -> Result<()> {
             replicas: a.replicas,
         },
     };
-    let report = run(&job, &mut Bars::default())?;
+    let report = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     print!("{report}");
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! `herdfit simulate`: flags → [`SimulateJob`] → [`simulate`].
 
 use crate::backend::Precision;
-use crate::cli::args::{parse_pair, HerdArgs};
+use crate::cli::args::{choice, parse_pair, with_flags, HerdArgs, PRECISIONS};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::simulate::{simulate, SimulateConfig, SimulateJob};
@@ -28,7 +28,7 @@ pub struct SimulateArgs {
     /// Uniform guidance direction DX,DY for leaders; without it leaders act as followers.
     #[arg(long, value_name = "DX,DY", value_parser = parse_pair)]
     pub guidance: Option<(f64, f64)>,
-    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -59,6 +59,7 @@ pub fn exec(a: SimulateArgs) -> Result<()> {
             seed: a.seed,
         },
     };
-    simulate(&job, &mut Bars::default())?;
+    simulate(&job, &mut Bars::default())
+        .map_err(|e| with_flags(e, &[("herd", "--init/--agents")]))?;
     Ok(())
 }

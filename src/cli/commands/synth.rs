@@ -1,7 +1,7 @@
 //! `herdfit synth`: flags → [`SynthJob`] → [`write_clip`] → one line.
 
 use crate::backend::Precision;
-use crate::cli::args::{parse_grid, parse_rgb};
+use crate::cli::args::{choice, parse_grid, parse_rgb, with_flags, PRECISIONS};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::synth::{write_clip, SynthJob, SynthVideo};
@@ -16,13 +16,13 @@ pub struct SynthArgs {
     #[arg(long, value_name = "N")]
     pub agents: usize,
     /// Number of frames (frame 0 included).
-    #[arg(long, value_name = "F")]
-    pub frames: usize,
+    #[arg(long, alias = "frames", value_name = "F")]
+    pub frame_count: usize,
     #[arg(long, value_name = "FPS", default_value_t = 25.0)]
     pub fps: f64,
     /// Grid size in cells, NXxNY.
-    #[arg(long, value_name = "NXxNY", value_parser = parse_grid)]
-    pub grid: (usize, usize),
+    #[arg(long, alias = "grid", value_name = "NXxNY", value_parser = parse_grid)]
+    pub grid_size: (usize, usize),
     /// Cell side (BL).
     #[arg(long, value_name = "C")]
     pub cell_size: f64,
@@ -39,11 +39,11 @@ pub struct SynthArgs {
     pub heading: f64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Also render the overhead view as an MJPG AVI (needs the `video` feature).
-    #[arg(long, value_name = "OUT.avi")]
-    pub video: Option<PathBuf>,
+    #[arg(long, alias = "video", value_name = "OUT.avi")]
+    pub video_file: Option<PathBuf>,
     /// Video scale: pixels per body length.
     #[arg(long, value_name = "PX", default_value_t = 12.0)]
     pub px_per_bl: f64,
@@ -67,18 +67,19 @@ pub fn exec(a: SynthArgs) -> Result<()> {
     let job = SynthJob {
         params: a.params,
         agents: a.agents,
-        frames: a.frames,
+        frame_count: a.frame_count,
         fps: a.fps,
-        grid: a.grid,
+        grid_size: a.grid_size,
         cell_size: a.cell_size,
         obstacles: a.obstacles,
         heading_deg: a.heading,
         seed: a.seed,
         precision: a.precision,
         out: a.out,
-        video: a.video.map(|p| (p, video)),
+        video: a.video_file.map(|p| (p, video)),
     };
-    let syn = write_clip(&job, &mut Bars::default())?;
+    let renamed = [("heading_deg", "--heading"), ("grid", "--grid-size")];
+    let syn = write_clip(&job, &mut Bars::default()).map_err(|e| with_flags(e, &renamed))?;
     println!("{}", syn.summary(&job));
     Ok(())
 }

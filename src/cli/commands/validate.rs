@@ -1,5 +1,6 @@
 //! `herdfit validate`: flags → [`ValidateJob`] → [`run`] → the report's Markdown.
 
+use crate::cli::args::with_flags;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::{Settle, GUIDANCE_SCALE};
@@ -21,8 +22,8 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "S", default_value_t = 0.5)]
     pub split: f64,
     /// Coarse grid (cells per side) of the density and velocity errors.
-    #[arg(long, value_name = "N", default_value_t = 10)]
-    pub grid: usize,
+    #[arg(long, alias = "grid", value_name = "N", default_value_t = 10)]
+    pub coarse_grid: usize,
     /// Simulations per parameter set (averaged).
     #[arg(long, value_name = "K", default_value_t = 3)]
     pub seeds: usize,
@@ -58,7 +59,7 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
         video: !a.no_video,
         config: ValidateConfig {
             split: a.split,
-            grid: a.grid,
+            coarse_grid: a.coarse_grid,
             seeds: a.seeds,
             settle: Settle::with_iterations(a.settle),
             warmup: a.warmup,
@@ -66,7 +67,7 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             ensemble_mean: a.ensemble_mean,
         },
     };
-    let (_, md) = run(&job, &mut Bars::default())?;
+    let (_, md) = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     print!("{md}");
     println!("wrote {}", job.out.display());
     Ok(())

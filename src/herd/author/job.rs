@@ -13,8 +13,12 @@ use std::path::PathBuf;
 
 type P2 = [f64; 2];
 
+/// Schema tag of an authored scene's `report.json`.
+pub const AUTHORING_SCHEMA: &str = "herdfit.authoring/1";
+
 /// A scene with its outputs.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct AuthorJob {
     pub scene: PathBuf,
     /// The output folder.
@@ -23,6 +27,30 @@ pub struct AuthorJob {
     pub video: bool,
     /// Video scale: pixels per body length.
     pub px_per_bl: f64,
+}
+
+impl Default for AuthorJob {
+    fn default() -> Self {
+        AuthorJob {
+            scene: PathBuf::from("scene.json"),
+            out: PathBuf::from("author"),
+            video: false,
+            px_per_bl: 8.0,
+        }
+    }
+}
+
+impl AuthorJob {
+    /// Checks the video scale when a video is asked for (at least 2 pixels per body length).
+    pub fn check(&self) -> Result<()> {
+        if self.video && !(self.px_per_bl.is_finite() && self.px_per_bl >= 2.0) {
+            return Err(Error::config(
+                "px_per_bl",
+                format!("{} must be ≥ 2", self.px_per_bl),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// What `herdfit author` prints: the herd, the run's length and where its centroid went.
@@ -87,6 +115,7 @@ pub fn region_measures(r: &AuthorRun, sets: usize) -> Vec<serde_json::Value> {
 
 /// Simulates the scene and writes the output folder.
 pub fn run(job: &AuthorJob, progress: &mut dyn Progress) -> Result<AuthorSummary> {
+    job.check()?;
     let scene = Scene::load(&job.scene)?;
     let out = AtomicDir::create(&job.out)?;
     let device = cpu_device(Precision::F32)?;
@@ -104,6 +133,7 @@ pub fn run(job: &AuthorJob, progress: &mut dyn Progress) -> Result<AuthorSummary
     plots(&scene, &r, &out)?;
     let centroid = centroids(&r.frames);
     let report = serde_json::json!({
+        "schema": AUTHORING_SCHEMA,
         "scene": job.scene.display().to_string(),
         "agents": r.frames[0].len(),
         "frames": r.frames.len(),
@@ -139,7 +169,7 @@ pub fn run(job: &AuthorJob, progress: &mut dyn Progress) -> Result<AuthorSummary
     }
     #[cfg(not(feature = "video"))]
     if job.video {
-        return Err(Error::invalid("--video needs the `video` feature (OpenCV)"));
+        return Err(Error::config("video", "needs the `video` feature (OpenCV)"));
     }
     out.commit()?;
     Ok(AuthorSummary {

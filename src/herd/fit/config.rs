@@ -9,8 +9,9 @@ use crate::optim::Optimizer;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 
-/// Settings of a fit (the `fit` command's flags).
+/// Settings of a fit (recorded as `settings` in the fitted parameter set's provenance).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct FitConfig {
     /// Unrolled steps per gradient update (1 = the paper's greedy per-frame scheme).
     pub window: usize,
@@ -62,7 +63,7 @@ fn one_replica() -> usize {
 }
 
 /// What the fit minimises.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LossKind {
     /// E_mean (eq. 7) + λ_var E_var (eq. 8) against the target field U (eq. 10–11).
@@ -77,6 +78,29 @@ pub enum LossKind {
     /// clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖², see
     /// [`crate::herd::fit::ensemble_loss`]), plus λ_var E_var. Needs `replicas` ≥ 2.
     Ensemble,
+}
+
+impl std::fmt::Display for LossKind {
+    /// The name used in settings files and on the command line.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LossKind::Paper => "paper",
+            LossKind::Fields => "fields",
+            LossKind::Ensemble => "ensemble",
+        })
+    }
+}
+
+impl std::str::FromStr for LossKind {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "paper" => Ok(LossKind::Paper),
+            "fields" => Ok(LossKind::Fields),
+            "ensemble" => Ok(LossKind::Ensemble),
+            _ => Err(format!("'{s}' is not one of paper, fields, ensemble")),
+        }
+    }
 }
 
 pub use crate::herd::params::ALIGNMENT;
@@ -107,41 +131,68 @@ impl Default for FitConfig {
 }
 
 impl FitConfig {
-    /// Checks the settings against a clip.
-    pub fn check(&self, clip: &ClipFields) -> Result<()> {
-        let f = clip.frames();
-        if self.frames.start >= self.frames.end || self.frames.end > f {
-            return Err(Error::invalid(format!(
-                "--frames {}..{} is out of range: the clip has frames 0..{f}",
-                self.frames.start, self.frames.end
-            )));
-        }
-        if self.frames.end - self.frames.start < 2 {
-            return Err(Error::invalid("--frames must span at least 2 frames"));
+    /// Checks the settings on their own: ranges, and the ensemble objective's replicas. Errors
+    /// name the key.
+    pub fn check(&self) -> Result<()> {
+        if self.frames.end < self.frames.start + 2 {
+            return Err(Error::config(
+                "frames",
+                format!(
+                    "{}..{} must span at least 2 frames",
+                    self.frames.start, self.frames.end
+                ),
+            ));
         }
         if self.loss == LossKind::Ensemble && self.replicas < 2 {
-            return Err(Error::invalid(
-                "--loss ensemble compares several herds: set --replicas to 2 or more",
+            return Err(Error::config(
+                "replicas",
+                "{loss} ensemble compares several herds: set 2 or more",
             ));
         }
         if self.replicas == 0 || self.replicas > 64 {
-            return Err(Error::invalid(format!(
-                "--replicas {} is out of range 1..=64",
-                self.replicas
-            )));
+            return Err(Error::config(
+                "replicas",
+                format!("{} is out of range 1..=64", self.replicas),
+            ));
         }
-        if self.window == 0 || self.epochs == 0 {
-            return Err(Error::invalid("--window and --epochs must be ≥ 1"));
+        for (key, v) in [("window", self.window), ("epochs", self.epochs)] {
+            if v == 0 {
+                return Err(Error::config(key, "must be ≥ 1"));
+            }
         }
         check_guidance_scale(self.guidance_scale)?;
-        for (name, v, lo, hi) in [
-            ("--beta", self.beta, 0.0, 1.0),
-            ("--var-weight", self.var_weight, 0.0, f64::INFINITY),
-            ("--lr", self.lr, 1e-12, 1.0),
+        for (key, v, lo, hi) in [
+            ("beta", self.beta, 0.0, 1.0),
+            ("var_weight", self.var_weight, 0.0, f64::INFINITY),
+            ("lr", self.lr, 1e-12, 1.0),
+            (
+                "density_threshold",
+                self.density_threshold,
+                0.0,
+                f64::INFINITY,
+            ),
+            ("zero_grad_step", self.zero_grad_step, 0.0, f64::INFINITY),
         ] {
             if !(v.is_finite() && v >= lo && v <= hi) {
-                return Err(Error::invalid(format!("{name} {v} is out of range")));
+                return Err(Error::config(key, format!("{v} is out of range")));
             }
+        }
+        self.settle.check()
+    }
+
+    /// [`FitConfig::check`], then the settings against a clip: the frames inside it, a herd in
+    /// them and at the first.
+    pub fn check_clip(&self, clip: &ClipFields) -> Result<()> {
+        self.check()?;
+        let f = clip.frames();
+        if self.frames.end > f {
+            return Err(Error::config(
+                "frames",
+                format!(
+                    "{}..{} is out of range: the clip has frames 0..{f}",
+                    self.frames.start, self.frames.end
+                ),
+            ));
         }
         let total: f64 = (self.frames.start..self.frames.end)
             .map(|k| clip.count(k))
@@ -152,10 +203,13 @@ impl FitConfig {
             ));
         }
         if clip.count(self.frames.start) < 1.0 {
-            return Err(Error::invalid(format!(
-                "frame {} of the clip holds no agents: start the fit where the herd is",
-                self.frames.start
-            )));
+            return Err(Error::config(
+                "frames",
+                format!(
+                    "frame {} of the clip holds no agents: start the fit where the herd is",
+                    self.frames.start
+                ),
+            ));
         }
         Ok(())
     }

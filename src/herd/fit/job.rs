@@ -18,7 +18,8 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 /// A fit with its files.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct FitJob {
     /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
     pub clips: Vec<PathBuf>,
@@ -83,6 +84,23 @@ impl FitJob {
     }
 }
 
+impl FitJob {
+    /// Checks the evaluation's seeds and the fit's settings on their own
+    /// ([`FitConfig::check`]; `config.frames` is checked once the clips are known).
+    pub fn check(&self) -> Result<()> {
+        if self.eval_seeds == 0 || self.eval_seeds > 64 {
+            return Err(Error::config(
+                "eval_seeds",
+                format!("{} is out of range 1..=64", self.eval_seeds),
+            ));
+        }
+        if self.clips.is_empty() {
+            return Err(Error::config("clips", "give at least one clip"));
+        }
+        Ok(())
+    }
+}
+
 /// What a fit did: the schedule, the start and fitted parameters, and the losses and errors of
 /// both (printed by `herdfit fit`).
 #[derive(Clone, Debug)]
@@ -107,12 +125,7 @@ pub struct FitSummary {
 /// Runs a fit job: loads the clips and the start, fits, evaluates the start and the fitted set,
 /// and writes the parameter set (with its provenance), the log and the loss curve.
 pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
-    if job.eval_seeds == 0 || job.eval_seeds > 64 {
-        return Err(Error::invalid(format!(
-            "--eval-seeds {} is out of range 1..=64",
-            job.eval_seeds
-        )));
-    }
+    job.check()?;
     let loaded = job
         .clips
         .iter()
@@ -130,8 +143,9 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         frames: frames.clone(),
         ..job.config.clone()
     };
+    cfg.check()?;
     for (c, p) in clips.iter().zip(&job.clips) {
-        cfg.check(c).map_err(|e| e.in_file(p))?;
+        cfg.check_clip(c).map_err(|e| e.in_file(p))?;
     }
     let (log_path, plot_path) = (job.log_path(), job.plot_path());
     for p in [&job.out, &log_path, &plot_path] {

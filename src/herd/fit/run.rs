@@ -249,7 +249,7 @@ impl<'a> FitRun<'a> {
             return Err(Error::invalid("no clip to fit"));
         }
         for clip in clips {
-            cfg.check(clip)?;
+            cfg.check_clip(clip)?;
         }
         init.validate()?;
         let device = cpu_device(cfg.precision)?;

@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// What `gradcheck` differentiates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Objective {
     /// Spread + mean heading of the default scenario's herd after T steps.
@@ -22,6 +22,27 @@ pub enum Objective {
     /// The fit's loss (`--loss`: E_mean + λ E_var, eq. 7–8, or field matching, or the ensemble
     /// objective) over T steps on a clip.
     Loss,
+}
+
+impl std::fmt::Display for Objective {
+    /// The name used in settings files and on the command line.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Objective::Herd => "herd",
+            Objective::Loss => "loss",
+        })
+    }
+}
+
+impl std::str::FromStr for Objective {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "herd" => Ok(Objective::Herd),
+            "loss" => Ok(Objective::Loss),
+            _ => Err(format!("'{s}' is not one of herd, loss")),
+        }
+    }
 }
 
 /// Settings of a gradient check.
@@ -65,10 +86,32 @@ impl GradcheckConfig {
     }
 }
 
+impl GradcheckConfig {
+    /// Checks the steps, the finite-difference step and the replicas; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if self.steps == 0 {
+            return Err(Error::config("steps", "must be ≥ 1"));
+        }
+        if let Some(h) = self.fd_step {
+            if !(h.is_finite() && h > 0.0) {
+                return Err(Error::config("fd_step", format!("{h} must be > 0")));
+            }
+        }
+        if self.replicas == 0 || self.replicas > 64 {
+            return Err(Error::config(
+                "replicas",
+                format!("{} is out of range 1..=64", self.replicas),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// A gradient check with its files: the parameter set (built-in when absent), the herd of the
 /// herd objective (the default scenario's 200 agents when absent), the clip of the loss
 /// objective, decisions to record or replay, and the JSON report.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct GradcheckJob {
     pub params: Option<PathBuf>,
     pub herd: Option<HerdSource>,
@@ -79,18 +122,41 @@ pub struct GradcheckJob {
     pub config: GradcheckConfig,
 }
 
+impl Default for GradcheckJob {
+    fn default() -> Self {
+        GradcheckJob {
+            params: None,
+            herd: None,
+            clip: None,
+            record: None,
+            replay: None,
+            json: PathBuf::from("gradcheck.json"),
+            config: GradcheckConfig::default(),
+        }
+    }
+}
+
+impl GradcheckJob {
+    /// Checks the settings, and that the loss objective has a clip; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        self.config.check()?;
+        if self.config.objective == Objective::Loss && self.clip.is_none() {
+            return Err(Error::config("clip", "{objective} loss needs a clip"));
+        }
+        Ok(())
+    }
+}
+
 /// Runs the check and writes its JSON report.
 pub fn run(job: &GradcheckJob, progress: &mut dyn Progress) -> Result<GradReport> {
+    job.check()?;
     let cfg = &job.config;
-    if cfg.steps == 0 {
-        return Err(Error::invalid("--steps must be ≥ 1"));
-    }
     let params = load_params(job.params.as_deref())?;
     let report = if cfg.objective == Objective::Loss {
         let path = job
             .clip
             .clone()
-            .ok_or_else(|| Error::invalid("--objective loss needs --clip"))?;
+            .ok_or_else(|| Error::config("clip", "{objective} loss needs a clip"))?;
         let clip = ClipFields::load(&path)?;
         check_writable(&job.json)?;
         let device = cpu_device(cfg.precision)?;

@@ -56,8 +56,9 @@ impl LossScenario {
             )));
         }
         if (kind == LossKind::Ensemble) != (replicas >= 2) || replicas == 0 {
-            return Err(Error::invalid(
-                "the ensemble objective needs --replicas ≥ 2, the others one herd",
+            return Err(Error::config(
+                "replicas",
+                "the ensemble objective needs 2 or more, the others one herd",
             ));
         }
         let mut params = params.clone();
@@ -191,6 +192,7 @@ impl LossScenario {
         }
         let max_rel_err = parameters.iter().map(|r| r.rel_err).fold(0.0, f64::max);
         Ok(GradReport {
+            schema: super::GRADCHECK_SCHEMA.into(),
             steps: self.plans[0].len(),
             agents: self.init[0].len(),
             precision,

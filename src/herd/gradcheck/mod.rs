@@ -123,9 +123,14 @@ pub struct GradRow {
     pub rel_err: f64,
 }
 
+/// Schema tag of gradcheck reports.
+pub const GRADCHECK_SCHEMA: &str = "herdfit.gradcheck/1";
+
 /// The gradcheck report (the JSON written by `herdfit gradcheck`).
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct GradReport {
+    /// [`GRADCHECK_SCHEMA`].
+    pub schema: String,
     pub steps: usize,
     pub agents: usize,
     pub precision: Precision,
@@ -150,7 +155,7 @@ pub fn gradcheck(
     mut progress: impl FnMut(),
 ) -> Result<GradReport> {
     if !(fd_step.is_finite() && fd_step > 0.0) {
-        return Err(Error::invalid("--fd-step must be > 0"));
+        return Err(Error::config("fd_step", "must be > 0"));
     }
     let device = cpu_device(precision)?;
     let theta = sc.model.params.to_vec();
@@ -174,6 +179,7 @@ pub fn gradcheck(
         ));
     }
     Ok(GradReport {
+        schema: GRADCHECK_SCHEMA.into(),
         steps,
         agents: sc.init.len(),
         precision,

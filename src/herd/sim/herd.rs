@@ -47,7 +47,7 @@ pub fn random_herd(
     seed: u64,
 ) -> Result<Vec<AgentRow>> {
     if spec.agents == 0 {
-        return Err(Error::invalid("the herd is empty: --agents must be ≥ 1"));
+        return Err(Error::config("agents", "the herd is empty: must be ≥ 1"));
     }
     if !(spec.density.is_finite() && spec.density > 0.0) {
         return Err(Error::invalid("herd density must be > 0"));

@@ -149,12 +149,18 @@ impl SetReport {
     }
 }
 
+/// Schema tag of validation reports (`report.json`).
+pub const VALIDATION_SCHEMA: &str = "herdfit.validation/1";
+
 /// The whole report.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
+    /// [`VALIDATION_SCHEMA`].
+    pub schema: String,
     pub clip: String,
     pub frames: [usize; 2],
     pub split: f64,
+    /// The coarse grid of the errors ([`ValidateConfig::coarse_grid`]).
     pub grid: usize,
     pub seeds: usize,
     /// Whether the seeds' mean prediction was compared ([`ValidateConfig::ensemble_mean`]).
@@ -165,13 +171,14 @@ pub struct Report {
     pub sets: Vec<SetReport>,
 }
 
-/// Settings of a validation (the `validate` command's flags).
-#[derive(Clone, Debug, PartialEq)]
+/// Settings of a validation.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct ValidateConfig {
     /// Fraction of the clip before the held-out part.
     pub split: f64,
-    /// Coarse grid (cells per side) of the density and velocity errors.
-    pub grid: usize,
+    /// Coarse grid (cells per side) of the density and velocity errors (the report's `grid`).
+    pub coarse_grid: usize,
     /// Simulations per parameter set.
     pub seeds: usize,
     /// How the starting herd is settled.
@@ -189,6 +196,39 @@ pub struct ValidateConfig {
     pub ensemble_mean: bool,
 }
 
+impl Default for ValidateConfig {
+    fn default() -> Self {
+        ValidateConfig {
+            split: 0.5,
+            coarse_grid: 10,
+            seeds: 3,
+            settle: Settle::default(),
+            warmup: 0,
+            guidance_scale: crate::herd::guidance::GUIDANCE_SCALE,
+            ensemble_mean: false,
+        }
+    }
+}
+
+impl ValidateConfig {
+    /// Checks the ranges; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if !(self.split.is_finite() && (0.0..1.0).contains(&self.split)) {
+            return Err(Error::config(
+                "split",
+                format!("{} must be in [0, 1)", self.split),
+            ));
+        }
+        for (key, v) in [("coarse_grid", self.coarse_grid), ("seeds", self.seeds)] {
+            if v == 0 {
+                return Err(Error::config(key, "must be ≥ 1"));
+            }
+        }
+        crate::herd::guidance::check_guidance_scale(self.guidance_scale)?;
+        self.settle.check()
+    }
+}
+
 /// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
 pub fn validate(
     clip: &ClipFields,
@@ -197,14 +237,8 @@ pub fn validate(
     cfg: &ValidateConfig,
     mut progress: impl FnMut(),
 ) -> Result<(Report, Vec<Vec<SimRun>>)> {
-    let (split, grid, seeds) = (cfg.split, cfg.grid, cfg.seeds);
-    crate::herd::guidance::check_guidance_scale(cfg.guidance_scale)?;
-    if !(split.is_finite() && (0.0..1.0).contains(&split)) {
-        return Err(Error::invalid(format!("--split {split} must be in [0, 1)")));
-    }
-    if grid == 0 || seeds == 0 {
-        return Err(Error::invalid("--grid and --seeds must be ≥ 1"));
-    }
+    cfg.check()?;
+    let (split, grid, seeds) = (cfg.split, cfg.coarse_grid, cfg.seeds);
     let nf = clip.frames();
     let start = ((nf as f64) * split).floor() as usize;
     if nf - start < 2 {
@@ -313,6 +347,7 @@ pub fn validate(
     }
     Ok((
         Report {
+            schema: VALIDATION_SCHEMA.into(),
             clip: clip_name.to_string(),
             frames: [start, nf],
             split,

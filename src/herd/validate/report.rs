@@ -87,7 +87,8 @@ pub fn markdown(r: &Report) -> String {
 
 /// A validation with its files: the clip, the parameter set validated (`fitted`), an optional
 /// baseline, and the report folder.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct ValidateJob {
     pub clip: PathBuf,
     pub params: PathBuf,
@@ -98,8 +99,29 @@ pub struct ValidateJob {
     pub config: ValidateConfig,
 }
 
+impl Default for ValidateJob {
+    fn default() -> Self {
+        ValidateJob {
+            clip: PathBuf::from("clip"),
+            params: PathBuf::from("params.json"),
+            baseline: None,
+            out: PathBuf::from("report"),
+            video: true,
+            config: ValidateConfig::default(),
+        }
+    }
+}
+
+impl ValidateJob {
+    /// Checks the settings ([`ValidateConfig::check`]).
+    pub fn check(&self) -> Result<()> {
+        self.config.check()
+    }
+}
+
 /// Runs the validation and writes the report folder; returns the report and its Markdown.
 pub fn run(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Report, String)> {
+    job.check()?;
     let clip = ClipFields::load(&job.clip)?;
     let mut sets = vec![("fitted".to_string(), Params::load(&job.params)?)];
     if let Some(b) = &job.baseline {

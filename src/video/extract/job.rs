@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 pub const CENTRE_ANCHOR: [i32; 4] = [-1, -1, -1, -1];
 
 /// An extraction with its files.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct ExtractJob {
     pub video: PathBuf,
     /// The clip folder written.
@@ -23,6 +24,25 @@ pub struct ExtractJob {
     pub preview_every: usize,
     /// The settings; anchors equal to [`CENTRE_ANCHOR`] are resolved from the video's size.
     pub config: ExtractConfig,
+}
+
+impl Default for ExtractJob {
+    fn default() -> Self {
+        ExtractJob {
+            video: PathBuf::from("herd.avi"),
+            out: PathBuf::from("clip"),
+            preview: None,
+            preview_every: 25,
+            config: ExtractConfig::default(),
+        }
+    }
+}
+
+impl ExtractJob {
+    /// Checks the settings ([`ExtractConfig::check`]).
+    pub fn check(&self) -> Result<()> {
+        self.config.check()
+    }
 }
 
 /// `cfg` with every [`CENTRE_ANCHOR`] replaced by the central quarter of `video`'s frame.
@@ -51,6 +71,7 @@ fn resolve_centre(video: &Path, cfg: &ExtractConfig) -> Result<ExtractConfig> {
 
 /// Runs the extraction and writes the clip folder (and the previews).
 pub fn run(job: &ExtractJob, progress: &mut dyn Progress) -> Result<Extraction> {
+    job.check()?;
     let cfg = resolve_centre(&job.video, &job.config)?;
     // Fail early on an unusable output folder.
     AtomicDir::create(&job.out)?;
@@ -84,7 +105,7 @@ pub fn run(job: &ExtractJob, progress: &mut dyn Progress) -> Result<Extraction> 
         }
         dir.write(
             "report.json",
-            b"{\"source\": \"herdfit extract --preview\"}\n",
+            b"{\"schema\": \"herdfit.preview/1\", \"source\": \"herdfit extract --preview\"}\n",
         )?;
         dir.commit()?;
     }

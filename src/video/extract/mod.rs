@@ -78,6 +78,50 @@ impl Default for ExtractConfig {
     }
 }
 
+impl ExtractConfig {
+    /// Checks the settings on their own (the frames and anchors are checked against the video
+    /// when it is opened); errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if self.grid == 0 {
+            return Err(Error::config("grid", "must be ≥ 1"));
+        }
+        if !(self.body_length_px.is_finite() && self.body_length_px > 0.0) {
+            return Err(Error::config(
+                "body_length_px",
+                format!("{} must be > 0", self.body_length_px),
+            ));
+        }
+        if self.smooth == 0 {
+            return Err(Error::config("smooth", "must be ≥ 1"));
+        }
+        if let Some([a, b]) = self.frames {
+            if a >= b {
+                return Err(Error::config("frames", format!("{a}..{b} is empty")));
+            }
+        }
+        if let Some(n) = self.body_pixels {
+            if !(n.is_finite() && n > 0.0) {
+                return Err(Error::config("body_pixels", format!("{n} must be > 0")));
+            }
+        }
+        for (key, v) in [
+            ("colour_threshold", self.colour_threshold),
+            ("background_threshold", self.background_threshold),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::config(key, format!("{v} must be ≥ 0")));
+            }
+        }
+        if self.max_side < 16 {
+            return Err(Error::config(
+                "max_side",
+                format!("{} must be ≥ 16 pixels", self.max_side),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Result of an extraction.
 pub struct Extraction {
     pub clip: ClipFields,
@@ -94,42 +138,36 @@ pub fn extract(
     preview_every: Option<usize>,
     mut progress: impl FnMut(&str, usize, usize),
 ) -> Result<Extraction> {
-    if cfg.grid == 0 {
-        return Err(Error::invalid("--grid must be ≥ 1"));
-    }
-    if !(cfg.body_length_px.is_finite() && cfg.body_length_px > 0.0) {
-        return Err(Error::invalid("--body-length-px must be > 0"));
-    }
-    if cfg.smooth == 0 {
-        return Err(Error::invalid("--smooth must be ≥ 1"));
-    }
+    cfg.check()?;
     let mut vid = decode::open(path)?;
     let (w, h) = (vid.w, vid.h);
     let (first, last) = match cfg.frames {
         Some([a, b]) => (a, b),
         None => (0, usize::MAX),
     };
-    if first >= last {
-        return Err(Error::invalid(format!("--frames {first}..{last} is empty")));
-    }
     if vid.count > 0 && first >= vid.count {
-        return Err(Error::invalid(format!(
-            "--frames {first}..{last} is out of range: the video has {} frames",
-            vid.count
-        )));
+        return Err(Error::config(
+            "frames",
+            format!(
+                "{first}..{last} is out of range: the video has {} frames",
+                vid.count
+            ),
+        ));
     }
     for (k, a) in cfg.anchors.iter().enumerate() {
         let [x, y, aw, ah] = *a;
         if x < 0 || y < 0 || aw < 4 || ah < 4 || (x + aw) as usize > w || (y + ah) as usize > h {
-            return Err(Error::invalid(format!(
-                "--anchor {k} ({x},{y},{aw},{ah}) is not a rectangle of at least 4×4 inside the {w}×{h} frame"
-            )));
+            return Err(Error::config(
+                "anchors",
+                format!("rectangle {k} ({x},{y},{aw},{ah}) is not at least 4×4 inside the {w}×{h} frame"),
+            ));
         }
     }
     if !vid.skip(first)? {
-        return Err(Error::invalid(format!(
-            "--frames starts at {first} but the video ends before"
-        )));
+        return Err(Error::config(
+            "frames",
+            format!("{first}..{last} starts past the end of the video"),
+        ));
     }
     let t_start = std::time::Instant::now();
     let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
@@ -163,7 +201,10 @@ pub fn extract(
         .body_pixels
         .unwrap_or(std::f64::consts::PI / 4.0 * cfg.body_length_px * 0.4 * cfg.body_length_px);
     if !(body_px.is_finite() && body_px > 0.0) {
-        return Err(Error::invalid("--body-pixels must be > 0"));
+        return Err(Error::config(
+            "body_pixels",
+            format!("{body_px} must be > 0"),
+        ));
     }
     let body_px_proc = body_px * geom.scale * geom.scale;
     let sums = fields::pass_c(
