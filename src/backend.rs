@@ -13,26 +13,7 @@ pub enum Precision {
     F64,
 }
 
-impl std::fmt::Display for Precision {
-    /// The name used in settings files and on the command line.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Precision::F32 => "f32",
-            Precision::F64 => "f64",
-        })
-    }
-}
-
-impl std::str::FromStr for Precision {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "f32" => Ok(Precision::F32),
-            "f64" => Ok(Precision::F64),
-            _ => Err(format!("'{s}' is not one of f32, f64")),
-        }
-    }
-}
+enum_names!(Precision { F32 = "f32", F64 = "f64" });
 
 impl Precision {
     fn dtype(self) -> FloatDType {

@@ -115,6 +115,23 @@ impl Error {
     }
 }
 
+/// A [`ConfigError`] "must be ≥ 1" for the first of `counts` (key, value) that is 0.
+pub fn check_counts(counts: &[(&str, usize)]) -> Result<()> {
+    match counts.iter().find(|(_, v)| *v == 0) {
+        Some((key, _)) => Err(Error::config(*key, "must be ≥ 1")),
+        None => Ok(()),
+    }
+}
+
+/// A [`ConfigError`] "v must be > 0" for the first of `values` (key, value) that is not a finite
+/// positive number.
+pub fn check_positive(values: &[(&str, f64)]) -> Result<()> {
+    match values.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
+        Some((key, v)) => Err(Error::config(*key, format!("{v} must be > 0"))),
+        None => Ok(()),
+    }
+}
+
 /// Result alias of the library.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 

@@ -2,7 +2,7 @@
 //! flag groups several verbs take.
 
 use crate::error::Error;
-use crate::herd::simulate::HerdSource;
+use crate::herd::simulate::{HerdSource, RunFiles};
 use clap::Args;
 use std::path::{Path, PathBuf};
 
@@ -73,6 +73,35 @@ pub struct HerdArgs {
     /// A built-in random herd of N agents (one per 2 BL², heading +x ± 20°) instead of --init.
     #[arg(long, value_name = "N")]
     pub agents: Option<usize>,
+}
+
+/// The files of a run (`simulate`, `gradcheck`): parameters, herd, decisions recorded or
+/// replayed.
+#[derive(Args, Debug, Clone)]
+pub struct RunArgs {
+    /// Parameter set (herdfit.params/1 JSON); the built-in default set when omitted.
+    #[arg(long, value_name = "P.json")]
+    pub params: Option<PathBuf>,
+    #[command(flatten)]
+    pub herd: HerdArgs,
+    /// Write the run's decisions (perception, roles, noise) to this file (JSON), to replay them.
+    #[arg(long, value_name = "REC.json")]
+    pub record: Option<PathBuf>,
+    /// Replay the decisions of a recorded run instead of computing them.
+    #[arg(long, value_name = "REC.json", conflicts_with = "record")]
+    pub replay: Option<PathBuf>,
+}
+
+impl RunArgs {
+    /// The library's [`RunFiles`].
+    pub fn files(self) -> RunFiles {
+        RunFiles {
+            params: self.params,
+            herd: self.herd.source(),
+            record: self.record,
+            replay: self.replay,
+        }
+    }
 }
 
 impl HerdArgs {

@@ -14,6 +14,11 @@ use ndarray_npy::{NpzReader, NpzWriter};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// Width of an animal's body in body lengths (its length is 1): rendered videos draw bodies as
+/// ellipses of 1 × 0.4 BL, and extraction estimates the body pixels per animal and the size of its
+/// morphological opening from it.
+pub const BODY_WIDTH_BL: f64 = 0.4;
+
 /// Schema tag of `clip.json`.
 pub const CLIP_SCHEMA: &str = "herdfit.clip/1";
 
@@ -155,12 +160,8 @@ impl ClipFields {
     /// Checks shapes and values; messages name the array or key.
     pub fn validate(&self) -> Result<()> {
         let m = &self.meta;
-        if m.schema != CLIP_SCHEMA {
-            return Err(Error::invalid(format!(
-                "clip.json: schema is '{}', expected '{CLIP_SCHEMA}'",
-                m.schema
-            )));
-        }
+        super::check_schema(&m.schema, CLIP_SCHEMA)
+            .map_err(|e| Error::invalid(format!("clip.json: {e}")))?;
         if !(m.fps.is_finite() && m.fps > 0.0) {
             return Err(Error::invalid(format!(
                 "clip.json: fps = {} must be > 0",
@@ -212,24 +213,12 @@ impl ClipFields {
         let bad = |name: &str, idx: Vec<usize>, v: f32, what: &str| {
             Error::invalid(format!("fields.npz: {name}{idx:?} = {v} {what}"))
         };
-        for (i, &v) in self.density.indexed_iter() {
-            if !v.is_finite() || v < 0.0 {
-                return Err(bad(
-                    "density",
-                    vec![i.0, i.1, i.2],
-                    v,
-                    "(must be finite, ≥ 0)",
-                ));
-            }
-        }
-        for (i, &v) in self.dir_variance.indexed_iter() {
-            if !v.is_finite() || v < 0.0 {
-                return Err(bad(
-                    "dir_variance",
-                    vec![i.0, i.1, i.2],
-                    v,
-                    "(must be finite, ≥ 0)",
-                ));
+        for (name, a) in [
+            ("density", &self.density),
+            ("dir_variance", &self.dir_variance),
+        ] {
+            if let Some((i, &v)) = a.indexed_iter().find(|(_, v)| !v.is_finite() || **v < 0.0) {
+                return Err(bad(name, vec![i.0, i.1, i.2], v, "(must be finite, ≥ 0)"));
             }
         }
         for (i, &v) in self.velocity.indexed_iter() {

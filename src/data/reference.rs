@@ -22,6 +22,19 @@ fn with_suffix(prefix: &Path, suffix: &str) -> PathBuf {
     PathBuf::from(s)
 }
 
+/// The cell `x y` in tokens 1 and 2 of line `ln`, inside a `res × res` grid.
+fn cell_xy(path: &Path, ln: usize, tok: &[&str], res: usize) -> Result<(usize, usize)> {
+    let x: usize = num(path, ln, tok.get(1).copied(), "x")?;
+    let y: usize = num(path, ln, tok.get(2).copied(), "y")?;
+    if x >= res || y >= res {
+        return Err(Error::file(
+            path,
+            format!("line {ln}: cell ({x}, {y}) is outside the {res}×{res} grid"),
+        ));
+    }
+    Ok((x, y))
+}
+
 fn num<T: std::str::FromStr>(path: &Path, line: usize, tok: Option<&str>, what: &str) -> Result<T> {
     let t = tok.ok_or_else(|| Error::file(path, format!("line {line}: missing {what}")))?;
     t.parse::<T>().map_err(|_| {
@@ -180,14 +193,7 @@ fn parse_frames(path: &Path, res: usize) -> Result<Vec<Vec<Row>>> {
                         ),
                     ));
                 }
-                let x: usize = num(path, ln, tok.get(1).copied(), "x")?;
-                let y: usize = num(path, ln, tok.get(2).copied(), "y")?;
-                if x >= res || y >= res {
-                    return Err(Error::file(
-                        path,
-                        format!("line {ln}: cell ({x}, {y}) is outside the {res}×{res} grid"),
-                    ));
-                }
+                let (x, y) = cell_xy(path, ln, &tok, res)?;
                 let n: f64 = num(path, ln, tok.get(3).copied(), "n")?;
                 if !(n.is_finite() && n >= 0.0) {
                     return Err(Error::file(
@@ -248,15 +254,7 @@ fn parse_cells(path: &Path, res: usize) -> Result<Array2<u8>> {
                     format!("line {ln}: expected {} values after {}", want - 1, tok[0]),
                 ));
             }
-            let x: usize = num(path, ln, tok.get(1).copied(), "x")?;
-            let y: usize = num(path, ln, tok.get(2).copied(), "y")?;
-            if x >= res || y >= res {
-                return Err(Error::file(
-                    path,
-                    format!("line {ln}: cell ({x}, {y}) is outside the {res}×{res} grid"),
-                ));
-            }
-            Ok((x, y))
+            cell_xy(path, ln, tok, res)
         };
         match (block, tok[0]) {
             (None, "NonAccessibleGrid") => block = Some("NAG"),
@@ -377,49 +375,39 @@ mod tests {
 
     const META: &str = "Resolution 4\nGroundSize 8\nFrameTime 0.04\nTotalFrameCount 2\nOverallAverageSpeed 1.5 OverallAverageSpeedSTD 0.25 \nSpeedVSDensity\n1 1.8 0.1\n0 0\n3 1.2 0.1\nSDEND\n";
 
+    /// The message of the error importing `prefix`.
+    fn error_of(prefix: &Path) -> String {
+        import_reference(prefix).unwrap_err().to_string()
+    }
+
     #[test]
     fn malformed_rows_name_the_line() {
         let dir = tempfile::tempdir().unwrap();
         let p = write_set(dir.path(), META, "Frame 1 \nData 0 0 2.0 1 0 1\n", None);
-        let e = import_reference(&p).unwrap_err().to_string();
+        let e = error_of(&p);
         assert!(e.contains("_data_frame.txt") && e.contains("line 2"), "{e}");
         let p = write_set(dir.path(), META, "Data 0 0 2.0\n", None);
-        assert!(import_reference(&p)
-            .unwrap_err()
-            .to_string()
-            .contains("before any Frame"));
+        assert!(error_of(&p).contains("before any Frame"));
         let p = write_set(dir.path(), META, "Frame 1\nData 9 0 2.0\n", None);
-        assert!(import_reference(&p)
-            .unwrap_err()
-            .to_string()
-            .contains("outside"));
+        assert!(error_of(&p).contains("outside"));
         let p = write_set(dir.path(), META, "Frame 1\nData 0 0 x\n", None);
-        assert!(import_reference(&p)
-            .unwrap_err()
-            .to_string()
-            .contains("n = 'x'"));
+        assert!(error_of(&p).contains("n = 'x'"));
         let bad_meta = "Resolution 4\nGroundSize eight\n";
         let p = write_set(dir.path(), bad_meta, "Frame 1\n", None);
-        let e = import_reference(&p).unwrap_err().to_string();
+        let e = error_of(&p);
         assert!(e.contains("_data_meta.txt") && e.contains("line 2"), "{e}");
         let p = write_set(dir.path(), "GroundSize 8\n", "Frame 1\n", None);
-        assert!(import_reference(&p)
-            .unwrap_err()
-            .to_string()
-            .contains("missing Resolution"));
+        assert!(error_of(&p).contains("missing Resolution"));
         let p = write_set(
             dir.path(),
             META,
             "Frame 1\n",
             Some("NonAccessibleGrid\nNAG 1\nNAGEND\n"),
         );
-        let e = import_reference(&p).unwrap_err().to_string();
+        let e = error_of(&p);
         assert!(e.contains("_data_cell.txt") && e.contains("line 2"), "{e}");
         let p = write_set(dir.path(), META, "", None);
-        assert!(import_reference(&p)
-            .unwrap_err()
-            .to_string()
-            .contains("empty"));
+        assert!(error_of(&p).contains("empty"));
         let e = import_reference(&dir.path().join("nope"))
             .unwrap_err()
             .to_string();

@@ -20,6 +20,7 @@
 //! Coordinates: in `BL` and `m` the axes are x right, y up (z up in 3D); in `px` they are image
 //! coordinates, x right and y **down**, origin at the top-left corner of the image.
 
+use crate::data::csv::Table;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -123,12 +124,7 @@ impl Tracks {
     /// frame, time increasing with frame, z = 0 in 2D. Errors name the key or row.
     pub fn check(&self) -> Result<()> {
         let m = &self.meta;
-        if m.schema != TRACKS_SCHEMA {
-            return Err(Error::invalid(format!(
-                "schema is '{}', expected '{TRACKS_SCHEMA}'",
-                m.schema
-            )));
-        }
+        crate::data::check_schema(&m.schema, TRACKS_SCHEMA).map_err(Error::invalid)?;
         if !(m.fps.is_finite() && m.fps > 0.0 && m.fps <= 1e6) {
             return Err(Error::invalid(format!(
                 "fps = {} must be in (0, 1e6]",
@@ -363,21 +359,8 @@ fn infer_fps(rows: &[TrackRow]) -> Option<f64> {
 }
 
 fn parse_csv(path: &Path, text: &str) -> Result<(Vec<TrackRow>, bool)> {
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty());
-    let Some((_, header)) = lines.next() else {
-        return Err(Error::file(
-            path,
-            "empty file (expected header frame,time,id,x,y,…)",
-        ));
-    };
-    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    let find = |name: &str| cols.iter().position(|c| *c == name);
-    let need = |name: &str| {
-        find(name).ok_or_else(|| Error::file(path, format!("header lacks column '{name}'")))
-    };
+    let table = Table::parse(path, text, "frame,time,id,x,y,…")?;
+    let (find, need) = (|name: &str| table.find(name), |name: &str| table.need(name));
     let (c_frame, c_time, c_id, c_x, c_y) = (
         need("frame")?,
         need("time")?,
@@ -398,36 +381,13 @@ fn parse_csv(path: &Path, text: &str) -> Result<(Vec<TrackRow>, bool)> {
     }
     let c_role = find("role");
     let mut rows = Vec::new();
-    for (ln, line) in lines {
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
-        let line_no = ln + 1;
-        let get = |c: usize, name: &str| -> Result<&str> {
-            f.get(c).copied().ok_or_else(|| {
-                Error::file(path, format!("line {line_no}: missing column '{name}'"))
-            })
-        };
-        let num = |c: usize, name: &str| -> Result<f64> {
-            let s = get(c, name)?;
-            let v: f64 = s.parse().map_err(|_| {
-                Error::file(
-                    path,
-                    format!("line {line_no}: {name} = '{s}' is not a number"),
-                )
-            })?;
-            if !v.is_finite() {
-                return Err(Error::file(path, format!("line {line_no}: {name} is {v}")));
-            }
-            Ok(v)
-        };
-        let int = |c: usize, name: &str| -> Result<u64> {
-            let s = get(c, name)?;
-            s.parse().map_err(|_| {
-                Error::file(
-                    path,
-                    format!("line {line_no}: {name} = '{s}' is not a non-negative integer"),
-                )
-            })
-        };
+    for r in table.records() {
+        let line_no = r.line();
+        let (get, num, int) = (
+            |c: usize, name: &str| r.get(c, name),
+            |c: usize, name: &str| r.num(c, name),
+            |c: usize, name: &str| r.int(c, name),
+        );
         let z = match c_z {
             Some(c) => num(c, "z")?,
             None => 0.0,

@@ -276,12 +276,7 @@ impl Params {
 
     /// Checks every value; the message names the offending key.
     pub fn validate(&self) -> Result<()> {
-        if self.schema != SCHEMA {
-            return Err(Error::invalid(format!(
-                "schema is '{}', expected '{SCHEMA}'",
-                self.schema
-            )));
-        }
+        crate::data::check_schema(&self.schema, SCHEMA).map_err(Error::invalid)?;
         for (name, v) in param_names().iter().zip(self.to_vec()) {
             let lo = if name.ends_with("weight") {
                 0.0

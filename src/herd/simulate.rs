@@ -48,12 +48,8 @@ impl Default for SimulateConfig {
 impl SimulateConfig {
     /// Checks the steps, frame rate, speed noise and guidance; errors name the key.
     pub fn check(&self) -> Result<()> {
-        if self.steps == 0 {
-            return Err(Error::config("steps", "must be ≥ 1"));
-        }
-        if !(self.fps.is_finite() && self.fps > 0.0) {
-            return Err(Error::config("fps", format!("{} must be > 0", self.fps)));
-        }
+        crate::error::check_counts(&[("steps", self.steps)])?;
+        crate::error::check_positive(&[("fps", self.fps)])?;
         if let Some(s) = self.speed_noise {
             if !(s.is_finite() && s >= 0.0) {
                 return Err(Error::config("speed_noise", format!("{s} must be ≥ 0")));
@@ -93,37 +89,32 @@ impl HerdSource {
     }
 }
 
-/// A simulation with its files: the parameter set (the built-in set when absent), the initial
-/// herd (required), an optional recording to write or to replay, and the trajectory CSV.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+/// The files of a run of the model: the parameter set (the built-in set when absent), the
+/// initial herd, and the decisions to record or to replay (`simulate` and `gradcheck`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct SimulateJob {
+pub struct RunFiles {
     pub params: Option<PathBuf>,
     pub herd: Option<HerdSource>,
     pub record: Option<PathBuf>,
     pub replay: Option<PathBuf>,
-    pub out: PathBuf,
-    pub config: SimulateConfig,
 }
 
-impl Default for SimulateJob {
-    fn default() -> Self {
-        SimulateJob {
-            params: None,
-            herd: None,
-            record: None,
-            replay: None,
-            out: PathBuf::from("traj.csv"),
-            config: SimulateConfig::default(),
-        }
-    }
+/// A simulation with its files: the run's ([`RunFiles`], a herd required) and the trajectory
+/// CSV.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulateJob {
+    pub run: RunFiles,
+    pub out: PathBuf,
+    pub config: SimulateConfig,
 }
 
 impl SimulateJob {
     /// Checks the settings and that there is a herd; errors name the key.
     pub fn check(&self) -> Result<()> {
         self.config.check()?;
-        if self.herd.is_none() {
+        if self.run.herd.is_none() {
             return Err(Error::config(
                 "herd",
                 "give the initial herd: an INIT.csv file or a number of agents",
@@ -146,7 +137,7 @@ pub fn load_params(path: Option<&Path>) -> Result<Params> {
 pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize> {
     let cfg = &job.config;
     cfg.check()?;
-    let mut params = load_params(job.params.as_deref())?;
+    let mut params = load_params(job.run.params.as_deref())?;
     if let Some(s) = cfg.speed_noise {
         params.speed.std = s;
     }
@@ -154,7 +145,7 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
         obstacles: None,
         guidance: cfg.guidance.map_or(Guidance::None, Guidance::Uniform),
     };
-    let rows = match &job.herd {
+    let rows = match &job.run.herd {
         Some(h) => h.rows(&params, &world, cfg.seed)?,
         None => {
             return Err(Error::config(
@@ -163,9 +154,9 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
             ))
         }
     };
-    let replay = job.replay.as_deref().map(Recording::load).transpose()?;
+    let replay = job.run.replay.as_deref().map(Recording::load).transpose()?;
     check_writable(&job.out)?;
-    if let Some(r) = &job.record {
+    if let Some(r) = &job.run.record {
         check_writable(r)?;
     }
     let device = cpu_device(cfg.precision)?;
@@ -182,7 +173,7 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
     text.push_str(TRAJ_HEADER);
     text.push('\n');
     let mut prev = rows;
-    let mut rec = job.record.as_ref().map(|_| Recording::new(ids.len()));
+    let mut rec = job.run.record.as_ref().map(|_| Recording::new(ids.len()));
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005e_ed0f_5eed);
     progress.start("simulate", cfg.steps as u64);
     let decide = match &replay {
@@ -217,7 +208,7 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
         &last_roles,
     );
     out.write_str(&text)?;
-    if let (Some(path), Some(rec)) = (&job.record, &rec) {
+    if let (Some(path), Some(rec)) = (&job.run.record, &rec) {
         rec.save(path)?;
     }
     out.commit()?;

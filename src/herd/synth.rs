@@ -41,12 +41,8 @@ impl SynthConfig {
         if self.agents == 0 {
             return Err(Error::config("agents", "the herd is empty: must be ≥ 1"));
         }
-        if self.frame_count == 0 {
-            return Err(Error::config("frame_count", "must be ≥ 1"));
-        }
-        if !(self.fps.is_finite() && self.fps > 0.0) {
-            return Err(Error::config("fps", format!("{} must be > 0", self.fps)));
-        }
+        crate::error::check_counts(&[("frame_count", self.frame_count)])?;
+        crate::error::check_positive(&[("fps", self.fps)])?;
         let g = &self.grid;
         if g.nx == 0 || g.ny == 0 || !(g.cell_size.is_finite() && g.cell_size > 0.0) {
             return Err(Error::config(
@@ -233,13 +229,7 @@ impl Default for SynthVideo {
 impl SynthJob {
     /// Checks the cell size (the rest is [`SynthConfig::check`]'s and the video's).
     pub fn check(&self) -> Result<()> {
-        if !(self.cell_size.is_finite() && self.cell_size > 0.0) {
-            return Err(Error::config(
-                "cell_size",
-                format!("{} must be > 0", self.cell_size),
-            ));
-        }
-        Ok(())
+        crate::error::check_positive(&[("cell_size", self.cell_size)])
     }
 }
 
@@ -292,7 +282,7 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
             let s = v.px_per_bl;
             clip.meta.body_length_px = Some(s);
             clip.meta.body_pixel_coverage =
-                Some(std::f64::consts::PI * 0.5 * s * 0.5 * render::BODY_WIDTH_BL * s);
+                Some(std::f64::consts::PI * 0.5 * s * 0.5 * crate::data::clip::BODY_WIDTH_BL * s);
             if let serde_json::Value::Object(m) = &mut clip.meta.provenance {
                 m.insert("video".into(), settings);
             }
@@ -336,8 +326,6 @@ mod render {
     use crate::error::Result;
     use crate::progress::Progress;
     use std::path::Path;
-
-    pub const BODY_WIDTH_BL: f64 = 0.4;
 
     #[cfg(feature = "video")]
     pub type Pending = crate::video::PendingVideo;

@@ -66,28 +66,63 @@ pub fn coarse_cells(c: &ClipFields, f: usize, k: usize) -> Vec<[f64; 3]> {
     n
 }
 
-/// Density and velocity errors of simulated coarse cells `sim` against the clip's `clip` (from
-/// [`coarse_cells`]): density Σ|n' − n| / Σ n, velocity Σ n ‖V' − V‖ / Σ n ‖V‖.
-pub fn cell_errors(clip: &[[f64; 3]], sim: &[[f64; 3]]) -> (f64, f64) {
+/// One cell of a comparison with a clip: the clip's agents `n` and mean velocity `v` there, and
+/// the other side's (`n_sim`, `v_sim`; zero velocity where it has nobody).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellPair {
+    pub n: f64,
+    pub v: [f64; 2],
+    pub n_sim: f64,
+    pub v_sim: [f64; 2],
+}
+
+/// The density and velocity errors of a comparison, cell by cell: density Σ|n' − n| / Σ n,
+/// velocity Σ n ‖V' − V‖ / Σ n ‖V‖ over the clip's occupied cells (0 when the clip has nobody).
+/// `norm(x, y)` is the length of a vector: the coarse errors of validation have always used
+/// `hypot`, the fit's errors on the clip's grid √(x² + y²); each keeps its own so that the
+/// numbers it has recorded keep their bytes.
+pub fn relative_errors(
+    cells: impl IntoIterator<Item = CellPair>,
+    norm: fn(f64, f64) -> f64,
+) -> (f64, f64) {
     let (mut dn, mut tn, mut dv, mut tv) = (0.0, 0.0, 0.0, 0.0);
-    for (c, s) in clip.iter().zip(sim) {
-        dn += (s[0] - c[0]).abs();
-        tn += c[0];
-        if c[0] > 0.0 {
-            let v = [c[1] / c[0], c[2] / c[0]];
-            let vs = if s[0] > 0.0 {
-                [s[1] / s[0], s[2] / s[0]]
-            } else {
-                [0.0, 0.0]
-            };
-            dv += c[0] * (vs[0] - v[0]).hypot(vs[1] - v[1]);
-            tv += c[0] * v[0].hypot(v[1]);
+    for p in cells {
+        dn += (p.n_sim - p.n).abs();
+        tn += p.n;
+        if p.n > 0.0 {
+            dv += p.n * norm(p.v_sim[0] - p.v[0], p.v_sim[1] - p.v[1]);
+            tv += p.n * norm(p.v[0], p.v[1]);
         }
     }
     (
         if tn > 0.0 { dn / tn } else { 0.0 },
         if tv > 0.0 { dv / tv } else { 0.0 },
     )
+}
+
+/// √(x² + y²).
+fn sqrt_norm(x: f64, y: f64) -> f64 {
+    (x * x + y * y).sqrt()
+}
+
+/// Density and velocity errors of simulated coarse cells `sim` against the clip's `clip` (from
+/// [`coarse_cells`]; [`relative_errors`] with `hypot`).
+pub fn cell_errors(clip: &[[f64; 3]], sim: &[[f64; 3]]) -> (f64, f64) {
+    // Mean velocity of a coarse cell from its momentum (zero where it is empty).
+    let mean = |c: &[f64; 3]| {
+        if c[0] > 0.0 {
+            [c[1] / c[0], c[2] / c[0]]
+        } else {
+            [0.0, 0.0]
+        }
+    };
+    let pairs = clip.iter().zip(sim).map(|(c, s)| CellPair {
+        n: c[0],
+        v: mean(c),
+        n_sim: s[0],
+        v_sim: mean(s),
+    });
+    relative_errors(pairs, f64::hypot)
 }
 
 /// Density and velocity errors of frame `fs` of `sim` against frame `f` of `clip` (same grid), on
@@ -150,39 +185,29 @@ pub fn cell_counts(clip: &ClipFields, rows: &[AgentRow]) -> (Vec<f64>, Vec<[f64;
     (n, v)
 }
 
-/// Density and velocity errors of a herd against frame `f` of the clip, by cell counts:
-/// density Σ|n'_c − n_c| / Σ n_c (n = ρ·area), velocity Σ n_c ‖V'_c − V_c‖ / Σ n_c ‖V_c‖ over the
-/// clip's occupied cells (V'_c = 0 where the simulation has nobody).
+/// Density and velocity errors of a herd against frame `f` of the clip on the clip's grid
+/// ([`relative_errors`] with √(x² + y²)), by cell counts n = ρ·area.
 pub fn field_errors(clip: &ClipFields, f: usize, rows: &[AgentRow]) -> (f64, f64) {
     let g = clip.grid();
     let a = g.cell_area();
     let (n_sim, v_sum) = cell_counts(clip, rows);
-    let (mut dn, mut tn, mut dv, mut tv) = (0.0, 0.0, 0.0, 0.0);
-    for iy in 0..g.ny {
-        for ix in 0..g.nx {
-            let c = iy * g.nx + ix;
-            let n = clip.density[[f, iy, ix]] as f64 * a;
-            dn += (n_sim[c] - n).abs();
-            tn += n;
-            if n > 0.0 {
-                let v = [
-                    clip.velocity[[f, iy, ix, 0]] as f64,
-                    clip.velocity[[f, iy, ix, 1]] as f64,
-                ];
-                let vs = if n_sim[c] > 0.0 {
-                    [v_sum[c][0] / n_sim[c], v_sum[c][1] / n_sim[c]]
-                } else {
-                    [0.0, 0.0]
-                };
-                dv += n * ((vs[0] - v[0]).powi(2) + (vs[1] - v[1]).powi(2)).sqrt();
-                tv += n * (v[0] * v[0] + v[1] * v[1]).sqrt();
-            }
+    let pairs = (0..g.ny * g.nx).map(|c| {
+        let (iy, ix) = (c / g.nx, c % g.nx);
+        CellPair {
+            n: clip.density[[f, iy, ix]] as f64 * a,
+            v: [
+                clip.velocity[[f, iy, ix, 0]] as f64,
+                clip.velocity[[f, iy, ix, 1]] as f64,
+            ],
+            n_sim: n_sim[c],
+            v_sim: if n_sim[c] > 0.0 {
+                [v_sum[c][0] / n_sim[c], v_sum[c][1] / n_sim[c]]
+            } else {
+                [0.0, 0.0]
+            },
         }
-    }
-    (
-        if tn > 0.0 { dn / tn } else { 0.0 },
-        if tv > 0.0 { dv / tv } else { 0.0 },
-    )
+    });
+    relative_errors(pairs, sqrt_norm)
 }
 
 /// A cell field (row-major `[ny·nx]`) filtered by a symmetric kernel of odd length, centred on

@@ -179,6 +179,18 @@ mod tests {
         }
     }
 
+    /// One frame rasterised on [`grid`] at 10 fps without obstacles.
+    fn one_frame(frame: Vec<AgentRow>) -> ClipFields {
+        rasterise(
+            &[frame],
+            grid(),
+            10.0,
+            Array2::zeros((2, 3)),
+            serde_json::Value::Null,
+        )
+        .unwrap()
+    }
+
     #[test]
     fn hand_made_herd() {
         // Cell (0,0): two agents, velocities (1,0) and (0,1). Cell (2,1): one agent (−2, 0).
@@ -189,14 +201,7 @@ mod tests {
             a(5.0, 3.0, -2.0, 0.0),
             a(7.0, 1.0, 1.0, 0.0),
         ];
-        let c = rasterise(
-            &[frame],
-            grid(),
-            10.0,
-            Array2::zeros((2, 3)),
-            serde_json::Value::Null,
-        )
-        .unwrap();
+        let c = one_frame(frame);
         assert_eq!(c.density[[0, 0, 0]], 0.5);
         assert_eq!(c.density[[0, 1, 2]], 0.25);
         assert_eq!(c.density.iter().filter(|&&d| d > 0.0).count(), 2);
@@ -223,19 +228,8 @@ mod tests {
     #[test]
     fn opposite_directions_have_variance_pi_squared_over_four() {
         // Three agents: two heading +x, one heading −x; mean direction +x.
-        let frame = vec![
-            a(0.5, 0.5, 1.0, 0.0),
-            a(1.0, 0.5, 1.0, 0.0),
-            a(1.5, 0.5, -1.0, 0.0),
-        ];
-        let c = rasterise(
-            &[frame],
-            grid(),
-            10.0,
-            Array2::zeros((2, 3)),
-            serde_json::Value::Null,
-        )
-        .unwrap();
+        let frame = [(0.5, 1.0), (1.0, 1.0), (1.5, -1.0)].map(|(x, vx)| a(x, 0.5, vx, 0.0));
+        let c = one_frame(frame.to_vec());
         let want = (std::f64::consts::PI.powi(2) / 3.0) as f32;
         assert!((c.dir_variance[[0, 0, 0]] - want).abs() < 1e-5);
     }
@@ -243,14 +237,7 @@ mod tests {
     #[test]
     fn standing_agents_count_in_density_only() {
         let frame = vec![a(0.5, 0.5, 0.0, 0.0), a(1.0, 0.5, 0.0, 2.0)];
-        let c = rasterise(
-            &[frame],
-            grid(),
-            10.0,
-            Array2::zeros((2, 3)),
-            serde_json::Value::Null,
-        )
-        .unwrap();
+        let c = one_frame(frame);
         assert_eq!(c.density[[0, 0, 0]], 0.5);
         assert_eq!(c.velocity[[0, 0, 0, 1]], 1.0);
         assert_eq!(c.dir_variance[[0, 0, 0]], 0.0);

@@ -23,28 +23,7 @@ pub enum Optimizer {
     Averaged,
 }
 
-impl std::fmt::Display for Optimizer {
-    /// The name used in settings files and on the command line.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Optimizer::Adam => "adam",
-            Optimizer::Normalized => "normalized",
-            Optimizer::Averaged => "averaged",
-        })
-    }
-}
-
-impl std::str::FromStr for Optimizer {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "adam" => Ok(Optimizer::Adam),
-            "normalized" => Ok(Optimizer::Normalized),
-            "averaged" => Ok(Optimizer::Averaged),
-            _ => Err(format!("'{s}' is not one of adam, normalized, averaged")),
-        }
-    }
-}
+enum_names!(Optimizer { Adam = "adam", Normalized = "normalized", Averaged = "averaged" });
 
 /// Optimiser state: Adam's moments; the averaged step's mean gradient (`m`) and mean ‖g‖²
 /// (`v[0]`); nothing for the normalised step.

@@ -39,8 +39,8 @@ impl RenderConfig {
     }
 }
 
-/// Body ellipse: full length 1 BL, full width 0.4 BL.
-pub const BODY_WIDTH_BL: f64 = 0.4;
+/// Body ellipse: full length 1 BL, full width [`BODY_WIDTH_BL`].
+pub use crate::data::clip::BODY_WIDTH_BL;
 
 /// The camera of frame `f` of `frames`: image-space similarity about the image centre,
 /// `p' = c + t + z R(θ) (p − c)`. Identity at frame 0, easing smoothly (raised cosine) to a pan of

@@ -99,33 +99,17 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
         }
         None => (ExtractConfig::default(), None),
     };
-    if let Some(v) = a.grid {
-        cfg.grid = v;
-    }
-    if let Some(v) = a.body_length_px {
-        cfg.body_length_px = v;
-    }
-    if a.body_colour.is_some() {
-        cfg.body_colour = a.body_colour;
-    }
-    if let Some(v) = a.colour_threshold {
-        cfg.colour_threshold = v;
-    }
-    if let Some(v) = a.background_threshold {
-        cfg.background_threshold = v;
-    }
-    if a.body_pixels.is_some() {
-        cfg.body_pixels = a.body_pixels;
-    }
-    if let Some(v) = a.smooth {
-        cfg.smooth = v;
-    }
-    if let Some((x, y)) = a.frames {
-        cfg.frames = Some([x, y]);
-    }
-    if a.obstacles.is_some() {
-        cfg.obstacles = a.obstacles.clone();
-    }
+    // Flags given on the command line override the settings file.
+    let set = |v: &mut f64, x: Option<f64>| *v = x.unwrap_or(*v);
+    cfg.grid = a.grid.unwrap_or(cfg.grid);
+    set(&mut cfg.body_length_px, a.body_length_px);
+    cfg.body_colour = a.body_colour.or(cfg.body_colour);
+    set(&mut cfg.colour_threshold, a.colour_threshold);
+    set(&mut cfg.background_threshold, a.background_threshold);
+    cfg.body_pixels = a.body_pixels.or(cfg.body_pixels);
+    cfg.smooth = a.smooth.unwrap_or(cfg.smooth);
+    cfg.frames = a.frames.map(|(x, y)| [x, y]).or(cfg.frames);
+    cfg.obstacles = a.obstacles.clone().or(cfg.obstacles);
     match a.background.as_deref() {
         None => {}
         Some("auto") => cfg.background = None,

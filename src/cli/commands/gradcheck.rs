@@ -1,7 +1,7 @@
 //! `herdfit gradcheck`: flags → [`GradcheckJob`] → [`run`] → the table.
 
 use crate::backend::Precision;
-use crate::cli::args::{choice, with_flags, HerdArgs, LOSSES, OBJECTIVES, PRECISIONS};
+use crate::cli::args::{choice, with_flags, RunArgs, LOSSES, OBJECTIVES, PRECISIONS};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::LossKind;
@@ -11,11 +11,8 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct GradcheckArgs {
-    /// Parameter set; the built-in default set when omitted.
-    #[arg(long, value_name = "P.json")]
-    pub params: Option<PathBuf>,
     #[command(flatten)]
-    pub herd: HerdArgs,
+    pub run: RunArgs,
     /// Unrolled steps.
     #[arg(long, value_name = "T", default_value_t = 10)]
     pub steps: usize,
@@ -26,12 +23,6 @@ pub struct GradcheckArgs {
     pub fd_step: Option<f64>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Save the decisions used (to replay them in another precision).
-    #[arg(long, value_name = "REC.json")]
-    pub record: Option<PathBuf>,
-    /// Use these recorded decisions instead of recording new ones.
-    #[arg(long, value_name = "REC.json", conflicts_with = "record")]
-    pub replay: Option<PathBuf>,
     /// Objective: the documented herd objective, or the fit's loss on --clip.
     #[arg(long, value_parser = choice::<Objective>(OBJECTIVES), default_value_t = Objective::Herd)]
     pub objective: Objective,
@@ -51,11 +42,8 @@ pub struct GradcheckArgs {
 
 pub fn exec(a: GradcheckArgs) -> Result<()> {
     let job = GradcheckJob {
-        params: a.params,
-        herd: a.herd.source(),
+        run: a.run.files(),
         clip: a.clip,
-        record: a.record,
-        replay: a.replay,
         json: a.json,
         config: GradcheckConfig {
             steps: a.steps,

@@ -1,7 +1,7 @@
 //! `herdfit simulate`: flags → [`SimulateJob`] → [`simulate`].
 
 use crate::backend::Precision;
-use crate::cli::args::{choice, parse_pair, with_flags, HerdArgs, PRECISIONS};
+use crate::cli::args::{choice, parse_pair, with_flags, RunArgs, PRECISIONS};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::simulate::{simulate, SimulateConfig, SimulateJob};
@@ -10,11 +10,8 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// Parameter set (herdfit.params/1 JSON); the built-in default set when omitted.
-    #[arg(long, value_name = "P.json")]
-    pub params: Option<PathBuf>,
     #[command(flatten)]
-    pub herd: HerdArgs,
+    pub run: RunArgs,
     /// Number of steps (frames after frame 0).
     #[arg(long, value_name = "T")]
     pub steps: usize,
@@ -32,12 +29,6 @@ pub struct SimulateArgs {
     pub precision: Precision,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Write the run's perception, roles and noise to this file (JSON).
-    #[arg(long, value_name = "REC.json")]
-    pub record: Option<PathBuf>,
-    /// Replay the perception, roles and noise of a recorded run instead of computing them.
-    #[arg(long, value_name = "REC.json", conflicts_with = "record")]
-    pub replay: Option<PathBuf>,
     /// Output trajectories: frame,time,id,x,y,vx,vy,role.
     #[arg(long, value_name = "TRAJ.csv")]
     pub out: PathBuf,
@@ -45,10 +36,7 @@ pub struct SimulateArgs {
 
 pub fn exec(a: SimulateArgs) -> Result<()> {
     let job = SimulateJob {
-        params: a.params,
-        herd: a.herd.source(),
-        record: a.record,
-        replay: a.replay,
+        run: a.run.files(),
         out: a.out,
         config: SimulateConfig {
             steps: a.steps,

@@ -2,6 +2,14 @@
 
 use super::*;
 
+/// A temporary folder holding the file `name` with `text`, and the file's path.
+fn file_with(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join(name);
+    std::fs::write(&p, text).unwrap();
+    (dir, p)
+}
+
 fn row(frame: u64, id: u64, x: f64, y: f64) -> TrackRow {
     TrackRow {
         frame,
@@ -50,14 +58,11 @@ fn round_trip_2d_and_3d_with_sidecar() {
 
 #[test]
 fn traj_csv_without_sidecar_reads_with_defaults() {
-    let dir = tempfile::tempdir().unwrap();
-    let p = dir.path().join("traj.csv");
-    std::fs::write(
-        &p,
+    let (_dir, p) = file_with(
+        "traj.csv",
         "frame,time,id,x,y,vx,vy,role\n0,0,0,1,2,1,0,leader\n0,0,1,3,2,1,0,follower\n\
          1,0.04,0,1.04,2,1,0,leader\n1,0.04,1,3.04,2,1,0,follower\n",
-    )
-    .unwrap();
+    );
     let t = Tracks::load(&p).unwrap();
     assert_eq!(t.meta.units, Units::BodyLengths);
     assert_eq!(t.meta.dimension, 2);
@@ -102,31 +107,23 @@ fn bad_tracks_name_the_line_or_row() {
     }
     // A sidecar that disagrees with the CSV.
     std::fs::write(&p, "frame,time,id,x,y\n0,0,0,1,2\n").unwrap();
-    std::fs::write(
-        dir.path().join("bad.json"),
-        r#"{"schema":"herdfit.tracks/1","units":"m","fps":10,"dimension":3}"#,
-    )
-    .unwrap();
-    let e = Tracks::load(&p).unwrap_err().to_string();
+    let with_sidecar = |json: &str| {
+        std::fs::write(dir.path().join("bad.json"), json).unwrap();
+        Tracks::load(&p).unwrap_err().to_string()
+    };
+    let e = with_sidecar(r#"{"schema":"herdfit.tracks/1","units":"m","fps":10,"dimension":3}"#);
     assert!(e.contains("bad.json") && e.contains("dimension = 3"), "{e}");
-    std::fs::write(
-        dir.path().join("bad.json"),
-        r#"{"schema":"herdfit.tracks/1","units":"furlong","fps":10,"dimension":2}"#,
-    )
-    .unwrap();
-    let e = Tracks::load(&p).unwrap_err().to_string();
+    let e =
+        with_sidecar(r#"{"schema":"herdfit.tracks/1","units":"furlong","fps":10,"dimension":2}"#);
     assert!(e.contains("bad.json") && e.contains("furlong"), "{e}");
 }
 
 #[test]
 fn eth_ucy_frames_become_consecutive_steps() {
-    let dir = tempfile::tempdir().unwrap();
-    let p = dir.path().join("scene.txt");
-    std::fs::write(
-        &p,
+    let (_dir, p) = file_with(
+        "scene.txt",
         "780\t1.0\t8.46\t3.59\n790\t1.0\t9.0\t3.5\n790\t2.0\t1.5\t2.0\n800\t2.0\t1.9\t2.1\n",
-    )
-    .unwrap();
+    );
     let t = read_eth_ucy(&p, 2.5).unwrap();
     assert_eq!(t.meta.units, Units::Metres);
     let f: Vec<(u64, u64)> = t.rows.iter().map(|r| (r.frame, r.id)).collect();

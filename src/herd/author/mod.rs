@@ -13,7 +13,9 @@ use crate::data::agents::AgentRow;
 use crate::error::Result;
 use crate::herd::params::N_PARAMS;
 use crate::herd::sim::obstacle_map;
-use crate::herd::sim::{ForceTensors, Guidance, HerdState, Model, World};
+use crate::herd::sim::{
+    theta_tensor, ForceTensors, Guidance, HerdState, Model, StepDecisions, StepHooks, World,
+};
 use burn::tensor::Device;
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
@@ -141,64 +143,53 @@ fn spawn(scene: &Scene, rng: &mut impl Rng) -> Result<Vec<AgentRow>> {
     Ok(rows)
 }
 
-/// Simulates a scene. Leaders follow the navigation field; every agent uses the parameter set of
-/// the region it stands in (ramped over [`SWITCH_TIME`]); speeds are capped per region; a step
-/// that would put an agent inside an obstacle (or outside the world) slides along the wall or
-/// stays, so no agent centre is ever inside an obstacle.
-pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result<AuthorRun> {
-    let f = &scene.file;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(f.seed);
-    let mut rows = spawn(scene, &mut rng)?;
-    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
-    let navf = navigation(scene);
-    let g = scene.grid;
-    let model = Model {
-        params: scene.params[0].clone(),
-        world: World {
-            obstacles: Some(obstacle_map(&g, &scene.obstacles)),
-            guidance: Guidance::Field {
-                origin: g.origin,
-                cell_size: g.cell_size,
-                nx: g.nx,
-                ny: g.ny,
-                dirs: navf.clone(),
-            },
-        },
-        dt: 1.0 / f.fps,
-    };
-    let dt = model.dt;
-    let sets: Vec<[f64; N_PARAMS]> = scene.params.iter().map(|p| p.to_vec()).collect();
-    let region_of = |rows: &[AgentRow]| -> Vec<usize> {
-        rows.iter().map(|r| scene.region_at([r.x, r.y])).collect()
-    };
-    let mut region = region_of(&rows);
-    let mut thetas: Vec<[f64; N_PARAMS]> = region.iter().map(|&k| sets[k]).collect();
-    let steps = (f.duration * f.fps).round().max(1.0) as usize;
-    let mut frames = vec![rows.clone()];
-    let mut roles = Vec::with_capacity(steps + 1);
-    let mut regions = vec![region.clone()];
-    let mut predator = Vec::new();
-    let mut state = HerdState::from_rows(&rows, device);
-    let ramp = (dt / SWITCH_TIME).min(1.0);
-    for k in 0..steps {
-        let t = k as f64 * dt;
-        let snap = state.snapshot()?;
-        let dec = model.decide(&snap, &mut rng);
-        roles.push(dec.leader.clone());
-        for (th, &r) in thetas.iter_mut().zip(&region) {
-            for (a, b) in th.iter_mut().zip(&sets[r]) {
-                *a += (b - *a) * ramp;
+/// What an authored run changes between steps: each agent's parameter set ramps towards its
+/// region's, the predator's force is added, and after the step speeds are capped per region
+/// and no agent enters an obstacle.
+struct SceneHooks<'a, P: FnMut()> {
+    scene: &'a Scene,
+    device: &'a Device,
+    dt: f64,
+    ramp: f64,
+    sets: Vec<[f64; N_PARAMS]>,
+    /// Each agent's current parameters and behaviour set.
+    thetas: Vec<[f64; N_PARAMS]>,
+    ids: Vec<u64>,
+    frames: Vec<Vec<AgentRow>>,
+    roles: Vec<Vec<bool>>,
+    regions: Vec<Vec<usize>>,
+    predator: Vec<P2>,
+    progress: &'a mut P,
+}
+
+impl<P: FnMut()> StepHooks for SceneHooks<'_, P> {
+    fn forces(&mut self, _t: usize, _state: &HerdState) -> Result<Option<ForceTensors>> {
+        let region = self.regions.last().map(Vec::as_slice).unwrap_or(&[]);
+        for (th, &r) in self.thetas.iter_mut().zip(region) {
+            for (a, b) in th.iter_mut().zip(&self.sets[r]) {
+                *a += (b - *a) * self.ramp;
             }
         }
-        let forces = ForceTensors::per_agent(&thetas, &model.params.constants, device);
-        let extra = f.predator.as_ref().map(|p| {
-            let q = predator_at(&p.path, p.speed, t);
-            predator.push(q);
-            predator_force(&snap.pos, q, p.radius, p.strength)
-        });
-        let next = model.step_with(&forces, &state, &dec, extra.as_deref())?;
-        let mut new_rows = next.rows(&ids)?;
-        for (r, old) in new_rows.iter_mut().zip(&rows) {
+        let c = &self.scene.params[0].constants;
+        Ok(Some(ForceTensors::per_agent(&self.thetas, c, self.device)))
+    }
+
+    fn extra(&mut self, t: usize, state: &HerdState) -> Result<Option<Vec<P2>>> {
+        let Some(p) = &self.scene.file.predator else {
+            return Ok(None);
+        };
+        let q = predator_at(&p.path, p.speed, t as f64 * self.dt);
+        self.predator.push(q);
+        let pos = state.snapshot()?.pos;
+        Ok(Some(predator_force(&pos, q, p.radius, p.strength)))
+    }
+
+    fn after(&mut self, _t: usize, dec: &StepDecisions, next: HerdState) -> Result<HerdState> {
+        self.roles.push(dec.leader.clone());
+        let (scene, dt) = (self.scene, self.dt);
+        let old_rows = self.frames.last().map(Vec::as_slice).unwrap_or(&[]);
+        let mut rows = next.rows(&self.ids)?;
+        for (r, old) in rows.iter_mut().zip(old_rows) {
             // Speed cap of the region the agent stands in.
             let v = r.vx.hypot(r.vy);
             if let Some(cap) = scene.speed_cap_at([old.x, old.y]) {
@@ -222,13 +213,61 @@ pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result
                 }
             }
         }
-        rows = new_rows;
-        region = region_of(&rows);
-        state = HerdState::from_rows(&rows, device);
-        frames.push(rows.clone());
-        regions.push(region.clone());
-        progress();
+        let state = HerdState::from_rows(&rows, self.device);
+        self.regions
+            .push(rows.iter().map(|r| scene.region_at([r.x, r.y])).collect());
+        self.frames.push(rows);
+        (self.progress)();
+        Ok(state)
     }
+}
+
+/// Simulates a scene. Leaders follow the navigation field; every agent uses the parameter set of
+/// the region it stands in (ramped over [`SWITCH_TIME`]); speeds are capped per region; a step
+/// that would put an agent inside an obstacle (or outside the world) slides along the wall or
+/// stays, so no agent centre is ever inside an obstacle.
+pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result<AuthorRun> {
+    let f = &scene.file;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(f.seed);
+    let rows = spawn(scene, &mut rng)?;
+    let navf = navigation(scene);
+    let g = scene.grid;
+    let model = Model {
+        params: scene.params[0].clone(),
+        world: World {
+            obstacles: Some(obstacle_map(&g, &scene.obstacles)),
+            guidance: Guidance::Field {
+                origin: g.origin,
+                cell_size: g.cell_size,
+                nx: g.nx,
+                ny: g.ny,
+                dirs: navf.clone(),
+            },
+        },
+        dt: 1.0 / f.fps,
+    };
+    let sets: Vec<[f64; N_PARAMS]> = scene.params.iter().map(|p| p.to_vec()).collect();
+    let region: Vec<usize> = rows.iter().map(|r| scene.region_at([r.x, r.y])).collect();
+    let steps = (f.duration * f.fps).round().max(1.0) as usize;
+    let mut hooks = SceneHooks {
+        scene,
+        device,
+        dt: model.dt,
+        ramp: (model.dt / SWITCH_TIME).min(1.0),
+        thetas: region.iter().map(|&k| sets[k]).collect(),
+        sets,
+        ids: rows.iter().map(|r| r.id).collect(),
+        frames: vec![rows.clone()],
+        roles: Vec::with_capacity(steps + 1),
+        regions: vec![region],
+        predator: Vec::new(),
+        progress: &mut progress,
+    };
+    // The set-up θ is unused: every step takes the per-agent sets of [`SceneHooks::forces`].
+    let theta = theta_tensor(&hooks.sets[0], device);
+    let state = model.run_live(&theta, &rows, steps, &mut rng, &mut hooks)?;
+    let (frames, mut roles, regions, predator) =
+        (hooks.frames, hooks.roles, hooks.regions, hooks.predator);
     roles.push(model.decide(&state.snapshot()?, &mut rng).leader);
     Ok(AuthorRun {
         frames,

@@ -91,25 +91,16 @@ pub struct PredatorSpec {
     pub strength: f64,
 }
 
+/// The navigation field's ranges; each missing key takes [`NavSpec::default`]'s value.
 #[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct NavSpec {
     /// Arrow directions are propagated at full strength out to this distance (BL) ...
-    #[serde(default = "eight")]
     pub radius: f64,
     /// ... and decay as exp(−(d − radius) / decay) beyond it.
-    #[serde(default = "four")]
     pub decay: f64,
     /// Radius (BL) of the cancelling field around obstacles (eq. 14).
-    #[serde(default = "four")]
     pub cancel_radius: f64,
-}
-
-fn eight() -> f64 {
-    8.0
-}
-fn four() -> f64 {
-    4.0
 }
 
 impl Default for NavSpec {
@@ -207,9 +198,14 @@ impl Scene {
         }
         let grid = world_grid(&file, path)?;
         let obstacles = obstacle_cells(&file, &grid, path)?;
-        check_guidance(&file, &grid, &obstacles, path)?;
+        let ground = Ground {
+            grid: &grid,
+            obstacles: &obstacles,
+            path,
+        };
+        check_guidance(&file, &ground)?;
         let params = region_params(&file, path)?;
-        check_spawn_and_run(&file, &grid, &obstacles, path)?;
+        check_spawn_and_run(&file, &ground)?;
         Ok(Scene {
             path: path.to_path_buf(),
             grid,
@@ -379,15 +375,32 @@ fn obstacle_cells(file: &SceneFile, grid: &Grid, path: &Path) -> Result<Array2<u
     Ok(obstacles)
 }
 
+/// The grid and obstacles that a scene's points are judged against.
+struct Ground<'a> {
+    grid: &'a Grid,
+    obstacles: &'a Array2<u8>,
+    path: &'a Path,
+}
+
+impl Ground<'_> {
+    /// `p` (at JSON path `at`) is inside the world and not in an obstacle.
+    fn free_point(&self, file: &SceneFile, at: &str, p: P2) -> Result<()> {
+        if !in_world(&file.world, p) {
+            return Err(bad(self.path, at, "is outside the world"));
+        }
+        if let Some((ix, iy)) = self.grid.cell_of(p) {
+            if self.obstacles[[iy, ix]] != 0 {
+                return Err(bad(self.path, at, "is inside an obstacle"));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Guidance: `arrows` inside the world, `navigation` ranges, the `destination`; one of arrows
 /// or destination is required.
-fn check_guidance(
-    file: &SceneFile,
-    grid: &Grid,
-    obstacles: &Array2<u8>,
-    path: &Path,
-) -> Result<()> {
-    let bad = |at: &str, msg: &str| bad(path, at, msg);
+fn check_guidance(file: &SceneFile, ground: &Ground) -> Result<()> {
+    let bad = |at: &str, msg: &str| bad(ground.path, at, msg);
     let w = &file.world;
     let inside = |p: P2| in_world(w, p);
     for (k, arrow) in file.arrows.iter().enumerate() {
@@ -415,14 +428,7 @@ fn check_guidance(
         }
     }
     if let Some(d) = &file.destination {
-        if !inside(d.point) {
-            return Err(bad("destination.point", "is outside the world"));
-        }
-        if let Some((ix, iy)) = grid.cell_of(d.point) {
-            if obstacles[[iy, ix]] != 0 {
-                return Err(bad("destination.point", "is inside an obstacle"));
-            }
-        }
+        ground.free_point(file, "destination.point", d.point)?;
         if !(d.weight.is_finite() && d.weight >= 0.0) {
             return Err(bad("destination.weight", "must be ≥ 0"));
         }
@@ -468,26 +474,13 @@ fn region_params(file: &SceneFile, path: &Path) -> Result<Vec<Params>> {
 }
 
 /// `spawn`, `duration`, `fps` and `predator`.
-fn check_spawn_and_run(
-    file: &SceneFile,
-    grid: &Grid,
-    obstacles: &Array2<u8>,
-    path: &Path,
-) -> Result<()> {
-    let bad = |at: &str, msg: &str| bad(path, at, msg);
-    let inside = |p: P2| in_world(&file.world, p);
+fn check_spawn_and_run(file: &SceneFile, ground: &Ground) -> Result<()> {
+    let bad = |at: &str, msg: &str| bad(ground.path, at, msg);
     let s = &file.spawn;
     if s.count == 0 {
         return Err(bad("spawn.count", "the herd is empty"));
     }
-    if !inside(s.centre) {
-        return Err(bad("spawn.centre", "is outside the world"));
-    }
-    if let Some((ix, iy)) = grid.cell_of(s.centre) {
-        if obstacles[[iy, ix]] != 0 {
-            return Err(bad("spawn.centre", "is inside an obstacle"));
-        }
-    }
+    ground.free_point(file, "spawn.centre", s.centre)?;
     if !(s.size[0] > 0.0 && s.size[1] > 0.0 && s.size[0].is_finite() && s.size[1].is_finite()) {
         return Err(bad("spawn.size", "must be > 0"));
     }

@@ -2,7 +2,7 @@
 
 use crate::backend::Precision;
 use crate::data::ClipFields;
-use crate::error::{Error, Result};
+use crate::error::{check_counts, Error, Result};
 use crate::herd::guidance::{check_guidance_scale, GUIDANCE_SCALE};
 use crate::herd::start::Settle;
 use crate::optim::Optimizer;
@@ -80,28 +80,7 @@ pub enum LossKind {
     Ensemble,
 }
 
-impl std::fmt::Display for LossKind {
-    /// The name used in settings files and on the command line.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            LossKind::Paper => "paper",
-            LossKind::Fields => "fields",
-            LossKind::Ensemble => "ensemble",
-        })
-    }
-}
-
-impl std::str::FromStr for LossKind {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "paper" => Ok(LossKind::Paper),
-            "fields" => Ok(LossKind::Fields),
-            "ensemble" => Ok(LossKind::Ensemble),
-            _ => Err(format!("'{s}' is not one of paper, fields, ensemble")),
-        }
-    }
-}
+enum_names!(LossKind { Paper = "paper", Fields = "fields", Ensemble = "ensemble" });
 
 pub use crate::herd::params::ALIGNMENT;
 
@@ -155,11 +134,7 @@ impl FitConfig {
                 format!("{} is out of range 1..=64", self.replicas),
             ));
         }
-        for (key, v) in [("window", self.window), ("epochs", self.epochs)] {
-            if v == 0 {
-                return Err(Error::config(key, "must be ≥ 1"));
-            }
-        }
+        check_counts(&[("window", self.window), ("epochs", self.epochs)])?;
         check_guidance_scale(self.guidance_scale)?;
         for (key, v, lo, hi) in [
             ("beta", self.beta, 0.0, 1.0),

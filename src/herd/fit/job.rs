@@ -14,6 +14,7 @@ use crate::herd::guidance::guidance_fields;
 use crate::herd::params::{param_names, Params, SpeedModel};
 use crate::herd::sim::Guidance;
 use crate::progress::Progress;
+use plotters::style::RGBColor;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -313,28 +314,22 @@ fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
             })
             .collect()
     };
-    let series = [
-        crate::plot::Series {
-            name: "E_mean",
-            points: per_epoch(&|r| r.e_mean),
-            colour: plotters::style::RGBColor(31, 119, 180),
-        },
-        crate::plot::Series {
-            name: "E_var",
-            points: per_epoch(&|r| r.e_var),
-            colour: plotters::style::RGBColor(255, 127, 14),
-        },
-        crate::plot::Series {
-            name: "density error",
-            points: per_epoch(&|r| r.density_error),
-            colour: plotters::style::RGBColor(44, 160, 44),
-        },
-        crate::plot::Series {
-            name: "velocity error",
-            points: per_epoch(&|r| r.velocity_error),
-            colour: plotters::style::RGBColor(214, 39, 40),
-        },
+    type Column = fn(&LogRow) -> f64;
+    let columns: [(&str, Column, RGBColor); 4] = [
+        ("E_mean", |r| r.e_mean, RGBColor(31, 119, 180)),
+        ("E_var", |r| r.e_var, RGBColor(255, 127, 14)),
+        ("density error", |r| r.density_error, RGBColor(44, 160, 44)),
+        (
+            "velocity error",
+            |r| r.velocity_error,
+            RGBColor(214, 39, 40),
+        ),
     ];
+    let series = columns.map(|(name, f, colour)| crate::plot::Series {
+        name,
+        points: per_epoch(&f),
+        colour,
+    });
     crate::plot::line_chart(
         path,
         "herdfit fit",

@@ -118,24 +118,18 @@ pub fn step_loss(hx: &Tensor<1>, hy: &Tensor<1>, t: &StepTarget) -> StepLoss {
         (dist * mm.clone()).sum().div_scalar(n_mean)
     };
     // Cell mean directions Ṽ (sum of member directions), gathered back to the members.
-    let mx = zeros
-        .clone()
-        .scatter(
-            0,
-            idx.clone(),
-            hx.clone() * vm.clone(),
-            IndexingUpdateOp::Add,
-        )
-        .gather(0, idx.clone());
-    let my = zeros
-        .clone()
-        .scatter(
-            0,
-            idx.clone(),
-            hy.clone() * vm.clone(),
-            IndexingUpdateOp::Add,
-        )
-        .gather(0, idx.clone());
+    let member_sum = |h: &Tensor<1>| {
+        zeros
+            .clone()
+            .scatter(
+                0,
+                idx.clone(),
+                h.clone() * vm.clone(),
+                IndexingUpdateOp::Add,
+            )
+            .gather(0, idx.clone())
+    };
+    let (mx, my) = (member_sum(hx), member_sum(hy));
     let cross = hx.clone() * my.clone() - hy.clone() * mx.clone();
     let dot = hx.clone() * mx + hy.clone() * my;
     let ang2 = cross.atan2(dot.add_scalar(1e-9)).square() * vm;

@@ -8,7 +8,7 @@ use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::fit::LossKind;
 use crate::herd::sim::Recording;
-use crate::herd::simulate::{load_params, HerdSource};
+use crate::herd::simulate::{load_params, HerdSource, RunFiles};
 use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -24,26 +24,7 @@ pub enum Objective {
     Loss,
 }
 
-impl std::fmt::Display for Objective {
-    /// The name used in settings files and on the command line.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Objective::Herd => "herd",
-            Objective::Loss => "loss",
-        })
-    }
-}
-
-impl std::str::FromStr for Objective {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "herd" => Ok(Objective::Herd),
-            "loss" => Ok(Objective::Loss),
-            _ => Err(format!("'{s}' is not one of herd, loss")),
-        }
-    }
-}
+enum_names!(Objective { Herd = "herd", Loss = "loss" });
 
 /// Settings of a gradient check.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -89,13 +70,9 @@ impl GradcheckConfig {
 impl GradcheckConfig {
     /// Checks the steps, the finite-difference step and the replicas; errors name the key.
     pub fn check(&self) -> Result<()> {
-        if self.steps == 0 {
-            return Err(Error::config("steps", "must be ≥ 1"));
-        }
+        crate::error::check_counts(&[("steps", self.steps)])?;
         if let Some(h) = self.fd_step {
-            if !(h.is_finite() && h > 0.0) {
-                return Err(Error::config("fd_step", format!("{h} must be > 0")));
-            }
+            crate::error::check_positive(&[("fd_step", h)])?;
         }
         if self.replicas == 0 || self.replicas > 64 {
             return Err(Error::config(
@@ -107,33 +84,16 @@ impl GradcheckConfig {
     }
 }
 
-/// A gradient check with its files: the parameter set (built-in when absent), the herd of the
-/// herd objective (the default scenario's 200 agents when absent), the clip of the loss
-/// objective, decisions to record or replay, and the JSON report.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+/// A gradient check with its files: the run's ([`RunFiles`]: the herd of the herd objective,
+/// the default scenario's 200 agents when absent), the clip of the loss objective, and the JSON
+/// report.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GradcheckJob {
-    pub params: Option<PathBuf>,
-    pub herd: Option<HerdSource>,
+    pub run: RunFiles,
     pub clip: Option<PathBuf>,
-    pub record: Option<PathBuf>,
-    pub replay: Option<PathBuf>,
     pub json: PathBuf,
     pub config: GradcheckConfig,
-}
-
-impl Default for GradcheckJob {
-    fn default() -> Self {
-        GradcheckJob {
-            params: None,
-            herd: None,
-            clip: None,
-            record: None,
-            replay: None,
-            json: PathBuf::from("gradcheck.json"),
-            config: GradcheckConfig::default(),
-        }
-    }
 }
 
 impl GradcheckJob {
@@ -151,7 +111,7 @@ impl GradcheckJob {
 pub fn run(job: &GradcheckJob, progress: &mut dyn Progress) -> Result<GradReport> {
     job.check()?;
     let cfg = &job.config;
-    let params = load_params(job.params.as_deref())?;
+    let params = load_params(job.run.params.as_deref())?;
     let report = if cfg.objective == Objective::Loss {
         let path = job
             .clip
@@ -177,7 +137,7 @@ pub fn run(job: &GradcheckJob, progress: &mut dyn Progress) -> Result<GradReport
         progress.finish();
         report
     } else {
-        let sc = match &job.herd {
+        let sc = match &job.run.herd {
             Some(HerdSource::Init(p)) => {
                 let base = default_scenario(params, 1, cfg.seed)?;
                 Scenario {
@@ -190,11 +150,11 @@ pub fn run(job: &GradcheckJob, progress: &mut dyn Progress) -> Result<GradReport
         };
         check_writable(&job.json)?;
         let device = cpu_device(cfg.precision)?;
-        let rec = match &job.replay {
+        let rec = match &job.run.replay {
             Some(p) => Recording::load(p)?,
             None => record(&sc, cfg.steps, cfg.seed, &device)?,
         };
-        if let Some(p) = &job.record {
+        if let Some(p) = &job.run.record {
             rec.save(p)?;
         }
         progress.start("gradcheck", 13);

@@ -6,7 +6,7 @@ use crate::backend::{cpu_device, Precision};
 use crate::error::{Error, Result};
 use crate::herd::params::{param_names, N_PARAMS};
 use crate::herd::sim::{read_vec, theta_tensor, Decide, HerdState, Recording};
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 use rand::SeedableRng;
 use serde::Serialize;
 
@@ -44,19 +44,18 @@ pub fn objective_value(
     steps: usize,
     device: &Device,
 ) -> Result<f64> {
-    let state = HerdState::from_rows(&sc.init, device);
-    let t = theta_tensor(theta, device);
-    let end = sc.model.rollout::<rand_chacha::ChaCha8Rng>(
-        &t,
-        state,
-        steps,
-        Decide::Replay(rec),
-        |_, _, _| Ok(()),
-    )?;
+    let end = replayed(sc, &theta_tensor(theta, device), rec, steps)?;
     Ok(read_vec(&objective(
         &end,
         sc.model.params.constants.perception_radius,
     ))?[0])
+}
+
+/// The scenario's herd after `steps` replayed steps with parameters `t` (on `t`'s device).
+fn replayed(sc: &Scenario, t: &Tensor<1>, rec: &Recording, steps: usize) -> Result<HerdState> {
+    let state = HerdState::from_rows(&sc.init, &t.device());
+    sc.model
+        .rollout::<rand_chacha::ChaCha8Rng>(t, state, steps, Decide::Replay(rec), |_, _, _| Ok(()))
 }
 
 /// ∇J by reverse-mode autodiff through the unrolled steps (replayed decisions).
@@ -69,14 +68,7 @@ pub fn autodiff_gradient(
 ) -> Result<(f64, [f64; N_PARAMS])> {
     let ad = device.clone().autodiff();
     let t = theta_tensor(theta, &ad).require_grad();
-    let state = HerdState::from_rows(&sc.init, &ad);
-    let end = sc.model.rollout::<rand_chacha::ChaCha8Rng>(
-        &t,
-        state,
-        steps,
-        Decide::Replay(rec),
-        |_, _, _| Ok(()),
-    )?;
+    let end = replayed(sc, &t, rec, steps)?;
     let j = objective(&end, sc.model.params.constants.perception_radius);
     let value = read_vec(&j.clone().detach())?[0];
     let grads = j.backward();

@@ -12,9 +12,11 @@
 //! of the whole unrolled run.
 
 mod herd;
+mod rollout;
 mod world;
 
 pub use herd::{random_herd, HerdSpec};
+pub use rollout::{Decide, Guided, StepHooks};
 pub use world::{obstacle_map, Guidance, World};
 
 use crate::data::agents::AgentRow;
@@ -238,20 +240,11 @@ impl ForceTensors {
         let r2 = c.perception_radius * c.perception_radius;
         let pi2 = std::f64::consts::PI * std::f64::consts::PI;
         let w = std::array::from_fn(|g| at(3 * g).mul_scalar(c.sensitivity));
-        let alpha = std::array::from_fn(|g| {
-            at(3 * g + 1)
-                .square()
-                .mul_scalar(r2)
-                .recip()
-                .mul_scalar(-0.5)
-        });
-        let gamma = std::array::from_fn(|g| {
-            at(3 * g + 2)
-                .square()
-                .mul_scalar(pi2)
-                .recip()
-                .mul_scalar(-0.5)
-        });
+        // −½ / (θ_i · scale)², the exponent's coefficient of a range parameter (eq. 4).
+        let inv =
+            |i: usize, scale2: f64| at(i).square().mul_scalar(scale2).recip().mul_scalar(-0.5);
+        let alpha = std::array::from_fn(|g| inv(3 * g + 1, r2));
+        let gamma = std::array::from_fn(|g| inv(3 * g + 2, pi2));
         ForceTensors {
             w,
             alpha,
@@ -291,17 +284,6 @@ pub struct Model {
     pub world: World,
     /// Time step Δt (s) = 1 / fps.
     pub dt: f64,
-}
-
-/// Where a rollout's no-gradient decisions come from.
-pub enum Decide<'a, R: Rng> {
-    /// Computed from the current state (and optionally appended to a recording).
-    Live {
-        rng: &'a mut R,
-        record: Option<&'a mut Recording>,
-    },
-    /// Taken from a recording, step by step.
-    Replay(&'a Recording),
 }
 
 impl Model {
@@ -553,44 +535,5 @@ impl Model {
             hy,
             speed,
         })
-    }
-
-    /// Unrolls `steps` steps from `state` with parameters `theta` (`[12]`). `observe(t, dec, next)`
-    /// sees the decisions of step t and the state after it.
-    pub fn rollout<R: Rng>(
-        &self,
-        theta: &Tensor<1>,
-        mut state: HerdState,
-        steps: usize,
-        mut decide: Decide<'_, R>,
-        mut observe: impl FnMut(usize, &StepDecisions, &HerdState) -> Result<()>,
-    ) -> Result<HerdState> {
-        let f = ForceTensors::new(theta, &self.params.constants);
-        if let Decide::Replay(rec) = &decide {
-            if rec.steps.len() < steps || rec.agents != state.n() {
-                return Err(Error::invalid(format!(
-                    "the recording holds {} steps of {} agents; {steps} steps of {} requested",
-                    rec.steps.len(),
-                    rec.agents,
-                    state.n()
-                )));
-            }
-        }
-        for t in 0..steps {
-            let live;
-            let dec = match &mut decide {
-                Decide::Replay(rec) => &rec.steps[t],
-                Decide::Live { rng, record } => {
-                    live = self.decide(&state.snapshot()?, *rng);
-                    if let Some(r) = record {
-                        r.steps.push(live.clone());
-                    }
-                    &live
-                }
-            };
-            state = self.step(&f, &state, dec)?;
-            observe(t, dec, &state)?;
-        }
-        Ok(state)
     }
 }

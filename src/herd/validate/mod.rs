@@ -9,13 +9,12 @@ use crate::backend::{cpu_device, Precision};
 use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
+use crate::herd::eval::run_from_fields;
 use crate::herd::guidance::guidance_fields;
 use crate::herd::params::Params;
-use crate::herd::sim::{theta_tensor, ForceTensors, HerdState};
-use crate::herd::start::{start_herd, Settle};
+use crate::herd::start::Settle;
 use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocity, Emergent};
 use crate::measure::rasterise;
-use rand::SeedableRng;
 use serde::Serialize;
 
 mod report;
@@ -54,39 +53,30 @@ pub fn simulate_clip(
     guidance: &[crate::herd::sim::Guidance],
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
-    let (warmup, settle) = (cfg.warmup, &cfg.settle);
-    let g = clip.grid();
-    let mut params = params.clone();
-    params.speed = crate::herd::params::SpeedModel::of_clip(clip, &params.speed);
-    let mut model = crate::herd::eval::clip_model(params, clip);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let first = range.start - warmup.min(range.start);
-    let rows = start_herd(&model, clip, first, settle, &mut rng, device)?;
-    if rows.is_empty() {
-        return Err(Error::invalid(format!(
-            "frame {first} of the clip holds no agents: nothing to start from"
-        )));
-    }
-    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
-    let theta = theta_tensor(&model.params.to_vec(), device);
-    let f = ForceTensors::new(&theta, &model.params.constants);
-    let mut state = HerdState::from_rows(&rows, device);
+    let first = range.start - cfg.warmup.min(range.start);
     let mut frames = Vec::with_capacity(range.len());
-    if first == range.start {
-        frames.push(rows);
-    }
     let last = range.end.saturating_sub(1);
-    for (fr, lead) in guidance.iter().enumerate().take(last).skip(first) {
-        model.world.guidance = lead.clone();
-        let dec = model.decide(&state.snapshot()?, &mut rng);
-        state = model.step(&f, &state, &dec)?;
-        if fr + 1 >= range.start {
-            frames.push(state.rows(&ids)?);
-        }
+    let rows = run_from_fields(
+        clip,
+        params,
+        (first, last),
+        seed,
+        &cfg.settle,
+        guidance,
+        device,
+        |f, state, ids| {
+            if f >= range.start {
+                frames.push(state.rows(ids)?);
+            }
+            Ok(())
+        },
+    )?;
+    if first == range.start {
+        frames.insert(0, rows);
     }
     let mut fields = rasterise(
         &frames,
-        g,
+        clip.grid(),
         clip.meta.fps,
         clip.obstacles.clone(),
         serde_json::json!({"source": "validate simulation", "seed": seed}),
@@ -219,11 +209,7 @@ impl ValidateConfig {
                 format!("{} must be in [0, 1)", self.split),
             ));
         }
-        for (key, v) in [("coarse_grid", self.coarse_grid), ("seeds", self.seeds)] {
-            if v == 0 {
-                return Err(Error::config(key, "must be ≥ 1"));
-            }
-        }
+        crate::error::check_counts(&[("coarse_grid", self.coarse_grid), ("seeds", self.seeds)])?;
         crate::herd::guidance::check_guidance_scale(self.guidance_scale)?;
         self.settle.check()
     }

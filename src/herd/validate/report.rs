@@ -2,7 +2,7 @@
 //! (opening with the comparison table), `metrics.png`, `errors.png`, `error-map-*.png` and the
 //! side-by-side video of the first run.
 
-use super::{validate, Report, Stat, ValidateConfig, MEASURES};
+use super::{validate, Report, SetReport, Stat, ValidateConfig, MEASURES};
 use crate::data::atomic::AtomicDir;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
@@ -10,7 +10,7 @@ use crate::herd::params::Params;
 use crate::plot::Series;
 use crate::progress::Progress;
 use plotters::style::RGBColor;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The report as Markdown, opening with the comparison table.
 pub fn markdown(r: &Report) -> String {
@@ -175,92 +175,41 @@ const COLOURS: [RGBColor; 6] = [
 /// per set.
 fn plots(report: &Report, out: &AtomicDir) -> Result<()> {
     let start = report.frames[0];
-    // Column `m` of per-frame rows as (frame, value) points.
-    let column = |rows: &[[f64; 6]], m: usize| -> Vec<(f64, f64)> {
-        rows.iter()
-            .enumerate()
-            .map(|(k, v)| ((start + k) as f64, v[m]))
-            .collect()
-    };
+    let at = |k: usize| (start + k) as f64;
     let video = |m: usize| -> Vec<(f64, f64)> {
-        report
-            .video_per_frame
-            .iter()
-            .enumerate()
-            .map(|(k, v)| ((start + k) as f64, v[m]))
-            .collect()
+        let rows = report.video_per_frame.iter().enumerate();
+        rows.map(|(k, v)| (at(k), v[m])).collect()
     };
-    let names: Vec<String> = report
-        .sets
-        .iter()
-        .map(|s| format!("{} polarization", s.name))
-        .collect();
-    let am_names: Vec<String> = report
-        .sets
-        .iter()
-        .map(|s| format!("{} angular momentum", s.name))
-        .collect();
-    let mut series = vec![Series {
-        name: "video polarization",
-        points: video(0),
-        colour: RGBColor(0, 0, 0),
-    }];
+    let column = |set: &SetReport, m: usize| -> Vec<(f64, f64)> {
+        let rows = set.per_frame.iter().enumerate();
+        rows.map(|(k, v)| (at(k), v[m])).collect()
+    };
+    let mut metrics = vec![(
+        "video polarization".to_string(),
+        video(0),
+        RGBColor(0, 0, 0),
+    )];
     for (i, set) in report.sets.iter().enumerate() {
-        series.push(Series {
-            name: &names[i],
-            points: column(&set.per_frame, 2),
-            colour: COLOURS[i % 6],
-        });
+        let name = format!("{} polarization", set.name);
+        metrics.push((name, column(set, 2), COLOURS[i % 6]));
     }
-    series.push(Series {
-        name: "video angular momentum",
-        points: video(1),
-        colour: RGBColor(120, 120, 120),
-    });
+    let grey = RGBColor(120, 120, 120);
+    metrics.push(("video angular momentum".to_string(), video(1), grey));
     for (i, set) in report.sets.iter().enumerate() {
-        series.push(Series {
-            name: &am_names[i],
-            points: column(&set.per_frame, 3),
-            colour: COLOURS[(i + 2) % 6],
-        });
+        let name = format!("{} angular momentum", set.name);
+        metrics.push((name, column(set, 3), COLOURS[(i + 2) % 6]));
     }
-    crate::plot::line_chart(
-        &out.path("metrics.png"),
-        "emergent measures (held-out frames)",
-        "frame",
-        "value",
-        &series,
-    )?;
-    let err_names: Vec<(String, String)> = report
-        .sets
-        .iter()
-        .map(|s| {
-            (
-                format!("{} density error", s.name),
-                format!("{} velocity error", s.name),
-            )
-        })
-        .collect();
-    let mut es = Vec::new();
+    let mut errors = Vec::new();
     for (i, set) in report.sets.iter().enumerate() {
-        es.push(Series {
-            name: &err_names[i].0,
-            points: column(&set.per_frame, 0),
-            colour: COLOURS[(2 * i) % 6],
-        });
-        es.push(Series {
-            name: &err_names[i].1,
-            points: column(&set.per_frame, 1),
-            colour: COLOURS[(2 * i + 1) % 6],
-        });
+        let density = format!("{} density error", set.name);
+        errors.push((density, column(set, 0), COLOURS[(2 * i) % 6]));
+        let velocity = format!("{} velocity error", set.name);
+        errors.push((velocity, column(set, 1), COLOURS[(2 * i + 1) % 6]));
     }
-    crate::plot::line_chart(
-        &out.path("errors.png"),
-        "coarse-grid errors (held-out frames)",
-        "frame",
-        "relative error",
-        &es,
-    )?;
+    let title = "emergent measures (held-out frames)";
+    chart(&out.path("metrics.png"), title, "value", &metrics)?;
+    let title = "coarse-grid errors (held-out frames)";
+    chart(&out.path("errors.png"), title, "relative error", &errors)?;
     for set in &report.sets {
         crate::plot::heat_map(
             &out.path(&format!("error-map-{}.png", set.name)),
@@ -269,4 +218,20 @@ fn plots(report: &Report, out: &AtomicDir) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// A named line of (frame, value) points and its colour.
+type Line = (String, Vec<(f64, f64)>, RGBColor);
+
+/// A line chart of [`Line`]s over the held-out frames.
+fn chart(path: &Path, title: &str, y: &str, lines: &[Line]) -> Result<()> {
+    let series: Vec<Series> = lines
+        .iter()
+        .map(|(name, points, colour)| Series {
+            name,
+            points: points.clone(),
+            colour: *colour,
+        })
+        .collect();
+    crate::plot::line_chart(path, title, "frame", y, &series)
 }

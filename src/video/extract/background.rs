@@ -58,6 +58,22 @@ impl<'a> Geometry<'a> {
         .map_err(cv(self.path))
     }
 
+    /// The image `path` (read with OpenCV's `flags`), which must be the size of a video frame.
+    pub fn image(&self, path: &Path, flags: i32) -> Result<Mat> {
+        let img = imgcodecs::imread(path.as_os_str(), flags).map_err(cv(path))?;
+        if img.empty() {
+            return Err(Error::file(path, "cannot read as an image"));
+        }
+        let (w, h) = (self.w, self.h);
+        if img.cols() as usize != w || img.rows() as usize != h {
+            return Err(Error::file(
+                path,
+                format!("is {}×{}, the video is {w}×{h}", img.cols(), img.rows()),
+            ));
+        }
+        Ok(img)
+    }
+
     /// An all-255 mask the size of a video frame (warped to tell valid pixels).
     pub fn ones(&self) -> Result<Mat> {
         Mat::new_rows_cols_with_default(self.h as i32, self.w as i32, CV_8UC1, Scalar::all(255.0))
@@ -75,19 +91,10 @@ pub(super) fn background(
     (first, frames): (usize, usize),
     progress: &mut impl FnMut(&str, usize, usize),
 ) -> Result<Vec<u8>> {
-    let (path, w, h) = (geom.path, geom.w, geom.h);
+    let path = geom.path;
     let fail = cv(path);
     if let Some(bg) = &cfg.background {
-        let img = imgcodecs::imread(bg.as_os_str(), imgcodecs::IMREAD_COLOR).map_err(cv(bg))?;
-        if img.empty() {
-            return Err(Error::file(bg, "cannot read as an image"));
-        }
-        if img.cols() as usize != w || img.rows() as usize != h {
-            return Err(Error::file(
-                bg,
-                format!("is {}×{}, the video is {w}×{h}", img.cols(), img.rows()),
-            ));
-        }
+        let img = geom.image(bg, imgcodecs::IMREAD_COLOR)?;
         let mut out = Mat::default();
         geom.warp(&img, &Similarity::IDENTITY, &mut out, imgproc::INTER_AREA)?;
         return Ok(out.data_bytes().map_err(cv(path))?.to_vec());
@@ -183,17 +190,7 @@ pub(super) fn obstacle_cells(
     let obstacles = match &cfg.obstacles {
         None => Array2::<u8>::zeros((ny, nx)),
         Some(mp) => {
-            let img =
-                imgcodecs::imread(mp.as_os_str(), imgcodecs::IMREAD_GRAYSCALE).map_err(cv(mp))?;
-            if img.empty() {
-                return Err(Error::file(mp, "cannot read as an image"));
-            }
-            if img.cols() as usize != w || img.rows() as usize != h {
-                return Err(Error::file(
-                    mp,
-                    format!("is {}×{}, the video is {w}×{h}", img.cols(), img.rows()),
-                ));
-            }
+            let img = geom.image(mp, imgcodecs::IMREAD_GRAYSCALE)?;
             let data = img.data_bytes().map_err(cv(mp))?;
             let (mut on, mut all) = (vec![0usize; cells], vec![0usize; cells]);
             for (p, &v) in data.iter().enumerate() {

@@ -9,6 +9,7 @@ use super::camera::Similarity;
 use super::decode::{cv, forward, Video};
 use super::preview::preview_png;
 use super::ExtractConfig;
+use crate::data::clip::BODY_WIDTH_BL;
 use crate::error::Result;
 use ndarray::{Array3, Array4};
 use opencv::core::{Mat, Point, Scalar, Size};
@@ -119,7 +120,7 @@ pub(super) fn pass_c(
 ) -> Result<Sums> {
     let (path, scale) = (geom.path, geom.scale);
     let fail = cv(path);
-    let morph = cfg.body_length_px * 0.4 * scale >= 6.0;
+    let morph = cfg.body_length_px * BODY_WIDTH_BL * scale >= 6.0;
     let to_bl_s = vid.fps / (cfg.body_length_px * scale);
     vid.rewind()?;
     vid.skip(first)?;

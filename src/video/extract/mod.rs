@@ -22,6 +22,7 @@ pub use camera::Similarity;
 pub use decode::quietly;
 pub use job::{run, ExtractJob, CENTRE_ANCHOR};
 
+use crate::data::clip::BODY_WIDTH_BL;
 use crate::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
 use crate::error::{Error, Result};
 use crate::measure::speed_density_table;
@@ -42,7 +43,7 @@ pub struct ExtractConfig {
     pub colour_threshold: f64,
     /// Smallest per-channel difference to the background of a herd pixel.
     pub background_threshold: f64,
-    /// Body pixels per animal; estimated as an ellipse of L × 0.4 L when absent.
+    /// Body pixels per animal; estimated as an ellipse of L × [`BODY_WIDTH_BL`]·L when absent.
     pub body_pixels: Option<f64>,
     /// Anchor rectangles x,y,w,h in the first frame; empty: static camera.
     pub anchors: Vec<[i32; 4]>,
@@ -82,18 +83,8 @@ impl ExtractConfig {
     /// Checks the settings on their own (the frames and anchors are checked against the video
     /// when it is opened); errors name the key.
     pub fn check(&self) -> Result<()> {
-        if self.grid == 0 {
-            return Err(Error::config("grid", "must be ≥ 1"));
-        }
-        if !(self.body_length_px.is_finite() && self.body_length_px > 0.0) {
-            return Err(Error::config(
-                "body_length_px",
-                format!("{} must be > 0", self.body_length_px),
-            ));
-        }
-        if self.smooth == 0 {
-            return Err(Error::config("smooth", "must be ≥ 1"));
-        }
+        crate::error::check_counts(&[("grid", self.grid), ("smooth", self.smooth)])?;
+        crate::error::check_positive(&[("body_length_px", self.body_length_px)])?;
         if let Some([a, b]) = self.frames {
             if a >= b {
                 return Err(Error::config("frames", format!("{a}..{b} is empty")));
@@ -197,9 +188,9 @@ pub fn extract(
     }
     let grid = background::CellGrid::new(&geom, cfg.grid);
     let obstacles = background::obstacle_cells(cfg, &geom, &grid)?;
-    let body_px = cfg
-        .body_pixels
-        .unwrap_or(std::f64::consts::PI / 4.0 * cfg.body_length_px * 0.4 * cfg.body_length_px);
+    let body_px = cfg.body_pixels.unwrap_or(
+        std::f64::consts::PI / 4.0 * cfg.body_length_px * BODY_WIDTH_BL * cfg.body_length_px,
+    );
     if !(body_px.is_finite() && body_px > 0.0) {
         return Err(Error::config(
             "body_pixels",
