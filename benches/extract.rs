@@ -6,9 +6,9 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::fields::Grid;
-use herdfit::params::Params;
-use herdfit::synth::{synthesise, SynthConfig};
+use herdfit::data::Grid;
+use herdfit::herd::params::Params;
+use herdfit::herd::synth::{synthesise, SynthConfig};
 use herdfit::video::extract::{extract, ExtractConfig};
 use herdfit::video::{render_video, RenderConfig};
 use std::time::Duration;
@@ -26,7 +26,7 @@ fn bench(c: &mut Criterion) {
     let cfg = SynthConfig {
         params: Params::default(),
         agents: 1000,
-        frames: 50,
+        frame_count: 50,
         fps: 25.0,
         grid,
         obstacles: ndarray::Array2::zeros((18, 32)),

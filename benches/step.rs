@@ -6,9 +6,9 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::bench::bench_model;
-use herdfit::sim::{theta_tensor, Decide, HerdState};
-use herdfit::train::gradcheck::objective;
+use herdfit::herd::gradcheck::objective;
+use herdfit::herd::scenario::bench_model;
+use herdfit::herd::sim::{theta_tensor, Decide, HerdState};
 use herdfit_kernels::perceive;
 use rand::SeedableRng;
 use std::time::Duration;
@@ -104,10 +104,10 @@ criterion_main!(benches);
 /// One epoch of `fit` (W = 1, the paper's per-frame scheme, split gradients: two forward+backward
 /// passes per frame) over 10 frames of a synthetic clip, per agent count.
 fn fit_frames(c: &mut Criterion) {
-    use herdfit::fields::Grid;
-    use herdfit::params::Params;
-    use herdfit::synth::{synthesise, SynthConfig};
-    use herdfit::train::fit::{fit, FitConfig};
+    use herdfit::data::Grid;
+    use herdfit::herd::fit::{fit, FitConfig};
+    use herdfit::herd::params::Params;
+    use herdfit::herd::synth::{synthesise, SynthConfig};
     let device = cpu_device(Precision::F32).unwrap();
     let mut g = c.benchmark_group("fit_epoch_10_frames");
     g.sample_size(10).measurement_time(Duration::from_secs(8));
@@ -116,7 +116,7 @@ fn fit_frames(c: &mut Criterion) {
         let cfg = SynthConfig {
             params: Params::default(),
             agents: n,
-            frames: 11,
+            frame_count: 11,
             fps: 25.0,
             grid: Grid {
                 origin: [0.0, 0.0],

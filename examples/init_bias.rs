@@ -18,12 +18,12 @@
 //! cargo run --release --example init_bias -- /tmp/syn 60 200
 //! ```
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::fields::ClipFields;
-use herdfit::io::AgentRow;
-use herdfit::metrics::polarization;
-use herdfit::params::Params;
-use herdfit::sim::{theta_tensor, ForceTensors, HerdState};
-use herdfit::train::fit::{clip_model, guidance_field, init_herd, settle, Settle};
+use herdfit::data::agents::AgentRow;
+use herdfit::data::ClipFields;
+use herdfit::herd::fit::{clip_model, guidance_field, init_herd, settle, Settle};
+use herdfit::herd::params::Params;
+use herdfit::herd::sim::{theta_tensor, ForceTensors, HerdState};
+use herdfit::measure::emergent::polarization;
 use rand::SeedableRng;
 use std::path::PathBuf;
 
@@ -79,7 +79,7 @@ fn main() -> anyhow::Result<()> {
     }
     let device = cpu_device(Precision::F32)?;
     let mut params = truth.clone();
-    params.speed = clip.speed_model(&params.speed);
+    params.speed = herdfit::herd::params::SpeedModel::of_clip(&clip, &params.speed);
     let model = clip_model(params.clone(), &clip);
     let g = clip.grid();
     let clip_pol: Vec<f64> = (start..clip.frames())

@@ -52,7 +52,7 @@ truth = crossing_truth(a.herdfit, tmp)[1]
 
 
 def synth(out, seed, params):
-    subprocess.run([a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames), "--grid",
+    subprocess.run([a.herdfit, "synth", "--agents", str(a.agents), "--frame-count", str(a.frames), "--grid-size",
                     f"{14 * a.scale}x{10 * a.scale}", "--cell-size", str(4 / a.scale), "--obstacles", cells, "--seed", str(seed), "--out", out,
                     "--params", params], check=True, capture_output=True)
 

@@ -28,8 +28,8 @@ clip = os.path.join(tmp, "clip")
 cells = os.path.join(tmp, "cells.json")
 crossing = a.scenario == "crossing"
 json.dump({"cells": CROSSING_CELLS if crossing else DRIFT_CELLS}, open(cells, "w"))
-cmd = [a.herdfit, "synth", "--agents", "300", "--frames", "200" if crossing else "100",
-       "--grid", "14x10", "--cell-size", "4", "--obstacles", cells, "--seed", "11", "--out", clip]
+cmd = [a.herdfit, "synth", "--agents", "300", "--frame-count", "200" if crossing else "100",
+       "--grid-size", "14x10", "--cell-size", "4", "--obstacles", cells, "--seed", "11", "--out", clip]
 if crossing:
     cmd += ["--params", crossing_truth(a.herdfit, tmp)[0]]
 subprocess.run(cmd, check=True, capture_output=True)
@@ -40,7 +40,7 @@ def loss(p):
     init = os.path.join(tmp, "init.json")
     json.dump(p, open(init, "w"))
     out = os.path.join(tmp, "q.json")
-    subprocess.run([a.herdfit, "fit", clip, "--out", out, "--init", init, "--epochs", "1",
+    subprocess.run([a.herdfit, "fit", clip, "--out", out, "--start", init, "--epochs", "1",
                     "--lr", "1e-12"] + a.extra.split(), check=True, capture_output=True)
     q = json.load(open(out))["provenance"]
     return q["loss"]["start"], q["evaluation"]["start"]

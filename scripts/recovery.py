@@ -62,8 +62,8 @@ def main():
         json.dump({"cells": [[int(x * k) + i, int(y * k) + j] for x, y in sq
                              for i in range(int(k)) for j in range(int(k))]}, f)
     clip_dirs = [clip] + [os.path.join(tmp, f"clip{11 + c}") for c in range(1, a.clips)]
-    cmd = [a.herdfit, "synth", "--agents", str(a.agents), "--frames", str(a.frames),
-           "--grid", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells]
+    cmd = [a.herdfit, "synth", "--agents", str(a.agents), "--frame-count", str(a.frames),
+           "--grid-size", f"{nx}x{ny}", "--cell-size", str(a.cell), "--obstacles", cells]
     if a.scenario != "drift":
         # The built-in set at 2 BL/s: the herd crosses the obstacles in 8 s.
         cmd += ["--params", crossing_truth(a.herdfit, tmp)[0]]
@@ -81,7 +81,7 @@ def main():
         w, k = job
         out = os.path.join(tmp, f"fit-w{w}-{k}.json")
         t0 = time.time()
-        subprocess.run([a.herdfit, "fit"] + clip_dirs + ["--out", out, "--init",
+        subprocess.run([a.herdfit, "fit"] + clip_dirs + ["--out", out, "--start",
                         os.path.join(tmp, f"init{k}.json"), "--window", str(w),
                         "--epochs", str(a.epochs), "--seed", str(k)] + a.extra.split(),
                        check=True, capture_output=True)

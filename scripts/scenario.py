@@ -15,7 +15,7 @@ def crossing_truth(herdfit, tmp):
     """The built-in parameter set with the herd at 2 BL/s (speed noise 0.3), written to
     tmp/truth-in.json; returns (path, parameters)."""
     probe = os.path.join(tmp, "probe")
-    subprocess.run([herdfit, "synth", "--agents", "2", "--frames", "1", "--grid", "1x1",
+    subprocess.run([herdfit, "synth", "--agents", "2", "--frame-count", "1", "--grid-size", "1x1",
                     "--cell-size", "1", "--out", probe], check=True, capture_output=True)
     t = json.load(open(os.path.join(probe, "truth.json")))
     t.pop("physical", None)

@@ -30,7 +30,7 @@ tmp = tempfile.mkdtemp(prefix="herdfit-vpower-")
 clips = []
 for seed in (7, 8, 9):
     d = os.path.join(tmp, f"clip{seed}")
-    subprocess.run([a.herdfit, "synth", "--agents", "300", "--frames", "120", "--grid", "16x10",
+    subprocess.run([a.herdfit, "synth", "--agents", "300", "--frame-count", "120", "--grid-size", "16x10",
                     "--cell-size", "3", "--seed", str(seed), "--out", d],
                    check=True, capture_output=True)
     clips.append(d)

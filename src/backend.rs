@@ -6,14 +6,14 @@ use crate::error::{Error, Result};
 use burn::tensor::{Device, FloatDType};
 
 /// Float precision of the tensors of a run.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {
     F32,
     F64,
 }
+
+enum_names!(Precision { F32 = "f32", F64 = "f64" });
 
 impl Precision {
     fn dtype(self) -> FloatDType {

@@ -1,26 +1,60 @@
 //! herdfit: learn how animal groups move from video and replay that behaviour anywhere.
 //!
 //! The pipeline (see `ARCHITECTURE.md`): clip fields → fit → parameter set → simulate/author.
-//! This crate holds the differentiable herd model ([`sim`]), its parameters ([`params`]), the
-//! gradient checks ([`train::gradcheck`]) and the command-line interface ([`cli`]).
+//! Subsystems live in their own folders ([`herd`]: the herd model of *Herds From Video*); shared
+//! layers beside them: [`data`] (on-disk formats), [`measure`] (emergent measures and field
+//! comparisons), [`optim`] (optimisers), [`video`] (OpenCV), and the command-line interface
+//! ([`cli`]).
 
-pub mod author;
+/// `Display` and `FromStr` of a unit enum by the names given: the names its settings files and
+/// the command line use (serde's `rename_all = "lowercase"` names, written once here).
+macro_rules! enum_names {
+    ($ty:ident { $($variant:ident = $name:literal),+ $(,)? }) => {
+        impl std::fmt::Display for $ty {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(match self {
+                    $($ty::$variant => $name,)+
+                })
+            }
+        }
+
+        impl std::str::FromStr for $ty {
+            type Err = String;
+            fn from_str(s: &str) -> std::result::Result<Self, String> {
+                match s {
+                    $($name => Ok($ty::$variant),)+
+                    _ => Err(format!("'{s}' is not one of {}", [$($name),+].join(", "))),
+                }
+            }
+        }
+    };
+}
+
 pub mod backend;
-pub mod bench;
 pub mod cli;
 pub mod data;
 pub mod error;
-pub mod fields;
-pub mod io;
-pub mod metrics;
-pub mod params;
+pub mod herd;
+pub mod measure;
+pub mod optim;
 pub mod plot;
 pub mod progress;
-pub mod sim;
-pub mod synth;
-pub mod train;
-pub mod validate;
 #[cfg(feature = "video")]
 pub mod video;
 
 pub use error::{Error, Result};
+
+/// The pre-restructure path of the atomic writes and the agent-row CSVs (now [`data::atomic`] and
+/// [`data::agents`]), kept so branches written against it merge; new code uses `data`.
+#[doc(hidden)]
+pub mod io {
+    pub use crate::data::agents::*;
+    pub use crate::data::atomic::*;
+}
+
+/// The pre-restructure path of the emergent measures (now [`measure::emergent`]), kept so
+/// branches written against it merge; new code uses `measure`.
+#[doc(hidden)]
+pub mod metrics {
+    pub use crate::measure::emergent::*;
+}

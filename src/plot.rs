@@ -2,6 +2,7 @@
 //! (`fonts-dejavu-core`), registered once.
 
 use crate::error::{Error, Result};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -29,6 +30,39 @@ fn font_ready() -> Result<()> {
         .map_err(Error::invalid)
 }
 
+/// A chart on `root` captioned `caption` in sans-serif of `font` px, with `margin` px and label
+/// areas of (x, y) px.
+fn builder<'a, 'b, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, plotters::coord::Shift>,
+    caption: &str,
+    font: i32,
+    margin: u32,
+    (x, y): (u32, u32),
+) -> ChartBuilder<'a, 'b, DB> {
+    let mut b = ChartBuilder::on(root);
+    b.caption(caption, ("sans-serif", font))
+        .margin(margin)
+        .x_label_area_size(x)
+        .y_label_area_size(y);
+    b
+}
+
+/// Axes without a mesh, labelled `x` and `y` in 12 px.
+fn bare_axes<DB: DrawingBackend>(
+    chart: &mut ChartContext<DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    x: &str,
+    y: &str,
+) -> std::result::Result<(), String> {
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(x)
+        .y_desc(y)
+        .label_style(("sans-serif", 12))
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
 /// One named series of (x, y) points.
 pub struct Series<'a> {
     pub name: &'a str,
@@ -45,7 +79,7 @@ pub fn line_chart(
     series: &[Series],
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
@@ -73,11 +107,7 @@ pub fn line_chart(
     {
         let root = BitMapBackend::new(tmp.path(), (900, 500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 22))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
+        let mut chart = builder(&root, title, 22, 12, (40, 60))
             .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
             .map_err(|e| fail(e.to_string()))?;
         chart
@@ -106,7 +136,7 @@ pub fn line_chart(
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }
 
 /// A heat map of `values[row][col]` (row 0 at the bottom) written atomically as PNG.
@@ -121,26 +151,16 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max)
         .max(1e-12);
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     {
         let root = BitMapBackend::new(tmp.path(), (640, 560)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(format!("{title} (max {max:.3})"), ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(30)
-            .y_label_area_size(40)
+        let caption = format!("{title} (max {max:.3})");
+        let mut chart = builder(&root, &caption, 18, 12, (30, 40))
             .build_cartesian_2d(0.0..nx as f64, 0.0..ny as f64)
             .map_err(|e| fail(e.to_string()))?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("coarse cell x")
-            .y_desc("coarse cell y")
-            .label_style(("sans-serif", 12))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+        bare_axes(&mut chart, "coarse cell x", "coarse cell y").map_err(fail)?;
         chart
             .draw_series(values.iter().enumerate().flat_map(|(iy, row)| {
                 row.iter().enumerate().map(move |(ix, &v)| {
@@ -164,7 +184,7 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }
 
 /// A top view of a scene: obstacle cells (grey), optional per-cell vectors (a navigation field,
@@ -174,7 +194,7 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
 pub fn scene_plot(
     path: &Path,
     title: &str,
-    grid: &crate::fields::Grid,
+    grid: &crate::data::Grid,
     obstacles: &ndarray::Array2<u8>,
     vectors: Option<&[[f64; 2]]>,
     lines: &[Vec<[f64; 2]>],
@@ -182,31 +202,20 @@ pub fn scene_plot(
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
     let size = grid.size();
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let wpx = 1000u32;
     let hpx = ((wpx as f64 - 80.0) * size[1] / size[0] + 90.0).clamp(200.0, 1400.0) as u32;
     {
         let root = BitMapBackend::new(tmp.path(), (wpx, hpx)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(10)
-            .x_label_area_size(30)
-            .y_label_area_size(40)
+        let mut chart = builder(&root, title, 20, 10, (30, 40))
             .build_cartesian_2d(
                 grid.origin[0]..grid.origin[0] + size[0],
                 grid.origin[1]..grid.origin[1] + size[1],
             )
             .map_err(|e| fail(e.to_string()))?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("x (BL)")
-            .y_desc("y (BL)")
-            .label_style(("sans-serif", 12))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+        bare_axes(&mut chart, "x (BL)", "y (BL)").map_err(fail)?;
         let c = grid.cell_size;
         chart
             .draw_series(
@@ -274,5 +283,5 @@ pub fn scene_plot(
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }

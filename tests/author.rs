@@ -50,7 +50,7 @@ fn pasture_follows_the_arrow_avoids_obstacles_and_shows_two_behaviours() {
     ] {
         assert!(out.join(f).is_file(), "{f}");
     }
-    let scene = herdfit::author::Scene::load(&scene_path).unwrap();
+    let scene = herdfit::herd::author::Scene::load(&scene_path).unwrap();
     let arrow = &scene.file.arrows[0];
     let end = arrow[arrow.len() - 1];
     let frames = trajectories(&out);
@@ -102,7 +102,7 @@ fn anthill_runs_with_a_predator_and_keeps_out_of_the_hill() {
     let out = dir.path().join("anthill");
     let scene_path = scenes().join("anthill.json");
     ok(&["author", s(&scene_path), "--out", s(&out)]);
-    let scene = herdfit::author::Scene::load(&scene_path).unwrap();
+    let scene = herdfit::herd::author::Scene::load(&scene_path).unwrap();
     let frames = trajectories(&out);
     for agents in &frames {
         assert!(agents.iter().all(|p| !scene.blocked(*p)));
@@ -244,7 +244,7 @@ fn mask_obstacles_and_video_output() {
     scene["spawn"] = serde_json::json!({"count": 30, "centre": [10, 20], "size": [6, 6]});
     scene["duration"] = 2.into();
     let p = write_scene(d, "mask.json", &scene);
-    let loaded = herdfit::author::Scene::load(&p).unwrap();
+    let loaded = herdfit::herd::author::Scene::load(&p).unwrap();
     assert!(loaded.blocked([50.0, 20.0]) && !loaded.blocked([30.0, 20.0]));
     assert_eq!(
         loaded.obstacles.iter().filter(|&&v| v == 1).count(),

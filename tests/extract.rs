@@ -4,8 +4,9 @@
 
 mod common;
 use common::{herdfit, ok, s};
-use herdfit::fields::{rasterise, ClipFields, Grid};
-use herdfit::io::AgentRow;
+use herdfit::data::agents::AgentRow;
+use herdfit::data::{ClipFields, Grid};
+use herdfit::measure::rasterise;
 use ndarray::Array2;
 use std::path::{Path, PathBuf};
 

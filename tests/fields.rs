@@ -4,20 +4,21 @@
 mod common;
 use common::{fails, ok, s};
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::fields::{import_reference, ClipFields, Grid};
-use herdfit::params::Params;
-use herdfit::synth::{synthesise, SynthConfig};
+use herdfit::data::reference::import_reference;
+use herdfit::data::{ClipFields, Grid};
+use herdfit::herd::params::Params;
+use herdfit::herd::synth::{synthesise, SynthConfig};
 use ndarray::Array2;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn small_synth(seed: u64) -> (SynthConfig, herdfit::synth::Synth) {
+fn small_synth(seed: u64) -> (SynthConfig, herdfit::herd::synth::Synth) {
     let mut obstacles = Array2::zeros((8, 12));
     obstacles[[4, 7]] = 1;
     let cfg = SynthConfig {
         params: Params::default(),
         agents: 80,
-        frames: 12,
+        frame_count: 12,
         fps: 25.0,
         grid: Grid {
             origin: [0.0, 0.0],

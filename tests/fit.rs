@@ -4,11 +4,11 @@
 mod common;
 use common::{herdfit, ok, s};
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::fields::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
-use herdfit::params::Params;
-use herdfit::sim::read_vec;
-use herdfit::train::loss::{step_loss, StepTarget};
-use herdfit::train::target::{splat_density, target_field, Stencil};
+use herdfit::data::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
+use herdfit::herd::fit::loss::{step_loss, StepTarget};
+use herdfit::herd::fit::target::{splat_density, target_field, Stencil};
+use herdfit::herd::params::Params;
+use herdfit::herd::sim::read_vec;
 use ndarray::{Array2, Array3, Array4};
 use std::f64::consts::PI;
 use std::path::Path;
@@ -187,7 +187,7 @@ fn splatting_is_bilinear_conserves_mass_and_is_differentiable() {
 
 #[test]
 fn box_counts_blurred_like_splatting_match_the_mean_splat() {
-    use herdfit::train::target::blur_like_splat;
+    use herdfit::herd::fit::target::blur_like_splat;
     use rand::{Rng, SeedableRng};
     let g = grid2(5, 4);
     // 20 000 points uniform in cell (1, 2) and 20 000 in the corner cell (0, 0).
@@ -500,10 +500,10 @@ fn gradient_checkpointing_gives_the_same_fit() {
 
 #[test]
 fn ensemble_loss_subtracts_the_replicas_own_spread() {
-    use herdfit::io::AgentRow;
-    use herdfit::sim::HerdState;
-    use herdfit::train::fit::{ensemble_loss, fields_loss};
-    use herdfit::train::target::blur_like_splat;
+    use herdfit::data::agents::AgentRow;
+    use herdfit::herd::fit::target::blur_like_splat;
+    use herdfit::herd::fit::{ensemble_loss, fields_loss};
+    use herdfit::herd::sim::HerdState;
     // Clip frame 1: two agents' worth of density in cell 1, velocity +x everywhere.
     let mut clip = line_clip([0.0; 5], [1.0, 0.0]);
     clip.density[[1, 0, 1]] = 2.0;
@@ -602,7 +602,7 @@ fn an_ensemble_fit_is_deterministic_and_logs_its_objective() {
 
 #[test]
 fn settling_keeps_cells_and_headings_and_separates_close_pairs() {
-    use herdfit::train::fit::{clip_model, init_herd, settle, Settle};
+    use herdfit::herd::fit::{clip_model, init_herd, settle, Settle};
     use rand::SeedableRng;
     let dir = tempfile::tempdir().unwrap();
     let clip = ClipFields::load(&make_clip(dir.path(), "clip", "120", "3")).unwrap();
@@ -621,7 +621,7 @@ fn settling_keeps_cells_and_headings_and_separates_close_pairs() {
         r
     };
     // Agents whose nearest neighbour is closer than 0.4 BL.
-    let crowded = |r: &[herdfit::io::AgentRow]| {
+    let crowded = |r: &[herdfit::data::agents::AgentRow]| {
         (0..r.len())
             .filter(|&i| {
                 (0..r.len()).any(|j| {
@@ -708,15 +708,15 @@ fn several_clips_are_fitted_jointly() {
 
 #[test]
 fn the_clip_speed_model_reproduces_the_clip_speed_spread() {
-    use herdfit::io::AgentRow;
-    use herdfit::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model, World};
+    use herdfit::data::agents::AgentRow;
+    use herdfit::herd::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model, World};
     use rand::SeedableRng;
     // A clip whose agents moved at 1.5 ± 0.2 BL/s (mean ± STD over agents and frames).
     let mut clip = line_clip([1.0; 5], [1.5, 0.0]);
     clip.meta.speed.mean = 1.5;
     clip.meta.speed.std = 0.2;
     let base = Params::default();
-    let speed = clip.speed_model(&base.speed);
+    let speed = herdfit::herd::params::SpeedModel::of_clip(&clip, &base.speed);
     // Eq. 6 with θ_OU = 1 settles to a spread of v_σ / √2: v_σ must be 0.2 · √2.
     assert!((speed.std - 0.2 * 2f64.sqrt()).abs() < 1e-12);
     assert!((speed.stationary_std() - 0.2).abs() < 1e-12);
@@ -788,8 +788,8 @@ fn flanked_clip() -> ClipFields {
 
 #[test]
 fn leader_guidance_smooths_away_the_flanks_inward_drift() {
-    use herdfit::sim::{Guidance, World};
-    use herdfit::train::fit::guidance_field;
+    use herdfit::herd::fit::guidance_field;
+    use herdfit::herd::sim::{Guidance, World};
     let clip = flanked_clip();
     let at = |scale: f64, ix: usize, iy: usize| -> [f64; 2] {
         let g = guidance_field(&clip, 0, scale);
@@ -834,7 +834,7 @@ fn leader_guidance_smooths_away_the_flanks_inward_drift() {
 
 #[test]
 fn the_averaged_step_follows_a_steady_gradient_and_damps_a_noisy_one() {
-    use herdfit::train::fit::{update, FitConfig, OptState, Optimizer};
+    use herdfit::herd::fit::{update, FitConfig, OptState, Optimizer};
     use rand::{Rng, SeedableRng};
     let cfg = |optimizer| FitConfig {
         optimizer,

@@ -2,9 +2,9 @@
 //! leader rule, bearings at φ = 0 and φ = π, and exact replay. All tests here run in f64.
 
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::io::AgentRow;
-use herdfit::params::Params;
-use herdfit::sim::{
+use herdfit::data::agents::AgentRow;
+use herdfit::herd::params::Params;
+use herdfit::herd::sim::{
     read_vec, theta_tensor, Decide, ForceTensors, Guidance, HerdState, Model, Recording, World,
 };
 use herdfit_kernels::ObstacleMap;
@@ -274,8 +274,8 @@ fn speed_follows_the_ou_process() {
 }
 
 fn random_rows(n: usize, seed: u64) -> Vec<AgentRow> {
-    herdfit::sim::random_herd(
-        &herdfit::sim::HerdSpec::standard(n),
+    herdfit::herd::sim::random_herd(
+        &herdfit::herd::sim::HerdSpec::standard(n),
         &Params::default().speed,
         &World::open(),
         seed,
@@ -346,7 +346,7 @@ fn replay_reproduces_a_live_run_exactly() {
 
 #[test]
 fn gradcheck_in_process_matches_finite_differences() {
-    use herdfit::train::gradcheck::{default_scenario, gradcheck, record};
+    use herdfit::herd::gradcheck::{default_scenario, gradcheck, record};
     let sc = default_scenario(Params::default(), 60, 1).unwrap();
     let rec = record(&sc, 6, 1, &device()).unwrap();
     let r = gradcheck(&sc, 6, Precision::F64, 1e-4, &rec, || {}).unwrap();

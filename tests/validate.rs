@@ -214,7 +214,7 @@ fn demo_runs_the_whole_chain() {
         assert!(out.join("herd.avi").is_file());
         assert!(out.join("clip/clip.json").is_file());
     }
-    herdfit::params::Params::load(&out.join("params.json")).unwrap();
+    herdfit::herd::params::Params::load(&out.join("params.json")).unwrap();
 }
 
 #[test]

@@ -1,4 +1,22 @@
-//! On-disk formats shared by herdfit's systems: each has a schema tag, load/save and validation.
-//! No model types live here.
+//! On-disk formats shared by herdfit's systems: each has a schema tag, load/save and validation,
+//! and every file is written atomically ([`atomic`]). No model types live here.
 
+pub mod agents;
+pub mod atomic;
+pub mod cells;
+pub mod clip;
+pub mod csv;
+pub mod reference;
 pub mod tracks;
+
+pub use agents::AgentRow;
+
+/// `Err("schema is 'found', expected 'expected'")` unless the schema tag is the expected one.
+pub fn check_schema(found: &str, expected: &str) -> Result<(), String> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(format!("schema is '{found}', expected '{expected}'"))
+    }
+}
+pub use clip::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};

@@ -3,9 +3,9 @@
 //! and rotation starting from the identity at frame 0). Used by `synth --video` to make test
 //! videos with known truth for extraction.
 
+use crate::data::agents::AgentRow;
+use crate::data::Grid;
 use crate::error::{Error, Result};
-use crate::fields::Grid;
-use crate::io::AgentRow;
 use ndarray::Array2;
 use opencv::core::{Mat, Point, Scalar, Size, CV_8UC3};
 use opencv::prelude::*;
@@ -26,8 +26,21 @@ pub struct RenderConfig {
     pub seed: u64,
 }
 
-/// Body ellipse: full length 1 BL, full width 0.4 BL.
-pub const BODY_WIDTH_BL: f64 = 0.4;
+impl RenderConfig {
+    /// Checks the scale (at least 2 pixels per body length); errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if !(self.px_per_bl.is_finite() && self.px_per_bl >= 2.0) {
+            return Err(Error::config(
+                "px_per_bl",
+                format!("{} must be ≥ 2", self.px_per_bl),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Body ellipse: full length 1 BL, full width [`BODY_WIDTH_BL`].
+pub use crate::data::clip::BODY_WIDTH_BL;
 
 /// The camera of frame `f` of `frames`: image-space similarity about the image centre,
 /// `p' = c + t + z R(θ) (p − c)`. Identity at frame 0, easing smoothly (raised cosine) to a pan of
@@ -157,7 +170,7 @@ pub struct PendingVideo {
 impl PendingVideo {
     /// Renames the video into place.
     pub fn commit(self) -> Result<()> {
-        crate::io::persist(self.tmp, &self.path)
+        crate::data::atomic::persist(self.tmp, &self.path)
     }
 }
 
@@ -173,19 +186,14 @@ pub fn render_video(
     cfg: &RenderConfig,
     mut progress: impl FnMut(),
 ) -> Result<(Vec<Camera>, PendingVideo)> {
-    if !(cfg.px_per_bl.is_finite() && cfg.px_per_bl >= 2.0) {
-        return Err(Error::invalid(format!(
-            "--px-per-bl {} must be ≥ 2",
-            cfg.px_per_bl
-        )));
-    }
+    cfg.check()?;
     let (w, h) = frame_size(grid, cfg.px_per_bl);
     if w * h > 8192 * 8192 {
         return Err(Error::invalid(format!(
             "a {w}×{h} video frame is too large"
         )));
     }
-    let tmp = crate::io::temp_sibling(path, ".avi")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
     let tmp_name = tmp.path().to_string_lossy().into_owned();
     let mut writer =
@@ -298,8 +306,8 @@ pub fn render_video(
 /// frames `start..start + sim_frames.len()` of the clip. MJPG AVI, written atomically.
 pub fn render_comparison(
     path: &Path,
-    clip: &crate::fields::ClipFields,
-    sim: &crate::fields::ClipFields,
+    clip: &crate::data::ClipFields,
+    sim: &crate::data::ClipFields,
     sim_frames: &[Vec<AgentRow>],
     start: usize,
 ) -> Result<()> {
@@ -307,7 +315,7 @@ pub fn render_comparison(
     let size = g.size();
     let s = (400.0 / size[0].max(size[1])).max(2.0);
     let (w, h) = frame_size(&g, s);
-    let tmp = crate::io::temp_sibling(path, ".avi")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
     let name = tmp.path().to_string_lossy().into_owned();
     let mut writer = videoio::VideoWriter::new(

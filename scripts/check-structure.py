@@ -1,0 +1,180 @@
+#!/usr/bin/env python3
+"""Structure guard (ARCHITECTURE.md, invariants): no Rust source file over 600 lines and no
+function over 150 lines under src/ and kernels/ (tests/ is exempt), and no subsystem folder
+(src/herd, src/flock, src/crowd, src/lift) importing another one.
+
+    python3 scripts/check-structure.py            # check; exit 1 and list every violation
+    python3 scripts/check-structure.py --report   # also print the longest files and functions
+
+A function's length runs from the line of its `fn` keyword to the line of its closing brace
+(closures and nested items inside it count towards it). The scanner understands comments,
+strings, raw strings and char literals, so braces inside them are not counted.
+"""
+
+import os
+import re
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DIRS = ["src", "kernels"]
+MAX_FILE = 600
+MAX_FN = 150
+SUBSYSTEMS = ["herd", "flock", "crowd", "lift"]
+# Violations known when this guard was written, reported as warnings until the restructure
+# (issue #13) removes them; anything else fails. Empty once the restructure is done.
+KNOWN = {
+}
+
+
+def rust_files():
+    for d in DIRS:
+        for base, dirs, files in os.walk(os.path.join(ROOT, d)):
+            dirs[:] = sorted(x for x in dirs if x not in ("target", "tests"))
+            for f in sorted(files):
+                if f.endswith(".rs"):
+                    yield os.path.join(base, f)
+
+
+def code_only(text):
+    """The text with comments, strings and char literals blanked out (newlines kept)."""
+    out = []
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if text.startswith("//", i):
+            j = text.find("\n", i)
+            j = n if j < 0 else j
+            out.append(" " * (j - i))
+            i = j
+        elif text.startswith("/*", i):
+            depth, j = 1, i + 2
+            while j < n and depth:
+                if text.startswith("/*", j):
+                    depth, j = depth + 1, j + 2
+                elif text.startswith("*/", j):
+                    depth, j = depth - 1, j + 2
+                else:
+                    j += 1
+            out.append(re.sub(r"[^\n]", " ", text[i:j]))
+            i = j
+        elif c == "r" and re.match(r'r#*"', text[i:]) and (i == 0 or not (text[i - 1].isalnum() or text[i - 1] == "_")):
+            m = re.match(r'r(#*)"', text[i:])
+            end = '"' + m.group(1)
+            j = text.find(end, i + len(m.group(0)))
+            j = n if j < 0 else j + len(end)
+            out.append(re.sub(r"[^\n]", " ", text[i:j]))
+            i = j
+        elif c == '"':
+            j = i + 1
+            while j < n and text[j] != '"':
+                j += 2 if text[j] == "\\" else 1
+            j = min(j + 1, n)
+            out.append(re.sub(r"[^\n]", " ", text[i:j]))
+            i = j
+        elif c == "'":
+            # A char literal ('x', '\n', '\u{1F600}') or a lifetime ('a): blank only literals.
+            m = re.match(r"'(\\u\{[0-9a-fA-F]+\}|\\.|[^\\'\n])'", text[i:])
+            if m:
+                out.append(" " * len(m.group(0)))
+                i += len(m.group(0))
+            else:
+                out.append(c)
+                i += 1
+        else:
+            out.append(c)
+            i += 1
+    return "".join(out)
+
+
+FN = re.compile(r"\bfn\s+([A-Za-z_][A-Za-z0-9_]*)")
+
+
+def functions(code):
+    """(name, first line, last line) of every fn with a body."""
+    line_of = []
+    ln = 1
+    for ch in code:
+        line_of.append(ln)
+        if ch == "\n":
+            ln += 1
+    found = []
+    for m in FN.finditer(code):
+        # The body starts at the first `{` at bracket depth 0 after the signature; a `;` first
+        # means a declaration without a body (trait method).
+        depth, j = 0, m.end()
+        body = None
+        while j < len(code):
+            ch = code[j]
+            if ch in "([":
+                depth += 1
+            elif ch in ")]":
+                depth -= 1
+            elif ch == ";" and depth == 0:
+                break
+            elif ch == "{" and depth == 0:
+                body = j
+                break
+            j += 1
+        if body is None:
+            continue
+        level, k = 0, body
+        while k < len(code):
+            if code[k] == "{":
+                level += 1
+            elif code[k] == "}":
+                level -= 1
+                if level == 0:
+                    break
+            k += 1
+        found.append((m.group(1), line_of[m.start()], line_of[min(k, len(code) - 1)]))
+    return found
+
+
+USE = re.compile(r"\bcrate::(herd|flock|crowd|lift)\b")
+
+
+def main():
+    report = "--report" in sys.argv
+    bad = []
+    sizes, fns = [], []
+    for path in rust_files():
+        rel = os.path.relpath(path, ROOT)
+        text = open(path, encoding="utf-8").read()
+        lines = text.count("\n") + (0 if text.endswith("\n") or not text else 1)
+        sizes.append((lines, rel))
+        if lines > MAX_FILE:
+            bad.append((rel, f"{rel}: {lines} lines (limit {MAX_FILE})"))
+        code = code_only(text)
+        for name, a, b in functions(code):
+            fns.append((b - a + 1, f"{rel}:{a} fn {name}"))
+            if b - a + 1 > MAX_FN:
+                bad.append((f"{rel} fn {name}", f"{rel}:{a}: fn {name} is {b - a + 1} lines (limit {MAX_FN})"))
+        parts = rel.split(os.sep)
+        if len(parts) > 2 and parts[0] == "src" and parts[1] in SUBSYSTEMS:
+            for m in USE.finditer(code):
+                if m.group(1) != parts[1]:
+                    line = code.count("\n", 0, m.start()) + 1
+                    bad.append((rel, f"{rel}:{line}: subsystem {parts[1]} imports crate::{m.group(1)}"))
+    if report:
+        print("longest files:")
+        for n, rel in sorted(sizes, reverse=True)[:15]:
+            print(f"  {n:5} {rel}")
+        print("longest functions:")
+        for n, what in sorted(fns, reverse=True)[:15]:
+            print(f"  {n:5} {what}")
+    known = [msg for key, msg in bad if key in KNOWN]
+    new = [msg for key, msg in bad if key not in KNOWN]
+    for msg in known:
+        print(f"warning (known, issue #13): {msg}", file=sys.stderr)
+    for msg in new:
+        print(f"error: {msg}", file=sys.stderr)
+    if new:
+        sys.exit(1)
+    if known:
+        print(f"structure: {len(known)} known violation(s) left, no new ones")
+        return
+    print(f"structure: {len(sizes)} files ≤ {MAX_FILE} lines, {len(fns)} functions ≤ {MAX_FN} lines, subsystems independent")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,35 @@
+//! `herdfit author`: flags → [`AuthorJob`] → [`run`] → one line.
+
+use crate::cli::args::with_flags;
+use crate::cli::Bars;
+use crate::error::Result;
+use crate::herd::author::job::{run, AuthorJob};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct AuthorArgs {
+    #[arg(value_name = "SCENE.json")]
+    pub scene: PathBuf,
+    /// Output folder: trajectories.csv, navigation.png, snapshots, report.json (+ herd.avi).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Also render the herd over the scene as an MJPG AVI.
+    #[arg(long)]
+    pub video: bool,
+    /// Video scale: pixels per body length.
+    #[arg(long, value_name = "PX", default_value_t = 8.0)]
+    pub px_per_bl: f64,
+}
+
+pub fn exec(a: AuthorArgs) -> Result<()> {
+    let job = AuthorJob {
+        scene: a.scene,
+        out: a.out,
+        video: a.video,
+        px_per_bl: a.px_per_bl,
+    };
+    let summary = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
+    println!("{summary}");
+    Ok(())
+}

@@ -1,0 +1,42 @@
+//! `herdfit bench`: flags → [`BenchConfig`] → [`run`] → one line.
+
+use crate::cli::args::with_flags;
+use crate::cli::Bars;
+use crate::error::Result;
+use crate::herd::bench::{run, BenchConfig};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[arg(long, value_name = "N", default_value_t = 1500)]
+    pub agents: usize,
+    #[arg(long, value_name = "T", default_value_t = 20)]
+    pub steps: usize,
+    /// Skip the forward + backward measurement.
+    #[arg(long)]
+    pub sim_only: bool,
+    /// Forward + backward repetitions (median reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeats: usize,
+    /// Recompute memory-bound activations in the backward pass (burn's balanced gradient
+    /// checkpointing): less memory for long windows, more time.
+    #[arg(long)]
+    pub checkpointing: bool,
+    /// Output report (JSON).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: PathBuf,
+}
+
+pub fn exec(a: BenchArgs) -> Result<()> {
+    let cfg = BenchConfig {
+        agents: a.agents,
+        steps: a.steps,
+        sim_only: a.sim_only,
+        repeats: a.repeats,
+        checkpointing: a.checkpointing,
+    };
+    let r = run(&cfg, &a.json, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
+    println!("{r}");
+    Ok(())
+}

@@ -1,0 +1,129 @@
+//! `herdfit fit`: flags → [`FitJob`] → [`run`] → the summary.
+
+use crate::backend::Precision;
+use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
+use crate::cli::Bars;
+use crate::error::Result;
+use crate::herd::fit::job::{run, FitJob};
+use crate::herd::fit::{FitConfig, LossKind, Optimizer, Settle, GUIDANCE_SCALE};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
+    #[arg(value_name = "CLIP/", num_args = 1.., required = true)]
+    pub clips: Vec<PathBuf>,
+    /// Output parameter set (herdfit.params/1).
+    #[arg(long, value_name = "PARAMS.json")]
+    pub out: PathBuf,
+    /// Starting parameters; a generic start (every value 0.5) when omitted.
+    #[arg(long, alias = "init", value_name = "P.json")]
+    pub start: Option<PathBuf>,
+    /// Unrolled steps per update (1 = the paper's greedy per-frame scheme).
+    #[arg(long, value_name = "W", default_value_t = 4)]
+    pub window: usize,
+    #[arg(long, value_name = "E", default_value_t = 8)]
+    pub epochs: usize,
+    /// β of eq. 11 (density vs velocity in the target).
+    #[arg(long, value_name = "B", default_value_t = 0.7)]
+    pub beta: f64,
+    /// λ_var, the weight of E_var.
+    #[arg(long, value_name = "L", default_value_t = 1.0)]
+    pub var_weight: f64,
+    #[arg(long, value_name = "X", default_value_t = 0.02)]
+    pub lr: f64,
+    #[arg(long, value_parser = choice::<Optimizer>(OPTIMIZERS), default_value_t = Optimizer::Adam)]
+    pub optimizer: Optimizer,
+    /// Frames used, a..b (b exclusive); all frames when omitted.
+    #[arg(long, value_name = "a..b", value_parser = parse_range)]
+    pub frames: Option<(usize, usize)>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Density error above which the population is rebalanced.
+    #[arg(long, value_name = "E", default_value_t = 0.3)]
+    pub density_threshold: f64,
+    /// Every parameter follows ∇(E_mean + λ E_var) instead of the paper's split (alignment from
+    /// E_var, the others from E_mean).
+    #[arg(long)]
+    pub joint_gradients: bool,
+    /// E_mean on each cell's mean direction instead of every follower's (spread left to E_var).
+    #[arg(long)]
+    pub cell_mean: bool,
+    /// Objective: the paper's losses, or matching the density and momentum fields.
+    #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Paper)]
+    pub loss: LossKind,
+    /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
+    #[arg(long)]
+    pub checkpointing: bool,
+    /// Iterations settling each epoch's starting herd into the model's spacing (0: none).
+    #[arg(long, value_name = "N", default_value_t = Settle::default().iterations)]
+    pub settle: usize,
+    /// Herds simulated side by side from the same fields (losses averaged; `--loss ensemble`
+    /// compares their mean fields with the clip's).
+    #[arg(long, value_name = "K", default_value_t = 1)]
+    pub replicas: usize,
+    /// Runs (seeds S, S+1, …) whose density and velocity errors, with the start and the fitted
+    /// parameters, are averaged into the provenance's `evaluation` (one run is mostly noise).
+    #[arg(long, value_name = "K", default_value_t = 4)]
+    pub eval_seeds: usize,
+    /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
+    /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
+    #[arg(long, value_name = "S", default_value_t = GUIDANCE_SCALE, allow_hyphen_values = true)]
+    pub guidance_scale: f64,
+    #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
+    pub precision: Precision,
+    /// Write a checkpoint into DIR after every epoch.
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
+    /// Continue from DIR/checkpoint.json (same flags required).
+    #[arg(long, requires = "checkpoint")]
+    pub resume: bool,
+    /// Training log CSV (default: next to --out, .log.csv).
+    #[arg(long, value_name = "LOG.csv")]
+    pub log: Option<PathBuf>,
+    /// Loss-curve PNG (default: next to --out, .loss.png).
+    #[arg(long, value_name = "LOSS.png")]
+    pub plot: Option<PathBuf>,
+}
+
+pub fn exec(a: FitArgs) -> Result<()> {
+    let job = FitJob {
+        clips: a.clips,
+        start: a.start,
+        frames: a.frames.map(|(x, y)| x..y),
+        config: FitConfig {
+            window: a.window,
+            epochs: a.epochs,
+            beta: a.beta,
+            var_weight: a.var_weight,
+            lr: a.lr,
+            optimizer: a.optimizer,
+            frames: 0..0,
+            seed: a.seed,
+            density_threshold: a.density_threshold,
+            zero_grad_step: 0.02,
+            precision: a.precision,
+            split_gradients: !a.joint_gradients,
+            cell_mean: a.cell_mean,
+            loss: a.loss,
+            checkpointing: a.checkpointing,
+            settle: Settle::with_iterations(a.settle),
+            replicas: a.replicas,
+            guidance_scale: a.guidance_scale,
+        },
+        eval_seeds: a.eval_seeds,
+        checkpoint: a.checkpoint,
+        resume: a.resume,
+        out: a.out,
+        log: a.log,
+        plot: a.plot,
+    };
+    let summary = run(&job, &mut Bars::default())
+        .map_err(|e| with_flags(e, &[("split_gradients", "--joint-gradients")]))?;
+    if let Some(w) = &summary.plot_warning {
+        eprintln!("warning: no loss curve: {w}");
+    }
+    print!("{summary}");
+    Ok(())
+}

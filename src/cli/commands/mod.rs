@@ -1,0 +1,14 @@
+//! One file per verb (cargo's `commands/` style): its flags, and `exec`, which turns them into
+//! the library's job, makes one library call and prints the result.
+
+pub mod author;
+pub mod bench;
+pub mod demo;
+pub mod extract;
+pub mod fields_info;
+pub mod fit;
+pub mod gradcheck;
+pub mod import_reference;
+pub mod simulate;
+pub mod synth;
+pub mod validate;

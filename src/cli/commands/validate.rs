@@ -1,0 +1,74 @@
+//! `herdfit validate`: flags → [`ValidateJob`] → [`run`] → the report's Markdown.
+
+use crate::cli::args::with_flags;
+use crate::cli::Bars;
+use crate::error::Result;
+use crate::herd::fit::{Settle, GUIDANCE_SCALE};
+use crate::herd::validate::{run, ValidateConfig, ValidateJob};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    #[arg(value_name = "CLIP/")]
+    pub clip: PathBuf,
+    /// The parameter set to validate (e.g. the fit's output).
+    #[arg(long, value_name = "P.json")]
+    pub params: PathBuf,
+    /// A baseline to compare with (e.g. the fit's starting parameters).
+    #[arg(long, value_name = "P0.json")]
+    pub baseline: Option<PathBuf>,
+    /// Fraction of the clip before the held-out part.
+    #[arg(long, value_name = "S", default_value_t = 0.5)]
+    pub split: f64,
+    /// Coarse grid (cells per side) of the density and velocity errors.
+    #[arg(long, alias = "grid", value_name = "N", default_value_t = 10)]
+    pub coarse_grid: usize,
+    /// Simulations per parameter set (averaged).
+    #[arg(long, value_name = "K", default_value_t = 3)]
+    pub seeds: usize,
+    /// Iterations settling the starting herd into the model's spacing (0: none).
+    #[arg(long, value_name = "N", default_value_t = Settle::default().iterations)]
+    pub settle: usize,
+    /// Start the herd this many frames before the held-out part (from those fields) and simulate
+    /// through them unrecorded (0: start from the fields of the first held-out frame).
+    #[arg(long, value_name = "F", default_value_t = 0)]
+    pub warmup: usize,
+    /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
+    /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
+    #[arg(long, value_name = "S", default_value_t = GUIDANCE_SCALE, allow_hyphen_values = true)]
+    pub guidance_scale: f64,
+    /// Compare the seeds' mean prediction with the clip (counts, momenta and each measure
+    /// averaged over the seeds frame by frame) instead of averaging each seed's own errors.
+    #[arg(long)]
+    pub ensemble_mean: bool,
+    /// Skip the side-by-side video.
+    #[arg(long)]
+    pub no_video: bool,
+    /// Output report folder.
+    #[arg(long, value_name = "REPORT/")]
+    pub out: PathBuf,
+}
+
+pub fn exec(a: ValidateArgs) -> Result<()> {
+    let job = ValidateJob {
+        clip: a.clip,
+        params: a.params,
+        baseline: a.baseline,
+        out: a.out,
+        video: !a.no_video,
+        config: ValidateConfig {
+            split: a.split,
+            coarse_grid: a.coarse_grid,
+            seeds: a.seeds,
+            settle: Settle::with_iterations(a.settle),
+            warmup: a.warmup,
+            guidance_scale: a.guidance_scale,
+            ensemble_mean: a.ensemble_mean,
+        },
+    };
+    let (_, md) = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
+    print!("{md}");
+    println!("wrote {}", job.out.display());
+    Ok(())
+}

@@ -1,0 +1,307 @@
+//! Clip fields (paper §4, DESIGN §3, §6): per-frame density, mean velocity and direction variance
+//! on a grid of square cells, plus obstacle cells and the clip's speed statistics. They are the
+//! contract between video extraction, fitting and validation.
+//!
+//! On disk a clip is a folder: `fields.npz` (`density [F,ny,nx] f32` agents/BL², `velocity
+//! [F,ny,nx,2] f32` BL/s, `dir_variance [F,ny,nx] f32` rad², `obstacles [ny,nx] u8`) and
+//! `clip.json` (schema `herdfit.clip/1`). Row 0 of every grid is the bottom row (y up); cell
+//! `(ix, iy)` covers `origin + [ix, ix+1) × [iy, iy+1) · cell_size`.
+
+use crate::data::atomic::AtomicDir;
+use crate::error::{Error, Result};
+use ndarray::{Array2, Array3, Array4};
+use ndarray_npy::{NpzReader, NpzWriter};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Width of an animal's body in body lengths (its length is 1): rendered videos draw bodies as
+/// ellipses of 1 × 0.4 BL, and extraction estimates the body pixels per animal and the size of its
+/// morphological opening from it.
+pub const BODY_WIDTH_BL: f64 = 0.4;
+
+/// Schema tag of `clip.json`.
+pub const CLIP_SCHEMA: &str = "herdfit.clip/1";
+
+/// A grid of `nx × ny` square cells of side `cell_size` (BL), lower-left corner at `origin`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Grid {
+    pub origin: [f64; 2],
+    pub cell_size: f64,
+    pub nx: usize,
+    pub ny: usize,
+}
+
+impl Grid {
+    /// Area of one cell (BL²).
+    pub fn cell_area(&self) -> f64 {
+        self.cell_size * self.cell_size
+    }
+
+    /// The cell holding `p`, if inside.
+    pub fn cell_of(&self, p: [f64; 2]) -> Option<(usize, usize)> {
+        let fx = (p[0] - self.origin[0]) / self.cell_size;
+        let fy = (p[1] - self.origin[1]) / self.cell_size;
+        if !(fx >= 0.0 && fy >= 0.0 && fx < self.nx as f64 && fy < self.ny as f64) {
+            return None;
+        }
+        Some((fx as usize, fy as usize))
+    }
+
+    /// Centre of cell `(ix, iy)`.
+    pub fn centre(&self, ix: usize, iy: usize) -> [f64; 2] {
+        [
+            self.origin[0] + (ix as f64 + 0.5) * self.cell_size,
+            self.origin[1] + (iy as f64 + 0.5) * self.cell_size,
+        ]
+    }
+
+    /// Width and height (BL).
+    pub fn size(&self) -> [f64; 2] {
+        [
+            self.nx as f64 * self.cell_size,
+            self.ny as f64 * self.cell_size,
+        ]
+    }
+}
+
+/// Speed statistics of a clip (§6.2).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClipSpeed {
+    /// v_μ (BL/s).
+    pub mean: f64,
+    /// v_σ (BL/s): the per-animal standard deviation.
+    pub std: f64,
+    /// `[density (agents/BL²), mean speed (BL/s)]` rows, density increasing.
+    #[serde(default)]
+    pub density_table: Vec<[f64; 2]>,
+}
+
+/// `clip.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClipMeta {
+    pub schema: String,
+    pub fps: f64,
+    /// Cell side (BL).
+    pub cell_size: f64,
+    pub nx: usize,
+    pub ny: usize,
+    pub frames: usize,
+    /// World position of the grid's lower-left corner (BL).
+    #[serde(default)]
+    pub origin: [f64; 2],
+    /// Body length in video pixels, when the clip came from a video.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub body_length_px: Option<f64>,
+    /// Body pixels per animal, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub body_pixel_coverage: Option<f64>,
+    pub speed: ClipSpeed,
+    /// Where the clip came from (command, source files, settings).
+    #[serde(default)]
+    pub provenance: serde_json::Value,
+}
+
+impl ClipMeta {
+    /// The temporal window (frames) over which the clip's velocities were averaged: the extraction's
+    /// `smooth` setting for clips extracted from video, 1 otherwise.
+    pub fn velocity_window(&self) -> usize {
+        let p = &self.provenance;
+        if p["source"] == "extract" {
+            p["settings"]["smooth"].as_u64().unwrap_or(9).max(1) as usize
+        } else {
+            1
+        }
+    }
+}
+
+/// A clip's fields in memory.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClipFields {
+    pub meta: ClipMeta,
+    /// Agents per BL², `[F, ny, nx]`.
+    pub density: Array3<f32>,
+    /// Mean velocity (BL/s), `[F, ny, nx, 2]`.
+    pub velocity: Array4<f32>,
+    /// Variance of the angle between each animal's direction and its cell's mean direction
+    /// (rad²), `[F, ny, nx]`.
+    pub dir_variance: Array3<f32>,
+    /// 1 for an obstacle (non-accessible) cell, `[ny, nx]`.
+    pub obstacles: Array2<u8>,
+}
+
+impl ClipFields {
+    /// The grid of the clip.
+    pub fn grid(&self) -> Grid {
+        Grid {
+            origin: self.meta.origin,
+            cell_size: self.meta.cell_size,
+            nx: self.meta.nx,
+            ny: self.meta.ny,
+        }
+    }
+
+    /// Number of frames.
+    pub fn frames(&self) -> usize {
+        self.meta.frames
+    }
+
+    /// Agents in frame `f` (Σ density × cell area).
+    pub fn count(&self, f: usize) -> f64 {
+        let a = self.meta.cell_size * self.meta.cell_size;
+        self.density
+            .index_axis(ndarray::Axis(0), f)
+            .iter()
+            .map(|&d| d as f64 * a)
+            .sum()
+    }
+
+    /// Checks shapes and values; messages name the array or key.
+    pub fn validate(&self) -> Result<()> {
+        let m = &self.meta;
+        super::check_schema(&m.schema, CLIP_SCHEMA)
+            .map_err(|e| Error::invalid(format!("clip.json: {e}")))?;
+        if !(m.fps.is_finite() && m.fps > 0.0) {
+            return Err(Error::invalid(format!(
+                "clip.json: fps = {} must be > 0",
+                m.fps
+            )));
+        }
+        if !(m.cell_size.is_finite() && m.cell_size > 0.0) {
+            return Err(Error::invalid(format!(
+                "clip.json: cell_size = {} must be > 0",
+                m.cell_size
+            )));
+        }
+        if m.nx == 0 || m.ny == 0 || m.frames == 0 {
+            return Err(Error::invalid(format!(
+                "clip.json: empty clip (nx = {}, ny = {}, frames = {})",
+                m.nx, m.ny, m.frames
+            )));
+        }
+        if !(m.origin[0].is_finite() && m.origin[1].is_finite()) {
+            return Err(Error::invalid("clip.json: origin must be finite"));
+        }
+        for (k, v) in [("speed.mean", m.speed.mean), ("speed.std", m.speed.std)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::invalid(format!("clip.json: {k} = {v} must be ≥ 0")));
+            }
+        }
+        for (r, row) in m.speed.density_table.iter().enumerate() {
+            if !(row[0].is_finite() && row[1].is_finite() && row[0] >= 0.0 && row[1] >= 0.0)
+                || (r > 0 && row[0] < m.speed.density_table[r - 1][0])
+            {
+                return Err(Error::invalid(format!(
+                    "clip.json: speed.density_table[{r}] = {row:?} (finite, ≥ 0, density increasing)"
+                )));
+            }
+        }
+        let (f, ny, nx) = (m.frames, m.ny, m.nx);
+        let check = |name: &str, got: &[usize], want: &[usize]| -> Result<()> {
+            if got != want {
+                return Err(Error::invalid(format!(
+                    "fields.npz: {name} has shape {got:?}, clip.json says {want:?}"
+                )));
+            }
+            Ok(())
+        };
+        check("density", self.density.shape(), &[f, ny, nx])?;
+        check("velocity", self.velocity.shape(), &[f, ny, nx, 2])?;
+        check("dir_variance", self.dir_variance.shape(), &[f, ny, nx])?;
+        check("obstacles", self.obstacles.shape(), &[ny, nx])?;
+        let bad = |name: &str, idx: Vec<usize>, v: f32, what: &str| {
+            Error::invalid(format!("fields.npz: {name}{idx:?} = {v} {what}"))
+        };
+        for (name, a) in [
+            ("density", &self.density),
+            ("dir_variance", &self.dir_variance),
+        ] {
+            if let Some((i, &v)) = a.indexed_iter().find(|(_, v)| !v.is_finite() || **v < 0.0) {
+                return Err(bad(name, vec![i.0, i.1, i.2], v, "(must be finite, ≥ 0)"));
+            }
+        }
+        for (i, &v) in self.velocity.indexed_iter() {
+            if !v.is_finite() {
+                return Err(bad(
+                    "velocity",
+                    vec![i.0, i.1, i.2, i.3],
+                    v,
+                    "(must be finite)",
+                ));
+            }
+        }
+        if let Some(((iy, ix), v)) = self.obstacles.indexed_iter().find(|(_, &v)| v > 1) {
+            return Err(Error::invalid(format!(
+                "fields.npz: obstacles[{iy}, {ix}] = {v} (must be 0 or 1)"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Writes `dir/fields.npz` and `dir/clip.json`, plus extra files, all-or-nothing: the folder
+    /// is assembled beside `dir` and renamed into place.
+    pub fn save(&self, dir: &Path, extra: &[(&str, Vec<u8>)]) -> Result<()> {
+        self.validate().map_err(|e| e.in_file(dir))?;
+        let out = AtomicDir::create(dir)?;
+        let mut buf = std::io::Cursor::new(Vec::new());
+        {
+            let mut npz = NpzWriter::new(&mut buf);
+            let fail = |e: ndarray_npy::WriteNpzError| {
+                Error::file(dir, format!("writing fields.npz: {e}"))
+            };
+            npz.add_array("density", &self.density).map_err(fail)?;
+            npz.add_array("velocity", &self.velocity).map_err(fail)?;
+            npz.add_array("dir_variance", &self.dir_variance)
+                .map_err(fail)?;
+            npz.add_array("obstacles", &self.obstacles).map_err(fail)?;
+            npz.finish().map_err(fail)?;
+        }
+        out.write("fields.npz", buf.get_ref())?;
+        let json = serde_json::to_string_pretty(&self.meta)
+            .map_err(|e| Error::Internal(format!("serialising clip.json: {e}")))?;
+        out.write("clip.json", format!("{json}\n").as_bytes())?;
+        for (name, bytes) in extra {
+            out.write(name, bytes)?;
+        }
+        out.commit()
+    }
+
+    /// Reads and validates a clip folder.
+    pub fn load(dir: &Path) -> Result<ClipFields> {
+        if !dir.is_dir() {
+            return Err(Error::file(
+                dir,
+                "not a clip folder (missing or not a directory)",
+            ));
+        }
+        let meta_path = dir.join("clip.json");
+        let text = std::fs::read_to_string(&meta_path)
+            .map_err(|e| Error::file(&meta_path, format!("cannot read: {e}")))?;
+        let meta: ClipMeta = serde_json::from_str(&text)
+            .map_err(|e| Error::file(&meta_path, format!("not a {CLIP_SCHEMA} file: {e}")))?;
+        let npz_path = dir.join("fields.npz");
+        let file = std::fs::File::open(&npz_path)
+            .map_err(|e| Error::file(&npz_path, format!("cannot read: {e}")))?;
+        let mut npz = NpzReader::new(file)
+            .map_err(|e| Error::file(&npz_path, format!("not a valid npz archive: {e}")))?;
+        let fail = |name: &str, e: ndarray_npy::ReadNpzError| {
+            Error::file(&npz_path, format!("array '{name}': {e}"))
+        };
+        let density: Array3<f32> = npz.by_name("density").map_err(|e| fail("density", e))?;
+        let velocity: Array4<f32> = npz.by_name("velocity").map_err(|e| fail("velocity", e))?;
+        let dir_variance: Array3<f32> = npz
+            .by_name("dir_variance")
+            .map_err(|e| fail("dir_variance", e))?;
+        let obstacles: Array2<u8> = npz.by_name("obstacles").map_err(|e| fail("obstacles", e))?;
+        let clip = ClipFields {
+            meta,
+            density,
+            velocity,
+            dir_variance,
+            obstacles,
+        };
+        clip.validate().map_err(|e| e.in_file(dir))?;
+        Ok(clip)
+    }
+}

@@ -1,0 +1,101 @@
+//! Runs of the model on a clip: the model of a clip (its obstacles and frame rate) and runs from
+//! a frame's fields with the leaders following the clip's guidance.
+
+use crate::backend::{cpu_device, Precision};
+use crate::data::AgentRow;
+use crate::data::ClipFields;
+use crate::error::{Error, Result};
+use crate::herd::params::{Params, SpeedModel};
+use crate::herd::sim::{
+    obstacle_map, theta_tensor, Guidance, Guided, HerdState, Model, StepDecisions, World,
+};
+use crate::herd::start::{start_herd, Settle};
+use crate::measure::fields::field_errors;
+use burn::tensor::Device;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::ops::Range;
+
+/// The model of a clip: its obstacle cells, its frame rate, and `params` (the guidance is set per
+/// frame by the caller).
+pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
+    let g = clip.grid();
+    Model {
+        params,
+        world: World {
+            obstacles: Some(obstacle_map(&g, &clip.obstacles)),
+            guidance: Guidance::None,
+        },
+        dt: 1.0 / clip.meta.fps,
+    }
+}
+
+/// A run from the fields of frame `first` of a clip to frame `last` with `params` under the clip's
+/// speed model (leaders follow `guidance[f]`, the guidance of every frame; no population
+/// control): the herd is drawn from the fields with seed `seed` and settled by `settle`, then
+/// `observe(f, state, ids)` sees it at every frame `f` in `first + 1 ..= last`. Returns the herd
+/// it started from.
+#[allow(clippy::too_many_arguments)]
+pub fn run_from_fields(
+    clip: &ClipFields,
+    params: &Params,
+    (first, last): (usize, usize),
+    seed: u64,
+    settle: &Settle,
+    guidance: &[Guidance],
+    device: &Device,
+    mut observe: impl FnMut(usize, &HerdState, &[u64]) -> Result<()>,
+) -> Result<Vec<AgentRow>> {
+    let mut params = params.clone();
+    params.speed = SpeedModel::of_clip(clip, &params.speed);
+    let model = clip_model(params, clip);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let rows = start_herd(&model, clip, first, settle, &mut rng, device)?;
+    if rows.is_empty() {
+        return Err(Error::invalid(format!(
+            "frame {first} of the clip holds no agents: nothing to start from"
+        )));
+    }
+    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+    let theta = theta_tensor(&model.params.to_vec(), device);
+    let steps = last.min(guidance.len()).saturating_sub(first);
+    let mut hooks = Guided {
+        guidance: &guidance[first.min(guidance.len())..],
+        observe: |t: usize, _: &StepDecisions, next: &HerdState| observe(first + t + 1, next, &ids),
+    };
+    model.run_live(&theta, &rows, steps, &mut rng, &mut hooks)?;
+    Ok(rows)
+}
+
+/// The mean density and velocity errors ([`field_errors`]) over the frames after the first of a
+/// [`run_from_fields`] through the frames `range` of the clip.
+pub fn evaluate(
+    clip: &ClipFields,
+    params: &Params,
+    range: Range<usize>,
+    seed: u64,
+    precision: Precision,
+    settle: &Settle,
+    guidance: &[Guidance],
+) -> Result<(f64, f64)> {
+    let device = cpu_device(precision)?;
+    let (mut de, mut ve, mut n): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    let last = range.end.saturating_sub(1);
+    run_from_fields(
+        clip,
+        params,
+        (range.start, last),
+        seed,
+        settle,
+        guidance,
+        &device,
+        |f, state, ids| {
+            let (d, v) = field_errors(clip, f, &state.rows(ids)?);
+            de += d;
+            ve += v;
+            n += 1.0;
+            Ok(())
+        },
+    )?;
+    Ok((de / n.max(1.0), ve / n.max(1.0)))
+}

@@ -1,0 +1,191 @@
+//! The settings of a fit ([`FitConfig`]), the objective ([`LossKind`]) and their checks.
+
+use crate::backend::Precision;
+use crate::data::ClipFields;
+use crate::error::{check_counts, Error, Result};
+use crate::herd::guidance::{check_guidance_scale, GUIDANCE_SCALE};
+use crate::herd::start::Settle;
+use crate::optim::Optimizer;
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+
+/// Settings of a fit (recorded as `settings` in the fitted parameter set's provenance).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FitConfig {
+    /// Unrolled steps per gradient update (1 = the paper's greedy per-frame scheme).
+    pub window: usize,
+    pub epochs: usize,
+    /// β of eq. 11.
+    pub beta: f64,
+    /// λ_var: weight of E_var.
+    pub var_weight: f64,
+    pub lr: f64,
+    pub optimizer: Optimizer,
+    /// Frames of the clip used (start..end, end exclusive).
+    pub frames: Range<usize>,
+    pub seed: u64,
+    /// Density error Σ|ρ' − ρ| / Σρ above which the population is rebalanced.
+    pub density_threshold: f64,
+    /// Size of the random step taken when the gradient vanishes.
+    pub zero_grad_step: f64,
+    pub precision: Precision,
+    /// The paper's split (§6.1): alignment parameters follow ∇E_var, the others ∇E_mean.
+    /// Off: every parameter follows ∇(E_mean + λ E_var).
+    pub split_gradients: bool,
+    /// E_mean on cell means rather than per agent (see [`crate::herd::fit::loss::StepTarget::cell_mean`]).
+    pub cell_mean: bool,
+    /// The objective: the paper's E_mean + λ E_var, or field matching.
+    #[serde(default)]
+    pub loss: LossKind,
+    /// burn's balanced gradient checkpointing (less memory for long windows, more time).
+    #[serde(default)]
+    pub checkpointing: bool,
+    /// How each epoch's starting herd is settled (see [`crate::herd::start::settle`]).
+    #[serde(default)]
+    pub settle: Settle,
+    /// Independent herds simulated side by side from the same fields (each its own sampling and
+    /// noise); the losses are averaged over them, and `--loss ensemble` compares their mean.
+    #[serde(default = "one_replica")]
+    pub replicas: usize,
+    /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
+    /// ([`crate::herd::guidance::guidance_field`]).
+    #[serde(default = "default_guidance_scale")]
+    pub guidance_scale: f64,
+}
+
+fn default_guidance_scale() -> f64 {
+    GUIDANCE_SCALE
+}
+
+fn one_replica() -> usize {
+    1
+}
+
+/// What the fit minimises.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LossKind {
+    /// E_mean (eq. 7) + λ_var E_var (eq. 8) against the target field U (eq. 10–11).
+    #[default]
+    Paper,
+    /// Field matching: after every step, the simulated density and momentum fields (bilinear
+    /// splatting of the agents and of their velocities) against the clip's,
+    /// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖², plus λ_var E_var, where K blurs the
+    /// clip's box-binned fields as splatting blurs points ([`crate::herd::fit::target::blur_like_splat`]).
+    Fields,
+    /// Field matching of the *expected* simulated fields: the replicas' mean fields against the
+    /// clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖², see
+    /// [`crate::herd::fit::ensemble_loss`]), plus λ_var E_var. Needs `replicas` ≥ 2.
+    Ensemble,
+}
+
+enum_names!(LossKind { Paper = "paper", Fields = "fields", Ensemble = "ensemble" });
+
+pub use crate::herd::params::ALIGNMENT;
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            window: 4,
+            epochs: 8,
+            beta: 0.7,
+            var_weight: 1.0,
+            lr: 0.02,
+            optimizer: Optimizer::Adam,
+            frames: 0..0,
+            seed: 0,
+            density_threshold: 0.3,
+            zero_grad_step: 0.02,
+            precision: Precision::F32,
+            split_gradients: true,
+            cell_mean: false,
+            loss: LossKind::Paper,
+            checkpointing: false,
+            settle: Settle::default(),
+            replicas: 1,
+            guidance_scale: GUIDANCE_SCALE,
+        }
+    }
+}
+
+impl FitConfig {
+    /// Checks the settings on their own: ranges, and the ensemble objective's replicas. Errors
+    /// name the key.
+    pub fn check(&self) -> Result<()> {
+        if self.frames.end < self.frames.start + 2 {
+            return Err(Error::config(
+                "frames",
+                format!(
+                    "{}..{} must span at least 2 frames",
+                    self.frames.start, self.frames.end
+                ),
+            ));
+        }
+        if self.loss == LossKind::Ensemble && self.replicas < 2 {
+            return Err(Error::config(
+                "replicas",
+                "{loss} ensemble compares several herds: set 2 or more",
+            ));
+        }
+        if self.replicas == 0 || self.replicas > 64 {
+            return Err(Error::config(
+                "replicas",
+                format!("{} is out of range 1..=64", self.replicas),
+            ));
+        }
+        check_counts(&[("window", self.window), ("epochs", self.epochs)])?;
+        check_guidance_scale(self.guidance_scale)?;
+        for (key, v, lo, hi) in [
+            ("beta", self.beta, 0.0, 1.0),
+            ("var_weight", self.var_weight, 0.0, f64::INFINITY),
+            ("lr", self.lr, 1e-12, 1.0),
+            (
+                "density_threshold",
+                self.density_threshold,
+                0.0,
+                f64::INFINITY,
+            ),
+            ("zero_grad_step", self.zero_grad_step, 0.0, f64::INFINITY),
+        ] {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err(Error::config(key, format!("{v} is out of range")));
+            }
+        }
+        self.settle.check()
+    }
+
+    /// [`FitConfig::check`], then the settings against a clip: the frames inside it, a herd in
+    /// them and at the first.
+    pub fn check_clip(&self, clip: &ClipFields) -> Result<()> {
+        self.check()?;
+        let f = clip.frames();
+        if self.frames.end > f {
+            return Err(Error::config(
+                "frames",
+                format!(
+                    "{}..{} is out of range: the clip has frames 0..{f}",
+                    self.frames.start, self.frames.end
+                ),
+            ));
+        }
+        let total: f64 = (self.frames.start..self.frames.end)
+            .map(|k| clip.count(k))
+            .sum();
+        if total < 1.0 {
+            return Err(Error::invalid(
+                "the clip's density is zero everywhere in the frames used: nothing to fit",
+            ));
+        }
+        if clip.count(self.frames.start) < 1.0 {
+            return Err(Error::config(
+                "frames",
+                format!(
+                    "frame {} of the clip holds no agents: start the fit where the herd is",
+                    self.frames.start
+                ),
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,376 @@
+//! A fit as `herdfit fit` runs it, and as `examples/fit_synthetic.rs` runs it: clips and start
+//! from files, the fit, its evaluation (losses and field errors of the start and the fitted set),
+//! the provenance recorded in the parameter file, the training log and the loss curve.
+
+use super::checkpoint::{Checkpoint, CheckpointDir};
+use super::config::FitConfig;
+use super::log::{write_log, LogRow};
+use super::run::{fit_clips, loss_of, FitResult};
+use crate::data::atomic::check_writable;
+use crate::data::ClipFields;
+use crate::error::{Error, Result};
+use crate::herd::eval::evaluate;
+use crate::herd::guidance::guidance_fields;
+use crate::herd::params::{param_names, Params, SpeedModel};
+use crate::herd::sim::Guidance;
+use crate::progress::Progress;
+use plotters::style::RGBColor;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// A fit with its files.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FitJob {
+    /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
+    pub clips: Vec<PathBuf>,
+    /// Starting parameters; the generic start (every value 0.5) when absent.
+    pub start: Option<PathBuf>,
+    /// Frames used, `start..end`; all frames of the shortest clip when absent (`config.frames`
+    /// is set from it).
+    pub frames: Option<Range<usize>>,
+    pub config: FitConfig,
+    /// Runs (seeds S, S+1, …) averaged into the provenance's `evaluation`.
+    pub eval_seeds: usize,
+    /// A folder for a checkpoint after every epoch, and whether to resume from it.
+    pub checkpoint: Option<PathBuf>,
+    pub resume: bool,
+    /// The parameter set written (`herdfit.params/1`).
+    pub out: PathBuf,
+    /// The training log CSV; next to `out` (`.log.csv`) when absent.
+    pub log: Option<PathBuf>,
+    /// The loss curve PNG; next to `out` (`.loss.png`) when absent.
+    pub plot: Option<PathBuf>,
+}
+
+impl Default for FitJob {
+    fn default() -> Self {
+        FitJob {
+            clips: Vec::new(),
+            start: None,
+            frames: None,
+            config: FitConfig::default(),
+            eval_seeds: 4,
+            checkpoint: None,
+            resume: false,
+            out: PathBuf::from("params.json"),
+            log: None,
+            plot: None,
+        }
+    }
+}
+
+/// `out` with its extension replaced by `suffix` (`params.json` → `params.log.csv`).
+pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "params".into());
+    out.with_file_name(format!("{stem}{suffix}"))
+}
+
+impl FitJob {
+    /// The training log's path.
+    pub fn log_path(&self) -> PathBuf {
+        self.log
+            .clone()
+            .unwrap_or_else(|| sibling(&self.out, ".log.csv"))
+    }
+
+    /// The loss curve's path.
+    pub fn plot_path(&self) -> PathBuf {
+        self.plot
+            .clone()
+            .unwrap_or_else(|| sibling(&self.out, ".loss.png"))
+    }
+}
+
+impl FitJob {
+    /// Checks the evaluation's seeds and the fit's settings on their own
+    /// ([`FitConfig::check`]; `config.frames` is checked once the clips are known).
+    pub fn check(&self) -> Result<()> {
+        if self.eval_seeds == 0 || self.eval_seeds > 64 {
+            return Err(Error::config(
+                "eval_seeds",
+                format!("{} is out of range 1..=64", self.eval_seeds),
+            ));
+        }
+        if self.clips.is_empty() {
+            return Err(Error::config("clips", "give at least one clip"));
+        }
+        Ok(())
+    }
+}
+
+/// What a fit did: the schedule, the start and fitted parameters, and the losses and errors of
+/// both (printed by `herdfit fit`).
+#[derive(Clone, Debug)]
+pub struct FitSummary {
+    pub clips: Vec<String>,
+    pub frames: Range<usize>,
+    pub epochs: usize,
+    pub window: usize,
+    pub windows_per_epoch: usize,
+    pub result: FitResult,
+    /// (E_mean, E_var, E_fields) of the start and of the fitted set ([`loss_of`]).
+    pub loss: [(f64, f64, f64); 2],
+    /// (density error, velocity error) of the start and of the fitted set.
+    pub errors: [(f64, f64); 2],
+    pub out: PathBuf,
+    pub log: PathBuf,
+    pub plot: PathBuf,
+    /// Why the loss curve could not be drawn, if it could not (the fit is written anyway).
+    pub plot_warning: Option<String>,
+}
+
+/// Runs a fit job: loads the clips and the start, fits, evaluates the start and the fitted set,
+/// and writes the parameter set (with its provenance), the log and the loss curve.
+pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
+    job.check()?;
+    let loaded = job
+        .clips
+        .iter()
+        .map(|p| ClipFields::load(p))
+        .collect::<Result<Vec<_>>>()?;
+    let clips: Vec<&ClipFields> = loaded.iter().collect();
+    let init = match &job.start {
+        Some(p) => Params::load(p)?,
+        None => Params::neutral(),
+    };
+    // All frames of the shortest clip unless told otherwise.
+    let shortest = clips.iter().map(|c| c.frames()).min().unwrap_or(0);
+    let frames = job.frames.clone().unwrap_or(0..shortest);
+    let cfg = FitConfig {
+        frames: frames.clone(),
+        ..job.config.clone()
+    };
+    cfg.check()?;
+    for (c, p) in clips.iter().zip(&job.clips) {
+        cfg.check_clip(c).map_err(|e| e.in_file(p))?;
+    }
+    let (log_path, plot_path) = (job.log_path(), job.plot_path());
+    for p in [&job.out, &log_path, &plot_path] {
+        check_writable(p)?;
+    }
+    let ckpt = match &job.checkpoint {
+        Some(d) => {
+            std::fs::create_dir_all(d)
+                .map_err(|e| Error::file(d, format!("cannot create folder: {e}")))?;
+            Some(CheckpointDir {
+                dir: d.clone(),
+                resume: job.resume,
+            })
+        }
+        None => None,
+    };
+    let windows_per_epoch = (frames.end - frames.start - 1).div_ceil(cfg.window) * clips.len();
+    progress.start("fit", (windows_per_epoch * cfg.epochs) as u64);
+    if let Some(c) = ckpt.as_ref().filter(|c| c.resume) {
+        if let Ok(text) = std::fs::read_to_string(c.file()) {
+            if let Ok(k) = serde_json::from_str::<Checkpoint>(&text) {
+                progress.inc((k.epochs_done * windows_per_epoch) as u64);
+            }
+        }
+    }
+    let res = fit_clips(&clips, &init, &cfg, ckpt.as_ref(), |epoch, frame, e, ms| {
+        progress.message(&format!(
+            "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
+        ));
+        progress.inc(1);
+    })?;
+    progress.finish();
+    let mut start_params = init.clone();
+    start_params.speed = res.params.speed.clone();
+    let loss = [
+        loss_of(&clips, &start_params, &cfg)?,
+        loss_of(&clips, &res.params, &cfg)?,
+    ];
+    let errors = evaluation(
+        &clips,
+        &init.speed,
+        &[&start_params, &res.params],
+        job,
+        &cfg,
+    )?;
+    let names: Vec<String> = job.clips.iter().map(|p| p.display().to_string()).collect();
+    let mut out = res.params.clone();
+    out.provenance = Some(provenance(&names, &cfg, &res, loss, errors, job.eval_seeds));
+    write_log(&log_path, &res.log)?;
+    let plot_warning = loss_plot(&plot_path, &res.log, cfg.epochs)
+        .err()
+        .map(|e| e.to_string());
+    out.save(&job.out)?;
+    Ok(FitSummary {
+        clips: names,
+        frames,
+        epochs: cfg.epochs,
+        window: cfg.window,
+        windows_per_epoch,
+        result: res,
+        loss,
+        errors: [errors[0], errors[1]],
+        out: job.out.clone(),
+        log: log_path,
+        plot: plot_path,
+        plot_warning,
+    })
+}
+
+/// Density and velocity errors of each parameter set in `sets`, averaged over the clips (each
+/// simulated with its own speeds, from `base`) and `job.eval_seeds` seeds.
+fn evaluation(
+    clips: &[&ClipFields],
+    base: &SpeedModel,
+    sets: &[&Params; 2],
+    job: &FitJob,
+    cfg: &FitConfig,
+) -> Result<[(f64, f64); 2]> {
+    let guidance: Vec<Vec<Guidance>> = clips
+        .iter()
+        .map(|c| guidance_fields(c, cfg.guidance_scale))
+        .collect();
+    let errors = |p: &Params| -> Result<(f64, f64)> {
+        let (mut d, mut v) = (0.0, 0.0);
+        for (c, guidance) in clips.iter().zip(&guidance) {
+            let mut q = p.clone();
+            q.speed = SpeedModel::of_clip(c, base);
+            for k in 0..job.eval_seeds {
+                let (x, y) = evaluate(
+                    c,
+                    &q,
+                    cfg.frames.clone(),
+                    cfg.seed.wrapping_add(k as u64),
+                    cfg.precision,
+                    &cfg.settle,
+                    guidance,
+                )?;
+                let w = (clips.len() * job.eval_seeds) as f64;
+                d += x / w;
+                v += y / w;
+            }
+        }
+        Ok((d, v))
+    };
+    Ok([errors(sets[0])?, errors(sets[1])?])
+}
+
+/// The provenance of a fitted parameter set: clips, frames, settings, start, the last epoch's
+/// mean losses, the losses of one epoch without updates and the evaluation, for the start and
+/// the fitted set.
+fn provenance(
+    clips: &[String],
+    cfg: &FitConfig,
+    res: &FitResult,
+    loss: [(f64, f64, f64); 2],
+    errors: [(f64, f64); 2],
+    eval_seeds: usize,
+) -> serde_json::Value {
+    let last_epoch = res.log.last().map_or(0, |r| r.epoch);
+    let last: Vec<&LogRow> = res.log.iter().filter(|r| r.epoch == last_epoch).collect();
+    let mean = |f: &dyn Fn(&LogRow) -> f64| {
+        last.iter().map(|r| f(r)).sum::<f64>() / last.len().max(1) as f64
+    };
+    let ([lb, la], [before, after]) = (loss, errors);
+    serde_json::json!({
+        "source": "fit",
+        "clip": clips[0],
+        "clips": clips,
+        "frames": [cfg.frames.start, cfg.frames.end],
+        "settings": cfg,
+        "start": res.start,
+        "final_losses": {
+            "e_mean": mean(&|r| r.e_mean),
+            "e_var": mean(&|r| r.e_var),
+            "e_fields": mean(&|r| r.e_fields),
+            "density_error": mean(&|r| r.density_error),
+            "velocity_error": mean(&|r| r.velocity_error),
+        },
+        "loss": {
+            "what": "mean E_mean and E_var over one epoch of the fit's schedule without updates (same herd and noise)",
+            "start": {"e_mean": lb.0, "e_var": lb.1, "e_fields": lb.2},
+            "fitted": {"e_mean": la.0, "e_var": la.1, "e_fields": la.2},
+        },
+        "evaluation": {
+            "what": "mean per-frame errors of runs from the first frame's fields (no population control), averaged over the seeds",
+            "seeds": eval_seeds,
+            "start": {"density_error": before.0, "velocity_error": before.1},
+            "fitted": {"density_error": after.0, "velocity_error": after.1},
+        },
+    })
+}
+
+/// The loss curve: per epoch, the mean E_mean, E_var, density and velocity errors of its windows.
+fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
+    let per_epoch = |f: &dyn Fn(&LogRow) -> f64| -> Vec<(f64, f64)> {
+        (0..epochs)
+            .filter_map(|e| {
+                let rows: Vec<_> = log.iter().filter(|r| r.epoch == e).collect();
+                (!rows.is_empty()).then(|| {
+                    (
+                        e as f64 + 1.0,
+                        rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64,
+                    )
+                })
+            })
+            .collect()
+    };
+    type Column = fn(&LogRow) -> f64;
+    let columns: [(&str, Column, RGBColor); 4] = [
+        ("E_mean", |r| r.e_mean, RGBColor(31, 119, 180)),
+        ("E_var", |r| r.e_var, RGBColor(255, 127, 14)),
+        ("density error", |r| r.density_error, RGBColor(44, 160, 44)),
+        (
+            "velocity error",
+            |r| r.velocity_error,
+            RGBColor(214, 39, 40),
+        ),
+    ];
+    let series = columns.map(|(name, f, colour)| crate::plot::Series {
+        name,
+        points: per_epoch(&f),
+        colour,
+    });
+    crate::plot::line_chart(
+        path,
+        "herdfit fit",
+        "epoch",
+        "mean over the epoch's windows",
+        &series,
+    )
+}
+
+impl std::fmt::Display for FitSummary {
+    /// What `herdfit fit` prints: the schedule, start vs fitted parameters, losses and errors.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "fit: {} epochs × {} windows of {} steps on frames {}..{} of {}",
+            self.epochs,
+            self.windows_per_epoch,
+            self.window,
+            self.frames.start,
+            self.frames.end,
+            self.clips.join(", ")
+        )?;
+        writeln!(f, "{:<20} {:>8} {:>8}", "parameter", "start", "fitted")?;
+        for (n, (s0, s1)) in param_names()
+            .iter()
+            .zip(self.result.start.iter().zip(self.result.params.to_vec()))
+        {
+            writeln!(f, "{n:<20} {s0:>8.4} {s1:>8.4}")?;
+        }
+        let ([lb, la], [b, a]) = (self.loss, self.errors);
+        writeln!(
+            f,
+            "loss E_mean {:.4} → {:.4}, E_var {:.4} → {:.4}, E_fields {:.4} → {:.4}; density error {:.4} → {:.4}, velocity error {:.4} → {:.4}",
+            lb.0, la.0, lb.1, la.1, lb.2, la.2, b.0, a.0, b.1, a.1
+        )?;
+        writeln!(
+            f,
+            "wrote {}, {}, {}",
+            self.out.display(),
+            self.log.display(),
+            self.plot.display()
+        )
+    }
+}

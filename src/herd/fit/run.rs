@@ -1,0 +1,557 @@
+//! The fit loop (paper §6.1): epochs × clips × windows of planned, then evaluated, steps; the
+//! gradient of each window's loss, the optimiser step, population control between windows.
+
+use super::checkpoint::{Checkpoint, CheckpointDir, CHECKPOINT_SCHEMA};
+use super::config::{FitConfig, LossKind};
+use super::log::LogRow;
+use super::loss::StepTarget;
+use super::loss::{add, ensemble_loss, fields_loss, step_loss};
+use super::plan::{plan_step, window_loss};
+use super::target::Stencil;
+use crate::backend::cpu_device;
+use crate::data::agents::AgentRow;
+use crate::data::atomic::write_atomic;
+use crate::data::ClipFields;
+use crate::error::{Error, Result};
+use crate::herd::eval::clip_model;
+use crate::herd::guidance::guidance_fields;
+use crate::herd::params::SpeedModel;
+use crate::herd::params::ALIGNMENT;
+use crate::herd::params::{Params, N_PARAMS};
+use crate::herd::sim::{read_vec, Model, StepDecisions};
+use crate::herd::sim::{theta_tensor, ForceTensors, Guidance, HerdState};
+use crate::herd::start::{population_control, start_herd};
+use crate::measure::fields::field_errors;
+use crate::optim::OptState;
+use burn::tensor::{Device, Tensor};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// One optimiser step on `theta` with gradient `g` and step size `lr` ([`crate::optim::step`]
+/// with `cfg.optimizer` and `cfg.zero_grad_step`), then clamped to the parameters' ranges.
+pub fn update(
+    theta: &mut [f64; N_PARAMS],
+    g: &[f64; N_PARAMS],
+    opt: &mut OptState,
+    cfg: &FitConfig,
+    lr: f64,
+    rng: &mut impl Rng,
+) {
+    crate::optim::step(cfg.optimizer, theta, g, opt, lr, cfg.zero_grad_step, rng);
+    Params::clamp_vec(theta);
+}
+
+/// Result of a fit.
+#[derive(Clone, Debug)]
+pub struct FitResult {
+    pub params: Params,
+    pub start: [f64; N_PARAMS],
+    pub log: Vec<LogRow>,
+}
+
+fn epoch_rng(seed: u64, epoch: usize) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(seed ^ (epoch as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
+/// Runs the fit. `progress(epoch, frame, e_mean, ms_per_step)` is called after every window.
+pub fn fit(
+    clip: &ClipFields,
+    init: &Params,
+    cfg: &FitConfig,
+    ckpt: Option<&CheckpointDir>,
+    progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<FitResult> {
+    fit_inner(&[clip], init, cfg, ckpt, true, progress)
+}
+
+/// [`fit`] to several clips of one kind of herd at once (paper §7.6): every epoch walks through
+/// the clips in turn, each with its own herds, obstacles, frame rate and speed model, and one set
+/// of 12 parameters learns from all of them. `cfg.frames` applies to every clip. The exported
+/// speed model is the first clip's.
+pub fn fit_clips(
+    clips: &[&ClipFields],
+    init: &Params,
+    cfg: &FitConfig,
+    ckpt: Option<&CheckpointDir>,
+    progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<FitResult> {
+    fit_inner(clips, init, cfg, ckpt, true, progress)
+}
+
+/// The loss of a parameter set on a clip without learning: one epoch of the fit's schedule
+/// (epoch-0 herd and noise) with no updates; returns the mean E_mean, E_var and field-matching
+/// loss over its windows. Comparing two parameter sets this way uses the same herd, noise and
+/// population control seed.
+pub fn loss_of(clips: &[&ClipFields], params: &Params, cfg: &FitConfig) -> Result<(f64, f64, f64)> {
+    let one = FitConfig {
+        epochs: 1,
+        ..cfg.clone()
+    };
+    let r = fit_inner(clips, params, &one, None, false, |_, _, _, _| {})?;
+    let n = r.log.len().max(1) as f64;
+    Ok((
+        r.log.iter().map(|x| x.e_mean).sum::<f64>() / n,
+        r.log.iter().map(|x| x.e_var).sum::<f64>() / n,
+        r.log.iter().map(|x| x.e_fields).sum::<f64>() / n,
+    ))
+}
+
+/// What one fit shares across its stages: the clips, the settings, the devices, the parameter
+/// set whose speed model is exported, and each clip's guidance and stencil.
+struct FitRun<'a> {
+    clips: &'a [&'a ClipFields],
+    init: &'a Params,
+    cfg: &'a FitConfig,
+    device: Device,
+    /// The autodiff device (with burn's gradient checkpointing when asked for).
+    ad: Device,
+    params: Params,
+    per_clip: Vec<(Vec<Guidance>, Stencil)>,
+    /// false: evaluate the schedule without updates ([`loss_of`]).
+    learn: bool,
+}
+
+/// What a fit learns and a checkpoint keeps: θ, the optimiser's state and the log.
+struct Learnt {
+    theta: [f64; N_PARAMS],
+    opt: OptState,
+    log: Vec<LogRow>,
+}
+
+/// The K replica herds of one clip in one epoch, with the next free id of each.
+struct Herds {
+    rows: Vec<Vec<AgentRow>>,
+    next_ids: Vec<u64>,
+}
+
+/// The forward pass over one window besides its loss: the logged loss values, and each live
+/// replica's plans and end state.
+struct Forward {
+    e_mean: f64,
+    e_var: f64,
+    e_fields: f64,
+    /// Replicas that held agents at the start of the window.
+    live: Vec<usize>,
+    plans: Vec<Vec<(StepDecisions, StepTarget)>>,
+    ends: Vec<HerdState>,
+}
+
+fn fit_inner(
+    clips: &[&ClipFields],
+    init: &Params,
+    cfg: &FitConfig,
+    ckpt: Option<&CheckpointDir>,
+    learn: bool,
+    mut progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<FitResult> {
+    let run = FitRun::new(clips, init, cfg, learn)?;
+    let start = init.to_vec();
+    let (mut learnt, first_epoch) = resume(ckpt, cfg, start)?;
+    for epoch in first_epoch..cfg.epochs {
+        let mut rng = epoch_rng(cfg.seed, epoch);
+        for ci in 0..clips.len() {
+            run.epoch_on_clip(epoch, ci, &mut learnt, &mut rng, &mut progress)?;
+        }
+        if let Some(c) = ckpt {
+            save_checkpoint(c, epoch + 1, &learnt, cfg, start)?;
+        }
+    }
+    let mut out = run.params.with_vec(&learnt.theta);
+    out.speed = run.params.speed.clone();
+    Ok(FitResult {
+        params: out,
+        start,
+        log: learnt.log,
+    })
+}
+
+/// The state to start from: θ = the start, or the checkpoint's state when resuming (refused
+/// when the checkpoint was written with other settings or another start).
+fn resume(
+    ckpt: Option<&CheckpointDir>,
+    cfg: &FitConfig,
+    start: [f64; N_PARAMS],
+) -> Result<(Learnt, usize)> {
+    match ckpt {
+        Some(c) if c.resume && c.file().exists() => {
+            let text = std::fs::read_to_string(c.file())
+                .map_err(|e| Error::file(c.file(), format!("cannot read: {e}")))?;
+            let k: Checkpoint = serde_json::from_str(&text).map_err(|e| {
+                Error::file(c.file(), format!("not a {CHECKPOINT_SCHEMA} file: {e}"))
+            })?;
+            if k.config != *cfg || k.start != start {
+                return Err(Error::file(
+                    c.file(),
+                    "was written by a fit with other settings or another start; resume with the same flags",
+                ));
+            }
+            let learnt = Learnt {
+                theta: k.theta,
+                opt: k.opt,
+                log: k.log,
+            };
+            Ok((learnt, k.epochs_done))
+        }
+        _ => Ok((
+            Learnt {
+                theta: start,
+                opt: OptState::new(N_PARAMS),
+                log: Vec::new(),
+            },
+            0,
+        )),
+    }
+}
+
+/// Writes the checkpoint after `epochs_done` epochs.
+fn save_checkpoint(
+    c: &CheckpointDir,
+    epochs_done: usize,
+    learnt: &Learnt,
+    cfg: &FitConfig,
+    start: [f64; N_PARAMS],
+) -> Result<()> {
+    let k = Checkpoint {
+        schema: CHECKPOINT_SCHEMA.into(),
+        epochs_done,
+        theta: learnt.theta,
+        opt: learnt.opt.clone(),
+        log: learnt.log.clone(),
+        config: cfg.clone(),
+        start,
+    };
+    let text = serde_json::to_string(&k)
+        .map_err(|e| Error::Internal(format!("serialising checkpoint: {e}")))?;
+    write_atomic(&c.file(), text.as_bytes())
+}
+
+/// The gradient of `loss` with respect to `theta` (zeros where none reaches it).
+fn grad_of(loss: Tensor<1>, theta: &Tensor<1>) -> Result<[f64; N_PARAMS]> {
+    let grads = loss.backward();
+    let gv = theta
+        .grad(&grads)
+        .map(|t| read_vec(&t))
+        .transpose()?
+        .unwrap_or_else(|| vec![0.0; N_PARAMS]);
+    let mut g = [0.0; N_PARAMS];
+    g.copy_from_slice(&gv);
+    Ok(g)
+}
+
+impl<'a> FitRun<'a> {
+    fn new(
+        clips: &'a [&'a ClipFields],
+        init: &'a Params,
+        cfg: &'a FitConfig,
+        learn: bool,
+    ) -> Result<Self> {
+        if clips.is_empty() {
+            return Err(Error::invalid("no clip to fit"));
+        }
+        for clip in clips {
+            cfg.check_clip(clip)?;
+        }
+        init.validate()?;
+        let device = cpu_device(cfg.precision)?;
+        // Long windows can trade time for memory with burn's balanced gradient checkpointing.
+        let ad: Device = if cfg.checkpointing {
+            device.clone().autodiff().gradient_checkpointing()
+        } else {
+            device.clone().autodiff()
+        };
+        let mut params = init.clone();
+        // Stage 2 (§6.2) first: the forces are learnt with each clip's own speeds; the exported
+        // speed model is the first clip's.
+        params.speed = SpeedModel::of_clip(clips[0], &init.speed);
+        let per_clip = clips
+            .iter()
+            .map(|clip| {
+                (
+                    guidance_fields(clip, cfg.guidance_scale),
+                    Stencil::new(clip),
+                )
+            })
+            .collect();
+        Ok(FitRun {
+            clips,
+            init,
+            cfg,
+            device,
+            ad,
+            params,
+            per_clip,
+            learn,
+        })
+    }
+
+    /// One epoch's pass over clip `ci`: fresh herds from the first frame's fields, then window
+    /// after window: forward, gradient, optimiser step, population control, log row.
+    fn epoch_on_clip(
+        &self,
+        epoch: usize,
+        ci: usize,
+        learnt: &mut Learnt,
+        rng: &mut ChaCha8Rng,
+        progress: &mut impl FnMut(usize, usize, f64, f64),
+    ) -> Result<()> {
+        let (clip, cfg) = (self.clips[ci], self.cfg);
+        let (a, b) = (cfg.frames.start, cfg.frames.end);
+        let mut speed_params = self.params.clone();
+        speed_params.speed = SpeedModel::of_clip(clip, &self.init.speed);
+        let mut model = clip_model(speed_params.with_vec(&learnt.theta), clip);
+        let mut herds = self.start_herds(&model, clip, a, rng)?;
+        let mut f = a;
+        while f + 1 < b {
+            let w = cfg.window.min(b - 1 - f);
+            let t0 = std::time::Instant::now();
+            herds.refill_empty(clip, f, &model, rng);
+            if herds.rows.iter().all(|h| h.is_empty()) {
+                f += w;
+                continue;
+            }
+            let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &learnt.theta, rng)?;
+            let (em, ev, ef) = (fwd.e_mean, fwd.e_var, fwd.e_fields);
+            let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
+            if self.learn {
+                // Learning rate decays linearly to 10 % over the epochs.
+                let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
+                update(&mut learnt.theta, &g, &mut learnt.opt, cfg, lr, rng);
+            }
+            model.params = model.params.with_vec(&learnt.theta);
+            f += w;
+            let (de, ve, agents) = herds.control(clip, f, &fwd, cfg, &model, rng)?;
+            learnt.log.push(LogRow {
+                epoch,
+                frame: f,
+                e_mean: em,
+                e_var: ev,
+                e_fields: ef,
+                density_error: de,
+                velocity_error: ve,
+                agents: agents / fwd.live.len(),
+                theta: learnt.theta,
+                clip: ci,
+            });
+            progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
+        }
+        Ok(())
+    }
+
+    /// K independent herds (replicas) from the fields of frame `a`, side by side.
+    fn start_herds(
+        &self,
+        model: &Model,
+        clip: &ClipFields,
+        a: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Herds> {
+        let replicas = self.cfg.replicas.max(1);
+        let mut rows: Vec<Vec<AgentRow>> = Vec::with_capacity(replicas);
+        for _ in 0..replicas {
+            rows.push(start_herd(
+                model,
+                clip,
+                a,
+                &self.cfg.settle,
+                rng,
+                &self.device,
+            )?);
+        }
+        let next_ids = rows.iter().map(|h| h.len() as u64).collect();
+        Ok(Herds { rows, next_ids })
+    }
+
+    /// Plans and evaluates the `w` steps of a window from frame `f` for every live replica, and
+    /// sums the window's loss: E_mean/E_var weighted by the objective, plus the field-matching or
+    /// ensemble term. Returns the loss, the parameter tensor it depends on and the rest of the
+    /// pass (the mean E_mean, E_var and field loss, plans, end states).
+    #[allow(clippy::too_many_arguments)]
+    fn forward(
+        &self,
+        model: &mut Model,
+        ci: usize,
+        herds: &Herds,
+        f: usize,
+        w: usize,
+        theta: &[f64; N_PARAMS],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(Tensor<1>, Tensor<1>, Forward)> {
+        let (cfg, clip) = (self.cfg, self.clips[ci]);
+        let (guidance, stencil) = &self.per_clip[ci];
+        // Weights of (E_mean, E_var) in the back-propagated loss: the paper's split takes
+        // E_var's gradient in a second pass; field matching replaces E_mean.
+        let weights = match (cfg.loss, cfg.split_gradients) {
+            (LossKind::Fields | LossKind::Ensemble, _) => (0.0, cfg.var_weight),
+            (LossKind::Paper, true) => (1.0, 0.0),
+            (LossKind::Paper, false) => (1.0, cfg.var_weight),
+        };
+        let th = theta_tensor(theta, &self.ad).require_grad();
+        let forces = ForceTensors::new(&th, &model.params.constants);
+        let mut total: Option<Tensor<1>> = None;
+        let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
+        let replicas = herds.rows.len();
+        let mut all_plans = Vec::with_capacity(replicas);
+        let mut ends = Vec::with_capacity(replicas);
+        // Per step, each replica's end-of-step state (for the ensemble loss).
+        let mut per_step: Vec<Vec<HerdState>> = vec![Vec::new(); w];
+        let live: Vec<usize> = (0..replicas)
+            .filter(|&r| !herds.rows[r].is_empty())
+            .collect();
+        let kr = live.len() as f64;
+        for &r in &live {
+            let mut state = HerdState::from_rows(&herds.rows[r], &self.ad);
+            let mut plans = Vec::with_capacity(w);
+            for (s, slot) in per_step.iter_mut().enumerate() {
+                let plan = plan_step(
+                    model,
+                    clip,
+                    guidance,
+                    stencil,
+                    cfg.beta,
+                    cfg.cell_mean,
+                    &state,
+                    f + s,
+                    rng,
+                )?;
+                let (next, loss, e_m, e_v) =
+                    window_loss(model, &forces, state, std::slice::from_ref(&plan), weights)?;
+                plans.push(plan);
+                state = next;
+                em += e_m / (w as f64 * kr);
+                ev += e_v / (w as f64 * kr);
+                let loss = match cfg.loss {
+                    LossKind::Fields => {
+                        let fl = fields_loss(clip, &state, f + s + 1)?;
+                        ef += read_vec(&fl.clone().detach())?[0] / (w as f64 * kr);
+                        loss + fl
+                    }
+                    LossKind::Ensemble => {
+                        slot.push(state.clone());
+                        loss
+                    }
+                    LossKind::Paper => {
+                        // Logged only: evaluated off the autodiff graph.
+                        let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
+                        ef += read_vec(&fl)?[0] / (w as f64 * kr);
+                        loss
+                    }
+                };
+                add(&mut total, loss.div_scalar(kr));
+            }
+            all_plans.push(plans);
+            ends.push(state);
+        }
+        if cfg.loss == LossKind::Ensemble {
+            for (s, states) in per_step.iter().enumerate() {
+                let l = ensemble_loss(clip, states, f + s + 1)?;
+                ef += read_vec(&l.clone().detach())?[0] / w as f64;
+                add(&mut total, l);
+            }
+        }
+        let loss = total
+            .ok_or_else(|| Error::invalid("empty window"))?
+            .div_scalar(w as f64);
+        let fwd = Forward {
+            e_mean: em,
+            e_var: ev,
+            e_fields: ef,
+            live,
+            plans: all_plans,
+            ends,
+        };
+        Ok((loss, th, fwd))
+    }
+
+    /// The window's gradient: of the forward loss, and with the paper's split (§6.1) the
+    /// alignment parameters' from E_var alone, in a second pass over the same (replayed)
+    /// decisions and targets.
+    fn gradient(
+        &self,
+        model: &Model,
+        herds: &Herds,
+        loss: Tensor<1>,
+        th: &Tensor<1>,
+        fwd: &Forward,
+        theta: &[f64; N_PARAMS],
+    ) -> Result<[f64; N_PARAMS]> {
+        let cfg = self.cfg;
+        let mut g = grad_of(loss, th)?;
+        if !(cfg.split_gradients && cfg.loss == LossKind::Paper) {
+            return Ok(g);
+        }
+        let kr = fwd.live.len() as f64;
+        let w = fwd.plans[0].len();
+        let th2 = theta_tensor(theta, &self.ad).require_grad();
+        let forces2 = ForceTensors::new(&th2, &model.params.constants);
+        let mut total2: Option<Tensor<1>> = None;
+        for (k, &r) in fwd.live.iter().enumerate() {
+            let mut s2 = HerdState::from_rows(&herds.rows[r], &self.ad);
+            for (dec, tgt) in &fwd.plans[k] {
+                s2 = model.step(&forces2, &s2, dec)?;
+                let l = step_loss(&s2.hx, &s2.hy, tgt).e_var;
+                add(&mut total2, l.div_scalar(kr));
+            }
+        }
+        let loss2 = total2
+            .ok_or_else(|| Error::invalid("empty window"))?
+            .div_scalar(w as f64);
+        let gvar = grad_of(loss2, &th2)?;
+        for p in ALIGNMENT {
+            g[p] = cfg.var_weight * gvar[p];
+        }
+        Ok(g)
+    }
+}
+
+impl Herds {
+    /// A replica that lost every agent is restarted from the fields of frame `f`.
+    fn refill_empty(&mut self, clip: &ClipFields, f: usize, model: &Model, rng: &mut ChaCha8Rng) {
+        for (rows, next_id) in self.rows.iter_mut().zip(self.next_ids.iter_mut()) {
+            if rows.is_empty() {
+                *rows = population_control(
+                    clip,
+                    f,
+                    std::mem::take(rows),
+                    0.0,
+                    &model.params.speed,
+                    next_id,
+                    rng,
+                );
+            }
+        }
+    }
+
+    /// After a window ending at frame `f`: each live replica's end state, detached, under
+    /// population control; returns the replicas' mean density and velocity errors and their
+    /// total agents.
+    fn control(
+        &mut self,
+        clip: &ClipFields,
+        f: usize,
+        fwd: &Forward,
+        cfg: &FitConfig,
+        model: &Model,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(f64, f64, usize)> {
+        let kr = fwd.live.len() as f64;
+        let (mut de, mut ve, mut agents) = (0.0, 0.0, 0usize);
+        for (k, &r) in fwd.live.iter().enumerate() {
+            let ids: Vec<u64> = self.rows[r].iter().map(|x| x.id).collect();
+            let rows = fwd.ends[k].clone().detach().rows(&ids)?;
+            self.rows[r] = population_control(
+                clip,
+                f,
+                rows,
+                cfg.density_threshold,
+                &model.params.speed,
+                &mut self.next_ids[r],
+                rng,
+            );
+            let (d, v) = field_errors(clip, f, &self.rows[r]);
+            de += d / kr;
+            ve += v / kr;
+            agents += self.rows[r].len();
+        }
+        Ok((de, ve, agents))
+    }
+}

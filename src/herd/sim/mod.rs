@@ -1,0 +1,539 @@
+//! The differentiable herd-agent model (paper §5, DESIGN §4).
+//!
+//! One step k → k+1 is a pipeline of named stages:
+//! 1. [`Model::decide`] — perception, roles and OU noise, **no gradient** (kernels crate). The
+//!    result, [`StepDecisions`], can be recorded and replayed ([`Recording`]).
+//! 2. [`Model::forces`] — the Gaussian-weighted forces of eq. 3–5 as tensor ops over padded
+//!    neighbour lists, so gradients flow to the 12 parameters.
+//! 3. [`Model::step`] — the direction update of eq. 2, the OU speed of eq. 6 and the position
+//!    update.
+//!
+//! [`Model::rollout`] unrolls T steps; on an autodiff device the final state carries the gradient
+//! of the whole unrolled run.
+
+mod herd;
+mod rollout;
+mod world;
+
+pub use herd::{random_herd, HerdSpec};
+pub use rollout::{Decide, Guided, StepHooks};
+pub use world::{obstacle_map, Guidance, World};
+
+use crate::data::agents::AgentRow;
+use crate::data::atomic::write_atomic;
+use crate::error::{Error, Result};
+use crate::herd::params::{Constants, Params, N_PARAMS};
+use burn::tensor::{Device, Int, Tensor, TensorData};
+use herdfit_kernels::{
+    perceive, Capsule, Perception, PerceptionConfig, BRANCH_BEHIND, BRANCH_RIGHT, P2,
+};
+use rand::Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Guard of the vector normalisation N(·) of eq. 2 (BL²/s²).
+const NORM_EPS: f64 = 1e-12;
+
+/// Batched herd state: one entry per agent, all on one device.
+#[derive(Clone, Debug)]
+pub struct HerdState {
+    /// Positions (BL).
+    pub x: Tensor<1>,
+    pub y: Tensor<1>,
+    /// Unit headings.
+    pub hx: Tensor<1>,
+    pub hy: Tensor<1>,
+    /// Speeds (BL/s). They carry no gradient: eq. 6 depends on θ only through the local
+    /// density, a piecewise-constant neighbour count.
+    pub speed: Tensor<1>,
+}
+
+/// Plain copy of a state, read back from the device.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Snapshot {
+    pub pos: Vec<P2>,
+    pub head: Vec<P2>,
+    pub speed: Vec<f64>,
+}
+
+fn vec_tensor(v: Vec<f64>, device: &Device) -> Tensor<1> {
+    let n = v.len();
+    Tensor::from_data(TensorData::new(v, [n]), device)
+}
+
+fn mat_tensor(v: Vec<f64>, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(v, [rows, cols]), device)
+}
+
+/// Reads a rank-1 tensor back as f64 values.
+pub fn read_vec(t: &Tensor<1>) -> Result<Vec<f64>> {
+    t.clone()
+        .try_into_vec_as::<f64>()
+        .map_err(|e| Error::Internal(format!("tensor read-back failed: {e:?}")))
+}
+
+impl HerdState {
+    /// Builds a state from agent rows: velocity gives heading and speed (a standing agent faces +x).
+    pub fn from_rows(rows: &[AgentRow], device: &Device) -> Self {
+        let mut hx = Vec::with_capacity(rows.len());
+        let mut hy = Vec::with_capacity(rows.len());
+        let mut sp = Vec::with_capacity(rows.len());
+        for r in rows {
+            let s = (r.vx * r.vx + r.vy * r.vy).sqrt();
+            if s > 1e-12 {
+                hx.push(r.vx / s);
+                hy.push(r.vy / s);
+            } else {
+                hx.push(1.0);
+                hy.push(0.0);
+            }
+            sp.push(s);
+        }
+        HerdState {
+            x: vec_tensor(rows.iter().map(|r| r.x).collect(), device),
+            y: vec_tensor(rows.iter().map(|r| r.y).collect(), device),
+            hx: vec_tensor(hx, device),
+            hy: vec_tensor(hy, device),
+            speed: vec_tensor(sp, device),
+        }
+    }
+
+    /// Number of agents.
+    pub fn n(&self) -> usize {
+        self.x.dims()[0]
+    }
+
+    /// Reads the state back from the device.
+    pub fn snapshot(&self) -> Result<Snapshot> {
+        let (x, y) = (read_vec(&self.x)?, read_vec(&self.y)?);
+        let (hx, hy) = (read_vec(&self.hx)?, read_vec(&self.hy)?);
+        Ok(Snapshot {
+            pos: x.into_iter().zip(y).map(|(a, b)| [a, b]).collect(),
+            head: hx.into_iter().zip(hy).map(|(a, b)| [a, b]).collect(),
+            speed: read_vec(&self.speed)?,
+        })
+    }
+
+    /// Agent rows (velocity = speed · heading) with the given ids.
+    pub fn rows(&self, ids: &[u64]) -> Result<Vec<AgentRow>> {
+        let s = self.snapshot()?;
+        Ok((0..s.pos.len())
+            .map(|i| AgentRow {
+                id: ids[i],
+                x: s.pos[i][0],
+                y: s.pos[i][1],
+                vx: s.speed[i] * s.head[i][0],
+                vy: s.speed[i] * s.head[i][1],
+            })
+            .collect())
+    }
+
+    /// The same values cut from the autodiff graph (used between training windows).
+    pub fn detach(self) -> Self {
+        HerdState {
+            x: self.x.detach(),
+            y: self.y.detach(),
+            hx: self.hx.detach(),
+            hy: self.hy.detach(),
+            speed: self.speed.detach(),
+        }
+    }
+}
+
+/// Everything decided without gradient in one step: perception (neighbour and obstacle lists,
+/// front-cone counts, local density), roles, leader directions and the OU noise ξ.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepDecisions {
+    pub perception: Perception,
+    /// Effective leaders: few visible neighbours ahead **and** guidance at their cell (§5.1).
+    pub leader: Vec<bool>,
+    /// The guidance direction a leader takes (zero for followers).
+    pub guide: Vec<P2>,
+    /// Standard-normal draws of eq. 6.
+    pub xi: Vec<f64>,
+}
+
+/// Schema tag of recording files.
+pub const RECORDING_SCHEMA: &str = "herdfit.recording/1";
+
+/// The decisions of a whole run, for exact replay.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Recording {
+    pub schema: String,
+    pub agents: usize,
+    pub steps: Vec<StepDecisions>,
+}
+
+impl Recording {
+    /// An empty recording for `agents` agents.
+    pub fn new(agents: usize) -> Self {
+        Recording {
+            schema: RECORDING_SCHEMA.into(),
+            agents,
+            steps: Vec::new(),
+        }
+    }
+
+    /// Writes the recording as JSON (atomically).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string(self)
+            .map_err(|e| Error::Internal(format!("serialising recording: {e}")))?;
+        write_atomic(path, text.as_bytes())
+    }
+
+    /// Reads a recording and checks its shape.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+        let r: Recording = serde_json::from_str(&text)
+            .map_err(|e| Error::file(path, format!("not a {RECORDING_SCHEMA} file: {e}")))?;
+        if r.schema != RECORDING_SCHEMA {
+            return Err(Error::file(path, format!("schema is '{}'", r.schema)));
+        }
+        for (t, s) in r.steps.iter().enumerate() {
+            let p = &s.perception;
+            let ok = p.n == r.agents
+                && p.k >= 1
+                && p.ko >= 1
+                && p.neighbours.len() == p.n * p.k
+                && p.neighbour_mask.len() == p.n * p.k
+                && p.neighbour_branch.len() == p.n * p.k
+                && p.obstacle_branch.len() == p.n * p.ko
+                && p.obstacle_points.len() == p.n * p.ko
+                && p.obstacle_mask.len() == p.n * p.ko
+                && p.neighbours.iter().all(|&j| (j as usize) < p.n)
+                && s.leader.len() == p.n
+                && s.guide.len() == p.n
+                && s.xi.len() == p.n
+                && p.density.len() == p.n
+                && p.front_count.len() == p.n;
+            if !ok {
+                return Err(Error::file(
+                    path,
+                    format!("step {t}: lists do not match {} agents", r.agents),
+                ));
+            }
+        }
+        Ok(r)
+    }
+}
+
+/// The 12 parameters turned into the per-force tensors of eq. 3–4 (each `[1, 1]`):
+/// `w = Ω·W_F`, `α = −½ / R_F²`, `γ = −½ / Φ_F²`, so that `Ω·W_F·WR·WA = w·exp(α d² + γ φ²)`.
+#[derive(Clone, Debug)]
+pub struct ForceTensors {
+    pub w: [Tensor<2>; 4],
+    pub alpha: [Tensor<2>; 4],
+    pub gamma: [Tensor<2>; 4],
+    /// `[n, 1]` tensors: one parameter set per agent (authoring with behaviour regions).
+    pub per_agent: bool,
+}
+
+impl ForceTensors {
+    /// From the `[12]` parameter tensor `theta` (normalised values, [`crate::herd::params::param_names`]
+    /// order). Gradients flow from the forces back to `theta`.
+    pub fn new(theta: &Tensor<1>, c: &Constants) -> Self {
+        assert_eq!(theta.dims()[0], N_PARAMS, "theta must hold 12 values");
+        let at = |i: usize| theta.clone().narrow(0, i, 1).reshape([1, 1]);
+        let r2 = c.perception_radius * c.perception_radius;
+        let pi2 = std::f64::consts::PI * std::f64::consts::PI;
+        let w = std::array::from_fn(|g| at(3 * g).mul_scalar(c.sensitivity));
+        // −½ / (θ_i · scale)², the exponent's coefficient of a range parameter (eq. 4).
+        let inv =
+            |i: usize, scale2: f64| at(i).square().mul_scalar(scale2).recip().mul_scalar(-0.5);
+        let alpha = std::array::from_fn(|g| inv(3 * g + 1, r2));
+        let gamma = std::array::from_fn(|g| inv(3 * g + 2, pi2));
+        ForceTensors {
+            w,
+            alpha,
+            gamma,
+            per_agent: false,
+        }
+    }
+
+    /// One parameter set per agent (no gradient): `thetas[i]` are agent i's 12 values.
+    pub fn per_agent(thetas: &[[f64; N_PARAMS]], c: &Constants, device: &Device) -> Self {
+        let n = thetas.len();
+        let col = |f: &dyn Fn(&[f64; N_PARAMS]) -> f64| {
+            mat_tensor(thetas.iter().map(f).collect(), n, 1, device)
+        };
+        let (r, pi) = (c.perception_radius, std::f64::consts::PI);
+        let w = std::array::from_fn(|g| col(&|t| t[3 * g] * c.sensitivity));
+        let alpha = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 1] * r).powi(2)));
+        let gamma = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 2] * pi).powi(2)));
+        ForceTensors {
+            w,
+            alpha,
+            gamma,
+            per_agent: true,
+        }
+    }
+}
+
+/// A parameter vector as a tensor on `device`.
+pub fn theta_tensor(theta: &[f64; N_PARAMS], device: &Device) -> Tensor<1> {
+    vec_tensor(theta.to_vec(), device)
+}
+
+/// The herd model of one run: parameters, surroundings, time step.
+#[derive(Clone, Debug)]
+pub struct Model {
+    pub params: Params,
+    pub world: World,
+    /// Time step Δt (s) = 1 / fps.
+    pub dt: f64,
+}
+
+impl Model {
+    /// Settings of the perception kernel from the constants.
+    pub fn perception_config(&self) -> PerceptionConfig {
+        let c = &self.params.constants;
+        PerceptionConfig {
+            radius: c.perception_radius,
+            capsule: Capsule {
+                half_length: c.capsule_half_length,
+                radius: c.capsule_radius,
+            },
+            occlusion: c.occlusion,
+            max_neighbours: c.max_neighbours,
+            max_obstacles: c.max_obstacles,
+            front_cone: c.leader_cone_deg.to_radians(),
+        }
+    }
+
+    /// Stage 1, no gradient: perception (DESIGN §4.1), roles (§5.1, DESIGN §4.2) and ξ of eq. 6.
+    pub fn decide(&self, snap: &Snapshot, rng: &mut impl Rng) -> StepDecisions {
+        let perception = perceive(
+            &snap.pos,
+            &snap.head,
+            self.world.obstacles.as_ref(),
+            &self.perception_config(),
+        );
+        let max_front = self.params.constants.leader_max_neighbours;
+        let n = snap.pos.len();
+        let mut leader = vec![false; n];
+        let mut guide = vec![[0.0; 2]; n];
+        for i in 0..n {
+            if perception.front_count[i] <= max_front {
+                if let Some(g) = self.world.guidance_at(snap.pos[i]) {
+                    leader[i] = true;
+                    guide[i] = g;
+                }
+            }
+        }
+        let xi = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+        StepDecisions {
+            perception,
+            leader,
+            guide,
+            xi,
+        }
+    }
+
+    /// Squared distances and squared bearings `[1, n·k]` of offsets `(dx, dy)` `[n, k]` seen from
+    /// headings `(hx, hy)` `[n, 1]`.
+    ///
+    /// The unsigned bearing φ ∈ [0, π] of eq. 4 uses atan2 (never acos) on the recorded branch
+    /// (side s = ±1, behind σ = −1 / ahead σ = +1, see [`herdfit_kernels::branch_of`]):
+    /// φ = [σ < 0]·π + σ·atan2(s·(h × d), σ·(h · d)). At the recorded state this equals
+    /// |atan2(h × d, h · d)|; around it, it is the smooth continuation through φ = 0 and φ = π.
+    /// `guard` (1 on padded entries) keeps atan2 away from (0, 0), whose gradient is NaN.
+    fn distances_and_bearings(
+        dx: &Tensor<2>,
+        dy: &Tensor<2>,
+        hx: &Tensor<2>,
+        hy: &Tensor<2>,
+        branch: &[u8],
+        guard: Tensor<2>,
+    ) -> (Tensor<2>, Tensor<2>) {
+        let device = dx.device();
+        let [n, k] = dx.dims();
+        let side: Vec<f64> = branch
+            .iter()
+            .map(|&b| if b & BRANCH_RIGHT != 0 { -1.0 } else { 1.0 })
+            .collect();
+        let behind: Vec<f64> = branch
+            .iter()
+            .map(|&b| if b & BRANCH_BEHIND != 0 { -1.0 } else { 1.0 })
+            .collect();
+        let offset: Vec<f64> = behind
+            .iter()
+            .map(|&s| if s < 0.0 { std::f64::consts::PI } else { 0.0 })
+            .collect();
+        let side = mat_tensor(side, n, k, &device);
+        let behind = mat_tensor(behind, n, k, &device);
+        let offset = mat_tensor(offset, n, k, &device);
+        let d2 = (dx.clone().square() + dy.clone().square()).reshape([1, n * k]);
+        let dot = (hx.clone() * dx.clone() + hy.clone() * dy.clone()) * behind.clone() + guard;
+        let cross = (hx.clone() * dy.clone() - hy.clone() * dx.clone()) * side;
+        let phi = cross.atan2(dot) * behind + offset;
+        (d2, phi.square().reshape([1, n * k]))
+    }
+
+    /// `Ω·W_F·WR_F·WA_F` (eq. 3–4) for force `g` on `[1, n·k]` pair tensors, zero on padding.
+    fn pair_weight(
+        f: &ForceTensors,
+        g: usize,
+        d2: &Tensor<2>,
+        phi2: &Tensor<2>,
+        mask: &Tensor<2>,
+        n: usize,
+    ) -> Tensor<2> {
+        if f.per_agent {
+            let k = d2.dims()[1] / n.max(1);
+            let d2 = d2.clone().reshape([n, k]);
+            let phi2 = phi2.clone().reshape([n, k]);
+            ((d2 * f.alpha[g].clone() + phi2 * f.gamma[g].clone()).exp()
+                * f.w[g].clone()
+                * mask.clone().reshape([n, k]))
+            .reshape([1, n * k])
+        } else {
+            (d2.clone() * f.alpha[g].clone() + phi2.clone() * f.gamma[g].clone()).exp()
+                * f.w[g].clone()
+                * mask.clone()
+        }
+    }
+
+    /// Stage 2: the total force F_i of eq. 3 with the components of eq. 5 and the Gaussian
+    /// weights of eq. 4, as `[n, 1]` tensors (x and y).
+    ///
+    /// FC = Σ WR·WA·(p_j − p_i), FV = −Σ WR·WA·(p_j − p_i), FA = Σ WR·WA·d_j,
+    /// FO = −Σ_o WR·WA·(q_o − p_i); F = Ω (W_C FC + W_V FV + W_A FA + W_O FO).
+    pub fn forces(
+        &self,
+        f: &ForceTensors,
+        s: &HerdState,
+        dec: &StepDecisions,
+    ) -> (Tensor<2>, Tensor<2>) {
+        let device = s.x.device();
+        let p = &dec.perception;
+        let (n, k) = (p.n, p.k);
+        let idx: Vec<i64> = p.neighbours.iter().map(|&j| j as i64).collect();
+        let idx = Tensor::<1, Int>::from_data(TensorData::new(idx, [n * k]), &device);
+        let maskv: Vec<f64> = p.neighbour_mask.iter().map(|&b| b as f64).collect();
+        let guard = mat_tensor(maskv.iter().map(|m| 1.0 - m).collect(), n, k, &device);
+        let mask = mat_tensor(maskv, 1, n * k, &device);
+        let xi = s.x.clone().reshape([n, 1]);
+        let yi = s.y.clone().reshape([n, 1]);
+        let hxi = s.hx.clone().reshape([n, 1]);
+        let hyi = s.hy.clone().reshape([n, 1]);
+        let gather = |t: &Tensor<1>| t.clone().gather(0, idx.clone()).reshape([n, k]);
+        let dx = gather(&s.x) - xi.clone();
+        let dy = gather(&s.y) - yi.clone();
+        let (d2, phi2) =
+            Self::distances_and_bearings(&dx, &dy, &hxi, &hyi, &p.neighbour_branch, guard);
+        let cc = Self::pair_weight(f, 0, &d2, &phi2, &mask, n);
+        let cv = Self::pair_weight(f, 1, &d2, &phi2, &mask, n);
+        let ca = Self::pair_weight(f, 2, &d2, &phi2, &mask, n).reshape([n, k]);
+        let cp = (cc - cv).reshape([n, k]);
+        let mut fx = (cp.clone() * dx + ca.clone() * gather(&s.hx)).sum_dim(1);
+        let mut fy = (cp * dy + ca * gather(&s.hy)).sum_dim(1);
+        if p.obstacle_mask.contains(&1) {
+            let ko = p.ko;
+            let om: Vec<f64> = p.obstacle_mask.iter().map(|&b| b as f64).collect();
+            let oguard = mat_tensor(om.iter().map(|m| 1.0 - m).collect(), n, ko, &device);
+            let omask = mat_tensor(om, 1, n * ko, &device);
+            let ox = mat_tensor(
+                p.obstacle_points.iter().map(|q| q[0]).collect(),
+                n,
+                ko,
+                &device,
+            );
+            let oy = mat_tensor(
+                p.obstacle_points.iter().map(|q| q[1]).collect(),
+                n,
+                ko,
+                &device,
+            );
+            let dox = ox - xi;
+            let doy = oy - yi;
+            let (d2o, phi2o) =
+                Self::distances_and_bearings(&dox, &doy, &hxi, &hyi, &p.obstacle_branch, oguard);
+            let co = Self::pair_weight(f, 3, &d2o, &phi2o, &omask, n).reshape([n, ko]);
+            fx = fx - (co.clone() * dox).sum_dim(1);
+            fy = fy - (co * doy).sum_dim(1);
+        }
+        (fx, fy)
+    }
+
+    /// New speeds by the OU process of eq. 6, v' = v − θ(v − v_μ(ρ_i))Δt + v_σ√Δt ξ, with v_μ(ρ)
+    /// from the speed–density table (§6.2), clamped to [0, v_max]. Plain values: no gradient.
+    pub fn next_speeds(&self, speed: &[f64], dec: &StepDecisions) -> Vec<f64> {
+        let sm = &self.params.speed;
+        let dt = self.dt;
+        speed
+            .iter()
+            .zip(&dec.perception.density)
+            .zip(&dec.xi)
+            .map(|((&v, &rho), &xi)| {
+                let v1 = v - sm.reversion * (v - sm.mean_at(rho)) * dt + sm.std * dt.sqrt() * xi;
+                v1.clamp(0.0, sm.max)
+            })
+            .collect()
+    }
+
+    /// Stage 3: one step of the model. Followers turn by eq. 2, d' = N(v·d + Δt F); leaders take
+    /// their guidance direction; speeds follow eq. 6; positions p' = p + Δt v' d'.
+    pub fn step(&self, f: &ForceTensors, s: &HerdState, dec: &StepDecisions) -> Result<HerdState> {
+        self.step_with(f, s, dec, None)
+    }
+
+    /// [`Model::step`] with an extra per-agent force added to F of eq. 3 (the hook of §7.5, e.g.
+    /// predator avoidance); no gradient flows through it.
+    pub fn step_with(
+        &self,
+        f: &ForceTensors,
+        s: &HerdState,
+        dec: &StepDecisions,
+        extra: Option<&[P2]>,
+    ) -> Result<HerdState> {
+        let n = s.n();
+        if dec.perception.n != n {
+            return Err(Error::invalid(format!(
+                "decisions are for {} agents, the herd has {n}",
+                dec.perception.n
+            )));
+        }
+        let device = s.x.device();
+        let (mut fx, mut fy) = self.forces(f, s, dec);
+        if let Some(e) = extra {
+            fx = fx + mat_tensor(e.iter().map(|v| v[0]).collect(), n, 1, &device);
+            fy = fy + mat_tensor(e.iter().map(|v| v[1]).collect(), n, 1, &device);
+        }
+        let v = s.speed.clone().reshape([n, 1]);
+        let ux = v.clone() * s.hx.clone().reshape([n, 1]) + fx.mul_scalar(self.dt);
+        let uy = v * s.hy.clone().reshape([n, 1]) + fy.mul_scalar(self.dt);
+        let norm = (ux.clone().square() + uy.clone().square())
+            .add_scalar(NORM_EPS)
+            .sqrt();
+        let mut hx = ux / norm.clone();
+        let mut hy = uy / norm;
+        if dec.leader.iter().any(|&l| l) {
+            let follow: Vec<f64> = dec
+                .leader
+                .iter()
+                .map(|&l| if l { 0.0 } else { 1.0 })
+                .collect();
+            let follow = mat_tensor(follow, n, 1, &device);
+            let gx = mat_tensor(dec.guide.iter().map(|g| g[0]).collect(), n, 1, &device);
+            let gy = mat_tensor(dec.guide.iter().map(|g| g[1]).collect(), n, 1, &device);
+            hx = hx * follow.clone() + gx;
+            hy = hy * follow + gy;
+        }
+        let speed = self.next_speeds(&read_vec(&s.speed)?, dec);
+        let speed = vec_tensor(speed, &device);
+        let hx = hx.reshape([n]);
+        let hy = hy.reshape([n]);
+        let step_x = hx.clone() * speed.clone().mul_scalar(self.dt);
+        let step_y = hy.clone() * speed.clone().mul_scalar(self.dt);
+        Ok(HerdState {
+            x: s.x.clone() + step_x,
+            y: s.y.clone() + step_y,
+            hx,
+            hy,
+            speed,
+        })
+    }
+}

@@ -1,0 +1,216 @@
+//! `herdfit simulate`: a parameter set run from an initial herd, written as a trajectory CSV
+//! (`frame,time,id,x,y,vx,vy,role`; frame 0 is the initial state), optionally recording or
+//! replaying the run's no-gradient decisions (perception, roles, noise).
+
+use crate::backend::{cpu_device, Precision};
+use crate::data::agents::{push_traj_frame, read_init_csv, AgentRow, TRAJ_HEADER};
+use crate::data::atomic::{check_writable, AtomicFile};
+use crate::error::{Error, Result};
+use crate::herd::params::Params;
+use crate::herd::sim::{
+    random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, Recording, World,
+};
+use crate::progress::Progress;
+use rand::SeedableRng;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Settings of a simulation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulateConfig {
+    /// Number of steps (frames after frame 0).
+    pub steps: usize,
+    /// Frames per second; Δt = 1 / fps.
+    pub fps: f64,
+    /// Speed noise v_σ (BL/s) of eq. 6, overriding the parameter set's `speed.std`; 0 makes the
+    /// run deterministic.
+    pub speed_noise: Option<f64>,
+    /// Uniform guidance direction for leaders; without it leaders act as followers.
+    pub guidance: Option<[f64; 2]>,
+    pub precision: Precision,
+    pub seed: u64,
+}
+
+impl Default for SimulateConfig {
+    fn default() -> Self {
+        SimulateConfig {
+            steps: 250,
+            fps: 25.0,
+            speed_noise: None,
+            guidance: None,
+            precision: Precision::F32,
+            seed: 0,
+        }
+    }
+}
+
+impl SimulateConfig {
+    /// Checks the steps, frame rate, speed noise and guidance; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        crate::error::check_counts(&[("steps", self.steps)])?;
+        crate::error::check_positive(&[("fps", self.fps)])?;
+        if let Some(s) = self.speed_noise {
+            if !(s.is_finite() && s >= 0.0) {
+                return Err(Error::config("speed_noise", format!("{s} must be ≥ 0")));
+            }
+        }
+        if let Some([x, y]) = self.guidance {
+            if !(x.is_finite() && y.is_finite()) || (x == 0.0 && y == 0.0) {
+                return Err(Error::config(
+                    "guidance",
+                    "the direction must be finite and non-zero",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Where the initial herd of a run comes from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "lowercase")]
+pub enum HerdSource {
+    /// An initial-state CSV (`id,x,y,vx,vy`).
+    Init(PathBuf),
+    /// The built-in random herd of N agents (one per 2 BL², heading +x ± 20°).
+    Agents(usize),
+}
+
+impl HerdSource {
+    /// The herd's rows (`world` places the random herd clear of obstacles).
+    pub fn rows(&self, params: &Params, world: &World, seed: u64) -> Result<Vec<AgentRow>> {
+        match self {
+            HerdSource::Init(p) => read_init_csv(p),
+            HerdSource::Agents(n) => {
+                random_herd(&HerdSpec::standard(*n), &params.speed, world, seed)
+            }
+        }
+    }
+}
+
+/// The files of a run of the model: the parameter set (the built-in set when absent), the
+/// initial herd, and the decisions to record or to replay (`simulate` and `gradcheck`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RunFiles {
+    pub params: Option<PathBuf>,
+    pub herd: Option<HerdSource>,
+    pub record: Option<PathBuf>,
+    pub replay: Option<PathBuf>,
+}
+
+/// A simulation with its files: the run's ([`RunFiles`], a herd required) and the trajectory
+/// CSV.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulateJob {
+    pub run: RunFiles,
+    pub out: PathBuf,
+    pub config: SimulateConfig,
+}
+
+impl SimulateJob {
+    /// Checks the settings and that there is a herd; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        self.config.check()?;
+        if self.run.herd.is_none() {
+            return Err(Error::config(
+                "herd",
+                "give the initial herd: an INIT.csv file or a number of agents",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Loads a parameter set, or the built-in one.
+pub fn load_params(path: Option<&Path>) -> Result<Params> {
+    match path {
+        Some(p) => Params::load(p),
+        None => Ok(Params::default()),
+    }
+}
+
+/// Runs the simulation and writes the trajectories (and the recording); returns the number of
+/// agents.
+pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize> {
+    let cfg = &job.config;
+    cfg.check()?;
+    let mut params = load_params(job.run.params.as_deref())?;
+    if let Some(s) = cfg.speed_noise {
+        params.speed.std = s;
+    }
+    let world = World {
+        obstacles: None,
+        guidance: cfg.guidance.map_or(Guidance::None, Guidance::Uniform),
+    };
+    let rows = match &job.run.herd {
+        Some(h) => h.rows(&params, &world, cfg.seed)?,
+        None => {
+            return Err(Error::config(
+                "herd",
+                "give the initial herd: an INIT.csv file or a number of agents",
+            ))
+        }
+    };
+    let replay = job.run.replay.as_deref().map(Recording::load).transpose()?;
+    check_writable(&job.out)?;
+    if let Some(r) = &job.run.record {
+        check_writable(r)?;
+    }
+    let device = cpu_device(cfg.precision)?;
+    let model = Model {
+        params,
+        world,
+        dt: 1.0 / cfg.fps,
+    };
+    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+    let theta = theta_tensor(&model.params.to_vec(), &device);
+    let state = HerdState::from_rows(&rows, &device);
+    let mut out = AtomicFile::create(&job.out)?;
+    let mut text = String::with_capacity(64 * rows.len());
+    text.push_str(TRAJ_HEADER);
+    text.push('\n');
+    let mut prev = rows;
+    let mut rec = job.run.record.as_ref().map(|_| Recording::new(ids.len()));
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005e_ed0f_5eed);
+    progress.start("simulate", cfg.steps as u64);
+    let decide = match &replay {
+        Some(r) => Decide::Replay(r),
+        None => Decide::Live {
+            rng: &mut rng,
+            record: rec.as_mut(),
+        },
+    };
+    let end = model.rollout(&theta, state, cfg.steps, decide, |t, dec, next| {
+        push_traj_frame(&mut text, t, t as f64 * model.dt, &prev, &dec.leader);
+        out.write_str(&text)?;
+        text.clear();
+        prev = next.rows(&ids)?;
+        progress.inc(1);
+        Ok(())
+    })?;
+    progress.finish();
+    // Roles of the last frame: the decision the next step would take.
+    let last_roles = match &replay {
+        Some(r) if r.steps.len() > cfg.steps => r.steps[cfg.steps].leader.clone(),
+        _ => {
+            let mut rng2 = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
+            model.decide(&end.snapshot()?, &mut rng2).leader
+        }
+    };
+    push_traj_frame(
+        &mut text,
+        cfg.steps,
+        cfg.steps as f64 * model.dt,
+        &prev,
+        &last_roles,
+    );
+    out.write_str(&text)?;
+    if let (Some(path), Some(rec)) = (&job.run.record, &rec) {
+        rec.save(path)?;
+    }
+    out.commit()?;
+    Ok(ids.len())
+}

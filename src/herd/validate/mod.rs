@@ -1,0 +1,348 @@
+//! Held-out validation (paper §7.1.2, DESIGN §7): start a herd from the fields of the first
+//! held-out frame, simulate with the fitted (and baseline) parameters, and compare with the clip
+//! frame by frame — density and velocity errors on a coarse grid, polarization (eq. 12), angular
+//! momentum (eq. 13, about the herd centroid and the frame centre) and the aspect ratio of the
+//! motion-aligned bounding box — as the mean and STD of each measure and of its error, averaged
+//! over seeds (the paper's Tables 1–5).
+
+use crate::backend::{cpu_device, Precision};
+use crate::data::agents::AgentRow;
+use crate::data::ClipFields;
+use crate::error::{Error, Result};
+use crate::herd::eval::run_from_fields;
+use crate::herd::guidance::guidance_fields;
+use crate::herd::params::Params;
+use crate::herd::start::Settle;
+use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocity, Emergent};
+use crate::measure::rasterise;
+use serde::Serialize;
+
+mod report;
+
+pub use report::{markdown, run, ValidateJob};
+
+/// The measures compared, in report order.
+pub const MEASURES: [&str; 6] = [
+    "density_error",
+    "velocity_error",
+    "polarization",
+    "angular_momentum_centroid",
+    "angular_momentum_frame_centre",
+    "aspect_ratio",
+];
+
+/// A run of the model over frames `range` of a clip from the first frame's fields: the agents of
+/// every frame and their rasterisation on the clip's grid.
+pub struct SimRun {
+    pub frames: Vec<Vec<AgentRow>>,
+    pub fields: ClipFields,
+}
+
+/// Simulates `range` of the clip with `params` and seed `seed` (leaders follow `guidance`, the
+/// clip's velocity field of every frame; no population control). The herd starts from the fields
+/// of frame `range.start − warmup` (settled by `settle`) and runs through the `warmup` frames before
+/// `range` unrecorded, so that it reaches `range.start` in an arrangement of its own making rather
+/// than the one sampled from fields (RESULTS.md §1, held-out validation); the returned frames and
+/// fields start at `range.start`.
+pub fn simulate_clip(
+    clip: &ClipFields,
+    params: &Params,
+    range: std::ops::Range<usize>,
+    seed: u64,
+    cfg: &ValidateConfig,
+    guidance: &[crate::herd::sim::Guidance],
+    device: &burn::tensor::Device,
+) -> Result<SimRun> {
+    let first = range.start - cfg.warmup.min(range.start);
+    let mut frames = Vec::with_capacity(range.len());
+    let last = range.end.saturating_sub(1);
+    let rows = run_from_fields(
+        clip,
+        params,
+        (first, last),
+        seed,
+        &cfg.settle,
+        guidance,
+        device,
+        |f, state, ids| {
+            if f >= range.start {
+                frames.push(state.rows(ids)?);
+            }
+            Ok(())
+        },
+    )?;
+    if first == range.start {
+        frames.insert(0, rows);
+    }
+    let mut fields = rasterise(
+        &frames,
+        clip.grid(),
+        clip.meta.fps,
+        clip.obstacles.clone(),
+        serde_json::json!({"source": "validate simulation", "seed": seed}),
+    )?;
+    smooth_velocity(&mut fields, clip.meta.velocity_window());
+    Ok(SimRun { frames, fields })
+}
+
+/// Mean and standard deviation.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Stat {
+    pub mean: f64,
+    pub std: f64,
+}
+
+fn stat(v: &[f64]) -> Stat {
+    let v: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return Stat {
+            mean: f64::NAN,
+            std: f64::NAN,
+        };
+    }
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    let s = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+    Stat { mean: m, std: s }
+}
+
+/// One measure for one parameter set: the video's value, the simulation's value and the
+/// per-frame absolute error, each as mean ± STD over frames (averaged over seeds).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeasureRow {
+    pub measure: String,
+    pub video: Option<Stat>,
+    pub simulation: Option<Stat>,
+    pub error: Stat,
+}
+
+/// The validation of one parameter set.
+#[derive(Clone, Debug, Serialize)]
+pub struct SetReport {
+    pub name: String,
+    pub params: [f64; 12],
+    pub rows: Vec<MeasureRow>,
+    /// Per frame, seed-averaged: [density error, velocity error, polarization, ang. momentum
+    /// centroid, ang. momentum frame centre, aspect ratio] of the simulation.
+    pub per_frame: Vec<[f64; 6]>,
+    /// Mean |ρ' − ρ| (agents) per coarse cell over frames and seeds (of the seeds' mean
+    /// prediction with `ensemble_mean`), row 0 at the bottom.
+    pub error_map: Vec<Vec<f64>>,
+}
+
+impl SetReport {
+    /// The mean error of a measure.
+    pub fn error(&self, measure: &str) -> f64 {
+        self.rows
+            .iter()
+            .find(|r| r.measure == measure)
+            .map_or(f64::NAN, |r| r.error.mean)
+    }
+}
+
+/// Schema tag of validation reports (`report.json`).
+pub const VALIDATION_SCHEMA: &str = "herdfit.validation/1";
+
+/// The whole report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// [`VALIDATION_SCHEMA`].
+    pub schema: String,
+    pub clip: String,
+    pub frames: [usize; 2],
+    pub split: f64,
+    /// The coarse grid of the errors ([`ValidateConfig::coarse_grid`]).
+    pub grid: usize,
+    pub seeds: usize,
+    /// Whether the seeds' mean prediction was compared ([`ValidateConfig::ensemble_mean`]).
+    pub ensemble_mean: bool,
+    /// The video's per-frame measures: [polarization, ang. momentum centroid, frame centre,
+    /// aspect ratio].
+    pub video_per_frame: Vec<[f64; 4]>,
+    pub sets: Vec<SetReport>,
+}
+
+/// Settings of a validation.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValidateConfig {
+    /// Fraction of the clip before the held-out part.
+    pub split: f64,
+    /// Coarse grid (cells per side) of the density and velocity errors (the report's `grid`).
+    pub coarse_grid: usize,
+    /// Simulations per parameter set.
+    pub seeds: usize,
+    /// How the starting herd is settled.
+    pub settle: Settle,
+    /// Frames before the held-out part that the herd is simulated through first (0: it starts
+    /// from the fields of the first held-out frame).
+    pub warmup: usize,
+    /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
+    /// ([`crate::herd::guidance::guidance_field`]).
+    pub guidance_scale: f64,
+    /// Compare the seeds' mean prediction (coarse counts and momenta, each measure averaged over
+    /// the seeds frame by frame) with the clip, instead of averaging each seed's own errors. A
+    /// stochastic herd's best prediction is its expectation; per-seed errors also charge it for
+    /// its own run-to-run spread, which favours sets that make the herd less variable.
+    pub ensemble_mean: bool,
+}
+
+impl Default for ValidateConfig {
+    fn default() -> Self {
+        ValidateConfig {
+            split: 0.5,
+            coarse_grid: 10,
+            seeds: 3,
+            settle: Settle::default(),
+            warmup: 0,
+            guidance_scale: crate::herd::guidance::GUIDANCE_SCALE,
+            ensemble_mean: false,
+        }
+    }
+}
+
+impl ValidateConfig {
+    /// Checks the ranges; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        if !(self.split.is_finite() && (0.0..1.0).contains(&self.split)) {
+            return Err(Error::config(
+                "split",
+                format!("{} must be in [0, 1)", self.split),
+            ));
+        }
+        crate::error::check_counts(&[("coarse_grid", self.coarse_grid), ("seeds", self.seeds)])?;
+        crate::herd::guidance::check_guidance_scale(self.guidance_scale)?;
+        self.settle.check()
+    }
+}
+
+/// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
+pub fn validate(
+    clip: &ClipFields,
+    clip_name: &str,
+    sets: &[(String, Params)],
+    cfg: &ValidateConfig,
+    mut progress: impl FnMut(),
+) -> Result<(Report, Vec<Vec<SimRun>>)> {
+    cfg.check()?;
+    let (split, grid, seeds) = (cfg.split, cfg.coarse_grid, cfg.seeds);
+    let nf = clip.frames();
+    let start = ((nf as f64) * split).floor() as usize;
+    if nf - start < 2 {
+        return Err(Error::invalid(format!(
+            "the held-out part {start}..{nf} has fewer than 2 frames"
+        )));
+    }
+    let device = cpu_device(Precision::F32)?;
+    // The leaders' guidance of every frame, the same for every set and seed.
+    let guidance = guidance_fields(clip, cfg.guidance_scale);
+    let video: Vec<Emergent> = (start..nf).map(|f| emergent(clip, f)).collect();
+    let clip_cells: Vec<Vec<[f64; 3]>> = (start..nf).map(|f| coarse_cells(clip, f, grid)).collect();
+    let mut reports = Vec::new();
+    let mut runs_all = Vec::new();
+    let (kx, ky) = (grid.min(clip.meta.nx), grid.min(clip.meta.ny));
+    for (name, params) in sets {
+        params.validate()?;
+        let mut per_frame = vec![[0.0f64; 6]; nf - start];
+        let mut errs: Vec<Vec<f64>> = vec![Vec::new(); 6];
+        let mut sims: Vec<Vec<f64>> = vec![Vec::new(); 6];
+        let mut map = vec![vec![0.0f64; kx]; ky];
+        let mut runs = Vec::new();
+        // One frame's simulated values (weight w: 1/seeds per run, or 1 for the ensemble mean):
+        // errors against the video, per-frame means and the coarse density error map.
+        let mut record = |k: usize, sim_vals: [f64; 6], cells: &[[f64; 3]], w: f64| {
+            let vid = video[k].values();
+            let vid_vals = [0.0, 0.0, vid[0], vid[1], vid[2], vid[3]];
+            for m in 0..6 {
+                let err = if m < 2 {
+                    sim_vals[m]
+                } else {
+                    (sim_vals[m] - vid_vals[m]).abs()
+                };
+                errs[m].push(err);
+                sims[m].push(sim_vals[m]);
+                per_frame[k][m] += w * sim_vals[m];
+            }
+            for (c, (s, v)) in cells.iter().zip(&clip_cells[k]).enumerate() {
+                map[c / kx][c % kx] += w * (s[0] - v[0]).abs() / (nf - start) as f64;
+            }
+        };
+        // Seed-averaged coarse cells and measures (the ensemble's prediction of each frame),
+        // accumulated only with `ensemble_mean`.
+        let mut mean_cells = vec![vec![[0.0f64; 3]; kx * ky]; nf - start];
+        let mut mean_vals = vec![[0.0f64; 4]; nf - start];
+        let w = 1.0 / seeds as f64;
+        for seed in 0..seeds {
+            let run = simulate_clip(
+                clip,
+                params,
+                start..nf,
+                seed as u64,
+                cfg,
+                &guidance,
+                &device,
+            )?;
+            for k in 0..nf - start {
+                // The simulation's fields are indexed from the first held-out frame.
+                let cells = coarse_cells(&run.fields, k, grid);
+                let vals = emergent(&run.fields, k).values();
+                if cfg.ensemble_mean {
+                    for (m, c) in mean_cells[k].iter_mut().zip(&cells) {
+                        for j in 0..3 {
+                            m[j] += w * c[j];
+                        }
+                    }
+                    for j in 0..4 {
+                        mean_vals[k][j] += w * vals[j];
+                    }
+                } else {
+                    let (de, ve) = cell_errors(&clip_cells[k], &cells);
+                    record(k, [de, ve, vals[0], vals[1], vals[2], vals[3]], &cells, w);
+                }
+            }
+            runs.push(run);
+            progress();
+        }
+        if cfg.ensemble_mean {
+            for k in 0..nf - start {
+                let (de, ve) = cell_errors(&clip_cells[k], &mean_cells[k]);
+                let v = mean_vals[k];
+                record(k, [de, ve, v[0], v[1], v[2], v[3]], &mean_cells[k], 1.0);
+            }
+        }
+        let rows = MEASURES
+            .iter()
+            .enumerate()
+            .map(|(m, name)| MeasureRow {
+                measure: name.to_string(),
+                video: (m >= 2).then(|| {
+                    let v: Vec<f64> = video.iter().map(|e| e.values()[m - 2]).collect();
+                    stat(&v)
+                }),
+                simulation: (m >= 2).then(|| stat(&sims[m])),
+                error: stat(&errs[m]),
+            })
+            .collect();
+        reports.push(SetReport {
+            name: name.clone(),
+            params: params.to_vec(),
+            rows,
+            per_frame,
+            error_map: map,
+        });
+        runs_all.push(runs);
+    }
+    Ok((
+        Report {
+            schema: VALIDATION_SCHEMA.into(),
+            clip: clip_name.to_string(),
+            frames: [start, nf],
+            split,
+            grid,
+            seeds,
+            ensemble_mean: cfg.ensemble_mean,
+            video_per_frame: video.iter().map(Emergent::values).collect(),
+            sets: reports,
+        },
+        runs_all,
+    ))
+}

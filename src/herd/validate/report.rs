@@ -1,0 +1,237 @@
+//! The validation report folder as `herdfit validate` writes it: `report.json`, `report.md`
+//! (opening with the comparison table), `metrics.png`, `errors.png`, `error-map-*.png` and the
+//! side-by-side video of the first run.
+
+use super::{validate, Report, SetReport, Stat, ValidateConfig, MEASURES};
+use crate::data::atomic::AtomicDir;
+use crate::data::ClipFields;
+use crate::error::{Error, Result};
+use crate::herd::params::Params;
+use crate::plot::Series;
+use crate::progress::Progress;
+use plotters::style::RGBColor;
+use std::path::{Path, PathBuf};
+
+/// The report as Markdown, opening with the comparison table.
+pub fn markdown(r: &Report) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "# herdfit validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid, {}.\n\n",
+        r.clip,
+        r.frames[0],
+        r.frames[1],
+        r.split,
+        r.seeds,
+        r.grid,
+        r.grid,
+        if r.ensemble_mean {
+            "of the seeds' mean prediction"
+        } else {
+            "averaged over the seeds' own errors"
+        }
+    ));
+    s.push_str("| measure | video mean ± STD |");
+    for set in &r.sets {
+        s.push_str(&format!(
+            " {} simulation mean ± STD | {} error mean ± STD |",
+            set.name, set.name
+        ));
+    }
+    s.push_str("\n|---|---:|");
+    for _ in &r.sets {
+        s.push_str("---:|---:|");
+    }
+    s.push('\n');
+    let f = |x: &Option<Stat>| match x {
+        Some(st) => format!("{:.4} ± {:.4}", st.mean, st.std),
+        None => "—".into(),
+    };
+    for (m, name) in MEASURES.iter().enumerate() {
+        let video = r
+            .sets
+            .first()
+            .map(|s| f(&s.rows[m].video))
+            .unwrap_or_default();
+        s.push_str(&format!("| {name} | {video} |"));
+        for set in &r.sets {
+            let row = &set.rows[m];
+            s.push_str(&format!(
+                " {} | {:.4} ± {:.4} |",
+                f(&row.simulation),
+                row.error.mean,
+                row.error.std
+            ));
+        }
+        s.push('\n');
+    }
+    s.push_str("\nThe simulation's velocities are averaged over the same window of frames as the clip's (the extraction's smoothing) before they are compared. Density and velocity errors are relative (Σ|n' − n| / Σn and Σn‖V' − V‖ / Σn‖V‖ over coarse cells); the other errors are |simulation − video| per frame. Measures come from the fields of the video and of the rasterised simulation (paper §7.1.2).\n\n");
+    s.push_str("| parameter |");
+    for set in &r.sets {
+        s.push_str(&format!(" {} |", set.name));
+    }
+    s.push_str("\n|---|");
+    for _ in &r.sets {
+        s.push_str("---:|");
+    }
+    s.push('\n');
+    for (i, n) in crate::herd::params::param_names().iter().enumerate() {
+        s.push_str(&format!("| {n} |"));
+        for set in &r.sets {
+            s.push_str(&format!(" {:.4} |", set.params[i]));
+        }
+        s.push('\n');
+    }
+    s.push_str("\nPlots: `metrics.png` (measures over time), `errors.png` (density and velocity errors over time), `error-map-*.png` (mean |ρ' − ρ| per coarse cell).\n");
+    s
+}
+
+/// A validation with its files: the clip, the parameter set validated (`fitted`), an optional
+/// baseline, and the report folder.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValidateJob {
+    pub clip: PathBuf,
+    pub params: PathBuf,
+    pub baseline: Option<PathBuf>,
+    pub out: PathBuf,
+    /// Also render the side-by-side video (feature `video`).
+    pub video: bool,
+    pub config: ValidateConfig,
+}
+
+impl Default for ValidateJob {
+    fn default() -> Self {
+        ValidateJob {
+            clip: PathBuf::from("clip"),
+            params: PathBuf::from("params.json"),
+            baseline: None,
+            out: PathBuf::from("report"),
+            video: true,
+            config: ValidateConfig::default(),
+        }
+    }
+}
+
+impl ValidateJob {
+    /// Checks the settings ([`ValidateConfig::check`]).
+    pub fn check(&self) -> Result<()> {
+        self.config.check()
+    }
+}
+
+/// Runs the validation and writes the report folder; returns the report and its Markdown.
+pub fn run(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Report, String)> {
+    job.check()?;
+    let clip = ClipFields::load(&job.clip)?;
+    let mut sets = vec![("fitted".to_string(), Params::load(&job.params)?)];
+    if let Some(b) = &job.baseline {
+        sets.push(("baseline".to_string(), Params::load(b)?));
+    }
+    let out = AtomicDir::create(&job.out)?;
+    progress.start("validate", (sets.len() * job.config.seeds) as u64);
+    let (report, runs) = validate(
+        &clip,
+        &job.clip.display().to_string(),
+        &sets,
+        &job.config,
+        || progress.inc(1),
+    )
+    .map_err(|e| e.in_file(&job.clip))?;
+    progress.finish();
+    let json = serde_json::to_string_pretty(&report).map_err(|e| Error::Internal(e.to_string()))?;
+    out.write("report.json", format!("{json}\n").as_bytes())?;
+    let md = markdown(&report);
+    out.write("report.md", md.as_bytes())?;
+    plots(&report, &out)?;
+    #[cfg(feature = "video")]
+    if job.video {
+        if let Some(run) = runs.first().and_then(|r| r.first()) {
+            crate::video::render::render_comparison(
+                &out.path("side-by-side.avi"),
+                &clip,
+                &run.fields,
+                &run.frames,
+                report.frames[0],
+            )?;
+        }
+    }
+    #[cfg(not(feature = "video"))]
+    let _ = &runs;
+    out.commit()?;
+    Ok((report, md))
+}
+
+const COLOURS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+/// `metrics.png` (the video's and each set's polarization and angular momentum over the
+/// held-out frames), `errors.png` (each set's density and velocity errors) and one error map
+/// per set.
+fn plots(report: &Report, out: &AtomicDir) -> Result<()> {
+    let start = report.frames[0];
+    let at = |k: usize| (start + k) as f64;
+    let video = |m: usize| -> Vec<(f64, f64)> {
+        let rows = report.video_per_frame.iter().enumerate();
+        rows.map(|(k, v)| (at(k), v[m])).collect()
+    };
+    let column = |set: &SetReport, m: usize| -> Vec<(f64, f64)> {
+        let rows = set.per_frame.iter().enumerate();
+        rows.map(|(k, v)| (at(k), v[m])).collect()
+    };
+    let mut metrics = vec![(
+        "video polarization".to_string(),
+        video(0),
+        RGBColor(0, 0, 0),
+    )];
+    for (i, set) in report.sets.iter().enumerate() {
+        let name = format!("{} polarization", set.name);
+        metrics.push((name, column(set, 2), COLOURS[i % 6]));
+    }
+    let grey = RGBColor(120, 120, 120);
+    metrics.push(("video angular momentum".to_string(), video(1), grey));
+    for (i, set) in report.sets.iter().enumerate() {
+        let name = format!("{} angular momentum", set.name);
+        metrics.push((name, column(set, 3), COLOURS[(i + 2) % 6]));
+    }
+    let mut errors = Vec::new();
+    for (i, set) in report.sets.iter().enumerate() {
+        let density = format!("{} density error", set.name);
+        errors.push((density, column(set, 0), COLOURS[(2 * i) % 6]));
+        let velocity = format!("{} velocity error", set.name);
+        errors.push((velocity, column(set, 1), COLOURS[(2 * i + 1) % 6]));
+    }
+    let title = "emergent measures (held-out frames)";
+    chart(&out.path("metrics.png"), title, "value", &metrics)?;
+    let title = "coarse-grid errors (held-out frames)";
+    chart(&out.path("errors.png"), title, "relative error", &errors)?;
+    for set in &report.sets {
+        crate::plot::heat_map(
+            &out.path(&format!("error-map-{}.png", set.name)),
+            &format!("{}: mean |ρ' − ρ| per coarse cell (agents)", set.name),
+            &set.error_map,
+        )?;
+    }
+    Ok(())
+}
+
+/// A named line of (frame, value) points and its colour.
+type Line = (String, Vec<(f64, f64)>, RGBColor);
+
+/// A line chart of [`Line`]s over the held-out frames.
+fn chart(path: &Path, title: &str, y: &str, lines: &[Line]) -> Result<()> {
+    let series: Vec<Series> = lines
+        .iter()
+        .map(|(name, points, colour)| Series {
+            name,
+            points: points.clone(),
+            colour: *colour,
+        })
+        .collect();
+    crate::plot::line_chart(path, title, "frame", y, &series)
+}

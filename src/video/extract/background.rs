@@ -1,0 +1,212 @@
+//! The processing frame of an extraction: the stabilising warp at the processing resolution, the
+//! background (a given image or the per-pixel median of sampled stabilised frames), the grid of
+//! cells over the first frame and the obstacle cells of a mask image.
+
+use super::camera::Similarity;
+use super::decode::{cv, Video};
+use super::ExtractConfig;
+use crate::error::{Error, Result};
+use ndarray::Array2;
+use opencv::core::{Mat, Scalar, Size, CV_8UC1};
+use opencv::prelude::*;
+use opencv::{imgcodecs, imgproc};
+use std::path::Path;
+
+/// The video's size and the processing resolution (the longer side at most `max_side` pixels).
+pub(super) struct Geometry<'a> {
+    pub path: &'a Path,
+    pub w: usize,
+    pub h: usize,
+    /// Processing pixels per video pixel (≤ 1).
+    pub scale: f64,
+    pub pw: usize,
+    pub ph: usize,
+}
+
+impl<'a> Geometry<'a> {
+    pub fn new(path: &'a Path, w: usize, h: usize, max_side: usize) -> Self {
+        let scale = (max_side as f64 / w.max(h) as f64).min(1.0);
+        Geometry {
+            path,
+            w,
+            h,
+            scale,
+            pw: ((w as f64) * scale).round() as usize,
+            ph: ((h as f64) * scale).round() as usize,
+        }
+    }
+
+    /// Warps frame `m` by the camera `s` into the first frame's view at the processing
+    /// resolution.
+    pub fn warp(&self, m: &Mat, s: &Similarity, out: &mut Mat, interp: i32) -> Result<()> {
+        let scale = self.scale;
+        let (c, sn) = (
+            s.angle.cos() * s.scale * scale,
+            s.angle.sin() * s.scale * scale,
+        );
+        let mm = Mat::from_slice_2d(&[[c, -sn, s.t[0] * scale], [sn, c, s.t[1] * scale]])
+            .map_err(cv(self.path))?;
+        imgproc::warp_affine(
+            m,
+            out,
+            &mm,
+            Size::new(self.pw as i32, self.ph as i32),
+            interp,
+            opencv::core::BORDER_CONSTANT,
+            Scalar::all(0.0),
+        )
+        .map_err(cv(self.path))
+    }
+
+    /// The image `path` (read with OpenCV's `flags`), which must be the size of a video frame.
+    pub fn image(&self, path: &Path, flags: i32) -> Result<Mat> {
+        let img = imgcodecs::imread(path.as_os_str(), flags).map_err(cv(path))?;
+        if img.empty() {
+            return Err(Error::file(path, "cannot read as an image"));
+        }
+        let (w, h) = (self.w, self.h);
+        if img.cols() as usize != w || img.rows() as usize != h {
+            return Err(Error::file(
+                path,
+                format!("is {}×{}, the video is {w}×{h}", img.cols(), img.rows()),
+            ));
+        }
+        Ok(img)
+    }
+
+    /// An all-255 mask the size of a video frame (warped to tell valid pixels).
+    pub fn ones(&self) -> Result<Mat> {
+        Mat::new_rows_cols_with_default(self.h as i32, self.w as i32, CV_8UC1, Scalar::all(255.0))
+            .map_err(cv(self.path))
+    }
+}
+
+/// The background at the processing resolution (BGR bytes): `cfg.background`, or the per-pixel
+/// median of up to 31 sampled stabilised frames of `first..first + frames`.
+pub(super) fn background(
+    vid: &mut Video,
+    geom: &Geometry,
+    cfg: &ExtractConfig,
+    camera: &[Similarity],
+    (first, frames): (usize, usize),
+    progress: &mut impl FnMut(&str, usize, usize),
+) -> Result<Vec<u8>> {
+    let path = geom.path;
+    let fail = cv(path);
+    if let Some(bg) = &cfg.background {
+        let img = geom.image(bg, imgcodecs::IMREAD_COLOR)?;
+        let mut out = Mat::default();
+        geom.warp(&img, &Similarity::IDENTITY, &mut out, imgproc::INTER_AREA)?;
+        return Ok(out.data_bytes().map_err(cv(path))?.to_vec());
+    }
+    let samples = frames.min(31);
+    let pick: Vec<usize> = (0..samples)
+        .map(|k| k * (frames - 1) / (samples - 1).max(1))
+        .collect();
+    vid.rewind()?;
+    vid.skip(first)?;
+    let mut stack: Vec<Vec<u8>> = Vec::with_capacity(samples);
+    let mut masks: Vec<Vec<u8>> = Vec::with_capacity(samples);
+    let ones = geom.ones()?;
+    for (i, cam) in camera.iter().enumerate() {
+        let Some(f) = vid.next()? else { break };
+        if pick.contains(&i) {
+            let (mut o, mut m) = (Mat::default(), Mat::default());
+            geom.warp(&f, cam, &mut o, imgproc::INTER_LINEAR)?;
+            geom.warp(&ones, cam, &mut m, imgproc::INTER_NEAREST)?;
+            stack.push(o.data_bytes().map_err(&fail)?.to_vec());
+            masks.push(m.data_bytes().map_err(&fail)?.to_vec());
+        }
+        progress("background", i + 1, frames);
+    }
+    let mut bg = vec![0u8; geom.pw * geom.ph * 3];
+    let mut vals = Vec::with_capacity(stack.len());
+    for p in 0..geom.pw * geom.ph {
+        for c in 0..3 {
+            vals.clear();
+            for (s, m) in stack.iter().zip(&masks) {
+                if m[p] > 0 {
+                    vals.push(s[p * 3 + c]);
+                }
+            }
+            if !vals.is_empty() {
+                vals.sort_unstable();
+                bg[p * 3 + c] = vals[vals.len() / 2];
+            }
+        }
+    }
+    Ok(bg)
+}
+
+/// The grid of an extraction: square cells of max(W, H) / N video pixels over the first frame,
+/// `nx = ⌈W / cell⌉` by `ny = ⌈H / cell⌉`, row 0 at the bottom, and the cell of every processing
+/// pixel.
+pub(super) struct CellGrid {
+    pub cell_px: f64,
+    pub nx: usize,
+    pub ny: usize,
+    /// Cell index (row-major, row 0 at the bottom) of each processing pixel.
+    pub cell_of: Vec<i32>,
+}
+
+impl CellGrid {
+    pub fn new(geom: &Geometry, cells: usize) -> Self {
+        let (w, h, scale, pw, ph) = (geom.w, geom.h, geom.scale, geom.pw, geom.ph);
+        let cell_px = w.max(h) as f64 / cells as f64;
+        let nx = (w as f64 / cell_px).ceil() as usize;
+        let ny = (h as f64 / cell_px).ceil() as usize;
+        let cell_of: Vec<i32> = (0..pw * ph)
+            .map(|p| {
+                let (u, v) = ((p % pw) as f64 + 0.5, (p / pw) as f64 + 0.5);
+                let (x, y) = (u / scale, h as f64 - v / scale);
+                let ix = ((x / cell_px) as usize).min(nx - 1);
+                let iy = ((y.max(0.0) / cell_px) as usize).min(ny - 1);
+                (iy * nx + ix) as i32
+            })
+            .collect();
+        CellGrid {
+            cell_px,
+            nx,
+            ny,
+            cell_of,
+        }
+    }
+
+    /// Number of cells.
+    pub fn cells(&self) -> usize {
+        self.nx * self.ny
+    }
+}
+
+/// Obstacle cells from `cfg.obstacles` (a mask the size of the video frame, non-zero =
+/// obstacle): a cell is an obstacle when more than half its pixels are.
+pub(super) fn obstacle_cells(
+    cfg: &ExtractConfig,
+    geom: &Geometry,
+    grid: &CellGrid,
+) -> Result<Array2<u8>> {
+    let (w, h) = (geom.w, geom.h);
+    let (cell_px, nx, ny, cells) = (grid.cell_px, grid.nx, grid.ny, grid.cells());
+    let obstacles = match &cfg.obstacles {
+        None => Array2::<u8>::zeros((ny, nx)),
+        Some(mp) => {
+            let img = geom.image(mp, imgcodecs::IMREAD_GRAYSCALE)?;
+            let data = img.data_bytes().map_err(cv(mp))?;
+            let (mut on, mut all) = (vec![0usize; cells], vec![0usize; cells]);
+            for (p, &v) in data.iter().enumerate() {
+                let (x, y) = ((p % w) as f64 + 0.5, h as f64 - (p / w) as f64 - 0.5);
+                let c = ((y / cell_px) as usize).min(ny - 1) * nx
+                    + ((x / cell_px) as usize).min(nx - 1);
+                all[c] += 1;
+                if v > 0 {
+                    on[c] += 1;
+                }
+            }
+            Array2::from_shape_fn((ny, nx), |(iy, ix)| {
+                let c = iy * nx + ix;
+                u8::from(all[c] > 0 && on[c] * 2 > all[c])
+            })
+        }
+    };
+    Ok(obstacles)
+}

@@ -1,0 +1,328 @@
+//! Pass C of an extraction: segmentation of every stabilised frame against the background (and
+//! the body colour), Farneback optical flow on the stabilised greys, and the per-cell sums they
+//! give — herd pixels, flow, direction variance — turned into density (herd pixels / body pixels
+//! / cell area), velocity (flow averaged over the smoothing window, BL/s, y up) and direction
+//! variance (paper §4, §6.2).
+
+use super::background::{CellGrid, Geometry};
+use super::camera::Similarity;
+use super::decode::{cv, forward, Video};
+use super::preview::preview_png;
+use super::ExtractConfig;
+use crate::data::clip::BODY_WIDTH_BL;
+use crate::error::Result;
+use ndarray::{Array3, Array4};
+use opencv::core::{Mat, Point, Scalar, Size};
+use opencv::prelude::*;
+use opencv::{imgproc, video};
+
+/// One frame through segmentation: the stabilised frame, its herd mask (255 = herd) and grey.
+type Stage = (Mat, Vec<u8>, Mat);
+
+/// Per-frame, per-cell accumulations of pass C, and the previews.
+pub(super) struct Sums {
+    /// Herd pixels.
+    pub count: Vec<Vec<f64>>,
+    /// Summed flow of herd pixels (BL/s, y up).
+    pub fsum: Vec<Vec<[f64; 2]>>,
+    /// Mean squared angle between each herd pixel's flow and its cell's mean flow (rad²).
+    pub var: Vec<Vec<f64>>,
+    /// Speed of every herd pixel with a flow (BL/s).
+    pub speeds: Vec<f64>,
+    /// First frame with a flow (frame 0 has none).
+    first_flow: Option<usize>,
+    pub previews: Vec<(String, Vec<u8>)>,
+}
+
+/// What segmentation needs, built once.
+struct Segmenter<'a> {
+    geom: &'a Geometry<'a>,
+    cfg: &'a ExtractConfig,
+    background: &'a [u8],
+    ones: Mat,
+    kernel: Mat,
+    /// Morphological opening of the mask when a body is wide enough (≥ 6 processing pixels).
+    morph: bool,
+}
+
+impl Segmenter<'_> {
+    /// Stabilises frame `f` by the camera `cam`, segments it and converts it to grey.
+    fn frame(&self, f: &Mat, cam: &Similarity) -> Result<Stage> {
+        let fail = cv(self.geom.path);
+        let (mut st, mut valid) = (Mat::default(), Mat::default());
+        self.geom.warp(f, cam, &mut st, imgproc::INTER_LINEAR)?;
+        self.geom
+            .warp(&self.ones, cam, &mut valid, imgproc::INTER_NEAREST)?;
+        let px = st.data_bytes().map_err(&fail)?;
+        let vm = valid.data_bytes().map_err(&fail)?;
+        let mut herd = vec![0u8; self.geom.pw * self.geom.ph];
+        for p in 0..self.geom.pw * self.geom.ph {
+            if vm[p] == 0 {
+                continue;
+            }
+            let (b, g, r) = (px[p * 3] as f64, px[p * 3 + 1] as f64, px[p * 3 + 2] as f64);
+            let d = (b - self.background[p * 3] as f64)
+                .abs()
+                .max((g - self.background[p * 3 + 1] as f64).abs())
+                .max((r - self.background[p * 3 + 2] as f64).abs());
+            let mut on = d > self.cfg.background_threshold;
+            if let Some(c) = self.cfg.body_colour {
+                let dist = ((r - c[0] as f64).powi(2)
+                    + (g - c[1] as f64).powi(2)
+                    + (b - c[2] as f64).powi(2))
+                .sqrt();
+                on = on && dist < self.cfg.colour_threshold;
+            }
+            herd[p] = if on { 255 } else { 0 };
+        }
+        if self.morph {
+            let m = Mat::from_slice(&herd)
+                .map_err(&fail)?
+                .reshape(1, self.geom.ph as i32)
+                .map_err(&fail)?
+                .try_clone()
+                .map_err(&fail)?;
+            let mut o = Mat::default();
+            imgproc::morphology_ex(
+                &m,
+                &mut o,
+                imgproc::MORPH_OPEN,
+                &self.kernel,
+                Point::new(-1, -1),
+                1,
+                opencv::core::BORDER_CONSTANT,
+                Scalar::all(0.0),
+            )
+            .map_err(&fail)?;
+            herd.copy_from_slice(o.data_bytes().map_err(&fail)?);
+        }
+
+        let mut grey = Mat::default();
+        imgproc::cvt_color(&st, &mut grey, imgproc::COLOR_BGR2GRAY, 0).map_err(&fail)?;
+        Ok((st, herd, grey))
+    }
+}
+
+/// Pass C over the `frames` frames from `first`: a second thread decodes, stabilises and segments
+/// frames while this one runs the optical flow and accumulates the cells. One preview every
+/// `preview_every` frames when given.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn pass_c(
+    vid: &mut Video,
+    geom: &Geometry,
+    grid: &CellGrid,
+    cfg: &ExtractConfig,
+    camera: &[Similarity],
+    background: &[u8],
+    (first, frames): (usize, usize),
+    preview_every: Option<usize>,
+    progress: &mut impl FnMut(&str, usize, usize),
+) -> Result<Sums> {
+    let (path, scale) = (geom.path, geom.scale);
+    let fail = cv(path);
+    let morph = cfg.body_length_px * BODY_WIDTH_BL * scale >= 6.0;
+    let to_bl_s = vid.fps / (cfg.body_length_px * scale);
+    vid.rewind()?;
+    vid.skip(first)?;
+    let kernel = imgproc::get_structuring_element(
+        imgproc::MORPH_ELLIPSE,
+        Size::new(3, 3),
+        Point::new(-1, -1),
+    )
+    .map_err(&fail)?;
+    let seg = Segmenter {
+        geom,
+        cfg,
+        background,
+        ones: geom.ones()?,
+        kernel,
+        morph,
+    };
+    let cells = grid.cells();
+    let mut sums = Sums {
+        count: vec![vec![0.0f64; cells]; frames],
+        fsum: vec![vec![[0.0f64; 2]; cells]; frames],
+        var: vec![vec![0.0f64; cells]; frames],
+        speeds: Vec::new(),
+        first_flow: None,
+        previews: Vec::new(),
+    };
+    let mut prev_grey: Option<Mat> = None;
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Stage>>(4);
+    std::thread::scope(|scope| -> Result<()> {
+        let producer = {
+            let tx = tx.clone();
+            let seg = &seg;
+            let vid = &mut *vid;
+            scope.spawn(move || {
+                for cam in camera.iter() {
+                    let item = (|| -> Result<Option<Stage>> {
+                        let Some(f) = vid.next()? else {
+                            return Ok(None);
+                        };
+                        seg.frame(&f, cam).map(Some)
+                    })();
+                    if !forward(&tx, item) {
+                        return;
+                    }
+                }
+            })
+        };
+        drop(tx);
+        for i in 0..frames {
+            let Ok(item) = rx.recv() else { break };
+            let (st, herd, grey) = item?;
+            for (&on, &c) in herd.iter().zip(&grid.cell_of) {
+                if on > 0 {
+                    sums.count[i][c as usize] += 1.0;
+                }
+            }
+            if let Some(pg) = &prev_grey {
+                sums.flow(i, pg, &grey, &herd, grid, to_bl_s, path)?;
+            }
+            if let Some(every) = preview_every {
+                if i % every.max(1) == 0 {
+                    let png = preview_png(&st, &herd, &sums.count[i], &sums.fsum[i], grid, geom)?;
+                    sums.previews.push((format!("preview-{i:05}.png"), png));
+                }
+            }
+            prev_grey = Some(grey);
+            progress("fields", i + 1, frames);
+        }
+        drop(rx);
+        let _ = producer.join();
+        Ok(())
+    })?;
+    // Frame 0 has no previous frame: it takes frame 1's flow.
+    if let Some(k) = sums.first_flow {
+        let (a, b) = (sums.fsum[k].clone(), sums.var[k].clone());
+        for i in 0..k {
+            sums.fsum[i] = a.clone();
+            sums.var[i] = b.clone();
+        }
+    }
+    Ok(sums)
+}
+
+/// The fields of an extraction from its sums.
+pub(super) struct Fields {
+    pub density: Array3<f32>,
+    pub velocity: Array4<f32>,
+    pub dir_variance: Array3<f32>,
+    /// `(density, speed, agents)` of every occupied cell and frame, for the speed–density table.
+    pub samples: Vec<(f64, f64, f64)>,
+    /// Mean and standard deviation of the herd pixels' speeds (BL/s).
+    pub speed: (f64, f64),
+}
+
+impl Sums {
+    /// Frame `i`'s flow from the previous grey `pg`: summed per cell over herd pixels (BL/s, y
+    /// up), the pixels' speeds, and each cell's direction variance about its mean flow.
+    #[allow(clippy::too_many_arguments)]
+    fn flow(
+        &mut self,
+        i: usize,
+        pg: &Mat,
+        grey: &Mat,
+        herd: &[u8],
+        grid: &CellGrid,
+        to_bl_s: f64,
+        path: &std::path::Path,
+    ) -> Result<()> {
+        let fail = cv(path);
+        let mut flow = Mat::default();
+        video::calc_optical_flow_farneback(pg, grey, &mut flow, 0.5, 2, 13, 2, 5, 1.1, 0)
+            .map_err(&fail)?;
+        let fl: &[opencv::core::Vec2f] = flow.data_typed().map_err(&fail)?;
+        let mut sum = vec![[0.0f64; 2]; grid.cells()];
+        for p in 0..grid.cell_of.len() {
+            if herd[p] > 0 {
+                let c = grid.cell_of[p] as usize;
+                let v = [fl[p][0] as f64 * to_bl_s, -(fl[p][1] as f64) * to_bl_s];
+                sum[c][0] += v[0];
+                sum[c][1] += v[1];
+                self.speeds.push((v[0] * v[0] + v[1] * v[1]).sqrt());
+            }
+        }
+        // Direction variance about each cell's mean flow direction.
+        let mut sq = vec![0.0f64; grid.cells()];
+        let mut n = vec![0.0f64; grid.cells()];
+        for p in 0..grid.cell_of.len() {
+            if herd[p] > 0 {
+                let c = grid.cell_of[p] as usize;
+                let m = sum[c];
+                let d = [fl[p][0] as f64, -(fl[p][1] as f64)];
+                if d[0] == 0.0 && d[1] == 0.0 {
+                    continue;
+                }
+                let a = (m[0] * d[1] - m[1] * d[0])
+                    .abs()
+                    .atan2(m[0] * d[0] + m[1] * d[1]);
+                sq[c] += a * a;
+                n[c] += 1.0;
+            }
+        }
+        for c in 0..grid.cells() {
+            if n[c] > 0.0 {
+                self.var[i][c] = sq[c] / n[c];
+            }
+        }
+        self.fsum[i] = sum;
+        self.first_flow.get_or_insert(i);
+        Ok(())
+    }
+
+    /// Density (herd pixels / body pixels per animal / cell area, agents/BL²), velocity (flow
+    /// sums over the smoothing window / herd pixels in it) and direction variance of every cell
+    /// and frame; `body_px_proc` is the body pixels per animal at the processing resolution.
+    pub fn fields(&self, grid: &CellGrid, cfg: &ExtractConfig, body_px_proc: f64) -> Fields {
+        let frames = self.count.len();
+        let half = cfg.smooth / 2;
+        let area_bl = (grid.cell_px / cfg.body_length_px).powi(2);
+        let mut density = Array3::<f32>::zeros((frames, grid.ny, grid.nx));
+        let mut velocity = Array4::<f32>::zeros((frames, grid.ny, grid.nx, 2));
+        let mut dir_variance = Array3::<f32>::zeros((frames, grid.ny, grid.nx));
+        let mut samples = Vec::new();
+        for i in 0..frames {
+            let (lo, hi) = (i.saturating_sub(half), (i + half + 1).min(frames));
+            for c in 0..grid.cells() {
+                let (iy, ix) = (c / grid.nx, c % grid.nx);
+                let n = self.count[i][c];
+                if n <= 0.0 {
+                    continue;
+                }
+                let agents = n / body_px_proc;
+                let rho = agents / area_bl;
+                density[[i, iy, ix]] = rho as f32;
+                let (mut s, mut k) = ([0.0; 2], 0.0);
+                for j in lo..hi {
+                    s[0] += self.fsum[j][c][0];
+                    s[1] += self.fsum[j][c][1];
+                    k += self.count[j][c];
+                }
+                if k > 0.0 {
+                    let v = [s[0] / k, s[1] / k];
+                    velocity[[i, iy, ix, 0]] = v[0] as f32;
+                    velocity[[i, iy, ix, 1]] = v[1] as f32;
+                    samples.push((rho, (v[0] * v[0] + v[1] * v[1]).sqrt(), agents));
+                }
+                dir_variance[[i, iy, ix]] = self.var[i][c] as f32;
+            }
+        }
+        let (mean, std_bp) = if self.speeds.is_empty() {
+            (0.0, 0.0)
+        } else {
+            let m = self.speeds.iter().sum::<f64>() / self.speeds.len() as f64;
+            let v =
+                self.speeds.iter().map(|s| (s - m).powi(2)).sum::<f64>() / self.speeds.len() as f64;
+            (m, v.sqrt())
+        };
+        Fields {
+            density,
+            velocity,
+            dir_variance,
+            samples,
+            speed: (mean, std_bp),
+        }
+    }
+}
