@@ -4,7 +4,9 @@
 use crate::backend::{cpu_device, Precision};
 use crate::error::Result;
 use crate::params::Params;
-use crate::sim::{random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, World};
+use crate::sim::{
+    random_herd, theta_tensor, Decide, ForceKernel, Guidance, HerdSpec, HerdState, Model, World,
+};
 use crate::train::gradcheck::objective;
 use rand::SeedableRng;
 use serde::Serialize;
@@ -25,6 +27,8 @@ pub struct BenchReport {
     pub k: usize,
     /// burn's balanced gradient checkpointing was on for the forward+backward pass.
     pub checkpointing: bool,
+    /// Which implementation computed the forces of eq. 3–5.
+    pub force_kernel: ForceKernel,
 }
 
 /// The benchmark scene: the standard herd (one agent per 2 BL²), default parameters, occlusion on,
@@ -41,6 +45,7 @@ pub fn bench_model(agents: usize, seed: u64) -> Result<(Model, Vec<crate::io::Ag
             params,
             world,
             dt: 1.0 / 25.0,
+            force_kernel: crate::sim::ForceKernel::default(),
         },
         init,
     ))
@@ -69,20 +74,23 @@ pub fn peak_rss_mb() -> f64 {
 }
 
 /// Runs the benchmark: `steps` live simulation steps (median per step), then, unless `sim_only`,
-/// `repeats` forward + backward passes through `steps` unrolled steps (median per step).
+/// `repeats` forward + backward passes through `steps` unrolled steps (median per step), with
+/// the forces computed by `force_kernel`.
 pub fn run_bench(
     agents: usize,
     steps: usize,
     sim_only: bool,
     repeats: usize,
     checkpointing: bool,
+    force_kernel: ForceKernel,
     mut progress: impl FnMut(),
 ) -> Result<BenchReport> {
     if steps == 0 {
         return Err(crate::Error::invalid("--steps must be ≥ 1"));
     }
     let device = cpu_device(Precision::F32)?;
-    let (model, init) = bench_model(agents, 1)?;
+    let (mut model, init) = bench_model(agents, 1)?;
+    model.force_kernel = force_kernel;
     let theta_v = model.params.to_vec();
     let theta = theta_tensor(&theta_v, &device);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
@@ -160,5 +168,6 @@ pub fn run_bench(
         mean_neighbours,
         k,
         checkpointing,
+        force_kernel,
     })
 }

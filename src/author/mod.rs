@@ -163,6 +163,7 @@ pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result
             },
         },
         dt: 1.0 / f.fps,
+        force_kernel: crate::sim::ForceKernel::default(),
     };
     let dt = model.dt;
     let sets: Vec<[f64; N_PARAMS]> = scene.params.iter().map(|p| p.to_vec()).collect();

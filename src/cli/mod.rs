@@ -9,7 +9,8 @@ use crate::io::{
 };
 use crate::params::Params;
 use crate::sim::{
-    random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, Recording, World,
+    random_herd, theta_tensor, Decide, ForceKernel, Guidance, HerdSpec, HerdState, Model,
+    Recording, World,
 };
 use crate::train::gradcheck::{default_scenario, gradcheck, record, Scenario};
 use clap::{Args, Parser, Subcommand};
@@ -482,6 +483,9 @@ pub struct BenchArgs {
     /// checkpointing): less memory for long windows, more time.
     #[arg(long)]
     pub checkpointing: bool,
+    /// Time the tensor-op reference implementation of the forces instead of the fused op.
+    #[arg(long)]
+    pub reference_forces: bool,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: PathBuf,
@@ -577,6 +581,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         params,
         world,
         dt: 1.0 / a.fps,
+        force_kernel: crate::sim::ForceKernel::default(),
     };
     let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
     let theta = theta_tensor(&model.params.to_vec(), &device);
@@ -727,6 +732,11 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
         a.sim_only,
         a.repeats,
         a.checkpointing,
+        if a.reference_forces {
+            ForceKernel::Reference
+        } else {
+            ForceKernel::Fused
+        },
         || pb.inc(1),
     )?;
     pb.finish_and_clear();

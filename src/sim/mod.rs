@@ -11,9 +11,11 @@
 //! [`Model::rollout`] unrolls T steps; on an autodiff device the final state carries the gradient
 //! of the whole unrolled run.
 
+mod fused;
 mod herd;
 mod world;
 
+pub use fused::{fused_forces, ForceKernel};
 pub use herd::{random_herd, HerdSpec};
 pub use world::{Guidance, World};
 
@@ -226,6 +228,9 @@ pub struct ForceTensors {
     pub gamma: [Tensor<2>; 4],
     /// `[n, 1]` tensors: one parameter set per agent (authoring with behaviour regions).
     pub per_agent: bool,
+    /// The same values packed for the fused op: `[1, 12]` (or `[n, 12]` per agent) as
+    /// `[w_C, w_V, w_A, w_O, α_C, …, α_O, γ_C, …, γ_O]` ([`herdfit_kernels::Coefficients`]).
+    pub coef: Tensor<2>,
 }
 
 impl ForceTensors {
@@ -251,11 +256,20 @@ impl ForceTensors {
                 .recip()
                 .mul_scalar(-0.5)
         });
+        let coef = Tensor::cat(
+            w.iter()
+                .chain(&alpha)
+                .chain(&gamma)
+                .cloned()
+                .collect::<Vec<_>>(),
+            1,
+        );
         ForceTensors {
             w,
             alpha,
             gamma,
             per_agent: false,
+            coef,
         }
     }
 
@@ -269,11 +283,21 @@ impl ForceTensors {
         let w = std::array::from_fn(|g| col(&|t| t[3 * g] * c.sensitivity));
         let alpha = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 1] * r).powi(2)));
         let gamma = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 2] * pi).powi(2)));
+        let coef = thetas
+            .iter()
+            .flat_map(|t| {
+                let w = (0..4).map(|g| t[3 * g] * c.sensitivity);
+                let a = (0..4).map(|g| -0.5 / (t[3 * g + 1] * r).powi(2));
+                let y = (0..4).map(|g| -0.5 / (t[3 * g + 2] * pi).powi(2));
+                w.chain(a).chain(y).collect::<Vec<_>>()
+            })
+            .collect();
         ForceTensors {
             w,
             alpha,
             gamma,
             per_agent: true,
+            coef: mat_tensor(coef, n, herdfit_kernels::N_COEF, device),
         }
     }
 }
@@ -290,6 +314,8 @@ pub struct Model {
     pub world: World,
     /// Time step Δt (s) = 1 / fps.
     pub dt: f64,
+    /// Fused force op (default) or the tensor-op reference ([`Model::forces`]).
+    pub force_kernel: ForceKernel,
 }
 
 /// Where a rollout's no-gradient decisions come from.
@@ -418,8 +444,27 @@ impl Model {
     ///
     /// FC = Σ WR·WA·(p_j − p_i), FV = −Σ WR·WA·(p_j − p_i), FA = Σ WR·WA·d_j,
     /// FO = −Σ_o WR·WA·(q_o − p_i); F = Ω (W_C FC + W_V FV + W_A FA + W_O FO).
+    ///
+    /// With [`ForceKernel::Fused`] on the ndarray backend this is one operation with a
+    /// hand-written backward ([`fused_forces`]); otherwise the tensor ops of
+    /// [`Model::reference_forces`].
     pub fn forces(
         &self,
+        f: &ForceTensors,
+        s: &HerdState,
+        dec: &StepDecisions,
+    ) -> (Tensor<2>, Tensor<2>) {
+        if self.force_kernel == ForceKernel::Fused {
+            if let Some(out) = fused_forces(f, s, dec) {
+                return out;
+            }
+        }
+        Self::reference_forces(f, s, dec)
+    }
+
+    /// [`Model::forces`] as tensor ops over the padded `[N, K]` lists: the reference
+    /// implementation, and the path on backends without the fused op.
+    pub fn reference_forces(
         f: &ForceTensors,
         s: &HerdState,
         dec: &StepDecisions,

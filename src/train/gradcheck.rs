@@ -51,6 +51,7 @@ pub fn default_scenario(params: Params, agents: usize, seed: u64) -> Result<Scen
             params,
             world,
             dt: 1.0 / 25.0,
+            force_kernel: crate::sim::ForceKernel::default(),
         },
         init,
     })
