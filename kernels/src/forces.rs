@@ -157,7 +157,7 @@ fn pair(dx: f64, dy: f64, hx: f64, hy: f64, branch: u8) -> Pair {
         b,
         side,
         behind,
-        phi: a.atan2(b) * behind + offset,
+        phi: libm::atan2(a, b) * behind + offset,
     }
 }
 
