@@ -181,6 +181,9 @@ pub struct FitArgs {
     /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
     #[arg(long, value_name = "S", default_value_t = crate::train::fit::GUIDANCE_SCALE, allow_hyphen_values = true)]
     pub guidance_scale: f64,
+    /// Train with the tensor-op reference implementation of the forces instead of the fused op.
+    #[arg(long)]
+    pub reference_forces: bool,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Write a checkpoint into DIR after every epoch.
@@ -1179,6 +1182,11 @@ fn fit_cmd(a: FitArgs) -> Result<()> {
         settle: crate::train::fit::Settle::with_iterations(a.settle),
         replicas: a.replicas,
         guidance_scale: a.guidance_scale,
+        force_kernel: if a.reference_forces {
+            ForceKernel::Reference
+        } else {
+            ForceKernel::Fused
+        },
     };
     for (c, p) in clips.iter().zip(&a.clips) {
         cfg.check(c).map_err(|e| e.in_file(p))?;

@@ -47,6 +47,13 @@ pub enum ForceKernel {
     Reference,
 }
 
+impl ForceKernel {
+    /// The default, [`ForceKernel::Fused`].
+    pub fn is_fused(&self) -> bool {
+        *self == ForceKernel::Fused
+    }
+}
+
 type NdDevice = <NdArray as burn::backend::BackendTypes>::Device;
 
 fn read(t: FloatTensor<NdArray>) -> Vec<f64> {

@@ -89,6 +89,10 @@ pub struct FitConfig {
     /// ([`guidance_field`]).
     #[serde(default = "default_guidance_scale")]
     pub guidance_scale: f64,
+    /// How the forces of eq. 3–5 are computed in the training loop (fused op by default; not
+    /// written when it is the default, so checkpoints keep their bytes).
+    #[serde(default, skip_serializing_if = "crate::sim::ForceKernel::is_fused")]
+    pub force_kernel: crate::sim::ForceKernel,
 }
 
 fn default_guidance_scale() -> f64 {
@@ -141,6 +145,7 @@ impl Default for FitConfig {
             settle: Settle::default(),
             replicas: 1,
             guidance_scale: GUIDANCE_SCALE,
+            force_kernel: crate::sim::ForceKernel::Fused,
         }
     }
 }
@@ -886,6 +891,7 @@ fn fit_inner(
             let mut speed_params = params.clone();
             speed_params.speed = clip.speed_model(&init.speed);
             let mut model = clip_model(speed_params.with_vec(&theta), clip);
+            model.force_kernel = cfg.force_kernel;
             // K independent herds (replicas) from the same fields, side by side.
             let mut herds: Vec<Vec<AgentRow>> = Vec::with_capacity(replicas);
             for _ in 0..replicas {
