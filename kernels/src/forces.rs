@@ -163,7 +163,7 @@ fn pair(dx: f64, dy: f64, hx: f64, hy: f64, branch: u8) -> Pair {
 
 #[inline]
 fn weight(c: &[f64], g: usize, d2: f64, phi2: f64) -> (f64, f64) {
-    let e = (c[4 + g] * d2 + c[8 + g] * phi2).exp();
+    let e = libm::exp(c[4 + g] * d2 + c[8 + g] * phi2);
     (e, c[g] * e)
 }
 
