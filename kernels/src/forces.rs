@@ -9,7 +9,7 @@
 //!
 //! The bearing φ ∈ [0, π] is the unsigned angle between d_i and p_j − p_i on its recorded branch
 //! (side s = ±1, behind σ = ±1, see [`crate::branch_of`]):
-//! φ = [σ < 0]·π + σ·atan2(s·(d × u), σ·(d · u)), smooth in every input around the recorded
+//! φ = \[σ < 0\]·π + σ·atan2(s·(d × u), σ·(d · u)), smooth in every input around the recorded
 //! state. The herd model's tensor-op path computes the same expression; this kernel is its fused
 //! form: one pass per agent and no intermediate `[N, K]` arrays, and a backward pass that
 //! recomputes the pair terms from the inputs instead of storing them.
