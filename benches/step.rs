@@ -1,6 +1,7 @@
 //! Criterion benchmarks of the hot paths on the standard random herd (one agent per 2 BL²,
 //! occlusion on, f32): the perception kernel, one simulation step, and forward + backward through
-//! T = 10 unrolled steps (reported per iteration; divide by 10 for per-step figures).
+//! T = 10 unrolled steps (reported per iteration; divide by 10 for per-step figures), each with
+//! the fused force op (`fused/N`) and the tensor-op reference (`reference/N`).
 //!
 //! `cargo bench --bench step` (set `HERDFIT_BENCH_LARGE=1` to add the 100,000-agent cases).
 
@@ -8,7 +9,7 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use herdfit::backend::{cpu_device, Precision};
 use herdfit::herd::gradcheck::objective;
 use herdfit::herd::scenario::bench_model;
-use herdfit::herd::sim::{theta_tensor, Decide, HerdState};
+use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState};
 use herdfit_kernels::perceive;
 use rand::SeedableRng;
 use std::time::Duration;
@@ -19,6 +20,21 @@ fn sizes(base: &[usize]) -> Vec<usize> {
         v.push(100_000);
     }
     v
+}
+
+/// Every size with the fused op, then with the tensor-op reference.
+fn kernels(sizes: &[usize]) -> Vec<(ForceKernel, usize)> {
+    [ForceKernel::Fused, ForceKernel::Reference]
+        .iter()
+        .flat_map(|&k| sizes.iter().map(move |&n| (k, n)))
+        .collect()
+}
+
+fn name(k: ForceKernel) -> &'static str {
+    match k {
+        ForceKernel::Fused => "fused",
+        ForceKernel::Reference => "reference",
+    }
 }
 
 fn perception(c: &mut Criterion) {
@@ -40,11 +56,12 @@ fn sim_step(c: &mut Criterion) {
     let device = cpu_device(Precision::F32).unwrap();
     let mut g = c.benchmark_group("sim_step");
     g.sample_size(10).measurement_time(Duration::from_secs(3));
-    for n in sizes(&[500, 1500, 5000]) {
-        let (model, init) = bench_model(n, 1).unwrap();
+    for (kernel, n) in kernels(&sizes(&[500, 1500, 5000])) {
+        let (mut model, init) = bench_model(n, 1).unwrap();
+        model.force_kernel = kernel;
         let theta = theta_tensor(&model.params.to_vec(), &device);
         let state = HerdState::from_rows(&init, &device);
-        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+        g.bench_with_input(BenchmarkId::new(name(kernel), n), &n, |b, _| {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
             b.iter(|| {
                 let s = model
@@ -71,10 +88,11 @@ fn grad_window(c: &mut Criterion) {
     let ad = device.clone().autodiff();
     let mut g = c.benchmark_group("forward_backward_10_steps");
     g.sample_size(10).measurement_time(Duration::from_secs(5));
-    for n in [500, 1000, 1500] {
-        let (model, init) = bench_model(n, 1).unwrap();
+    for (kernel, n) in kernels(&[500, 1500, 5000]) {
+        let (mut model, init) = bench_model(n, 1).unwrap();
+        model.force_kernel = kernel;
         let theta_v = model.params.to_vec();
-        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+        g.bench_with_input(BenchmarkId::new(name(kernel), n), &n, |b, _| {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
             b.iter(|| {
                 let th = theta_tensor(&theta_v, &ad).require_grad();

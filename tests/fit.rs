@@ -732,6 +732,7 @@ fn the_clip_speed_model_reproduces_the_clip_speed_spread() {
             guidance: Guidance::None,
         },
         dt: 0.04,
+        force_kernel: herdfit::herd::sim::ForceKernel::default(),
     };
     let rows: Vec<AgentRow> = (0..40)
         .map(|i| AgentRow {

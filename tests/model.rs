@@ -45,6 +45,7 @@ fn model(params: Params, world: World) -> Model {
         params,
         world,
         dt: 0.04,
+        force_kernel: herdfit::herd::sim::ForceKernel::default(),
     }
 }
 

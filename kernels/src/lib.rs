@@ -1,13 +1,18 @@
 //! `herdfit-kernels`: the non-differentiable hot loops of herdfit — a uniform bucket grid,
-//! padded neighbour lists with capsule occlusion, obstacle-cell traversal and (later) splatting.
+//! padded neighbour lists with capsule occlusion, obstacle-cell traversal, the fused force kernel
+//! of eq. 3–5 (forward and backward) and (later) splatting.
 //! Plain Rust (rayon for parallel loops), no burn: the differentiable model consumes their output
-//! as constant data.
+//! as constant data, and wraps the force kernel's forward/backward pair as one autodiff operation.
 
+pub mod forces;
 pub mod geometry;
 pub mod grid;
 pub mod obstacles;
 pub mod perception;
 
+pub use forces::{
+    forces_backward, forces_forward, AgentsRef, Coefficients, ForceGrads, PairLists, N_COEF,
+};
 pub use geometry::{Capsule, P2};
 pub use obstacles::ObstacleMap;
 pub use perception::{

@@ -67,11 +67,39 @@ pub fn branch_of(h: P2, d: P2) -> u8 {
     (if cross < 0.0 { BRANCH_RIGHT } else { 0 }) | (if dot < 0.0 { BRANCH_BEHIND } else { 0 })
 }
 
-struct AgentView {
-    neighbours: Vec<u32>,
-    obstacles: Vec<P2>,
-    front: u32,
-    in_range: u32,
+/// Agents per rayon task (and per output chunk): chunk boundaries are fixed, so the output does
+/// not depend on the thread count.
+const CHUNK: usize = 64;
+
+/// An in-range candidate: squared distance, index, offset from the perceiving agent, heading.
+#[derive(Clone, Copy)]
+struct Cand {
+    d2: f64,
+    j: u32,
+    o: P2,
+    h: P2,
+}
+
+/// Reused per-thread buffers (no allocation per agent).
+#[derive(Default)]
+struct Scratch {
+    keys: Vec<(u64, u32)>,
+    cand: Vec<Cand>,
+    pts: Vec<(f64, P2)>,
+}
+
+/// The views of one chunk of agents, flattened: agent `a` of the chunk owns
+/// `nb_len[a]` neighbours (with their branch codes) and `ob_len[a]` obstacle points.
+#[derive(Default)]
+struct ChunkViews {
+    nb: Vec<u32>,
+    nb_branch: Vec<u8>,
+    nb_len: Vec<u32>,
+    ob: Vec<P2>,
+    ob_branch: Vec<u8>,
+    ob_len: Vec<u32>,
+    front: Vec<u32>,
+    in_range: Vec<u32>,
 }
 
 /// Runs the perception kernel for all agents (in parallel; the result does not depend on the
@@ -83,149 +111,256 @@ pub fn perceive(
     cfg: &PerceptionConfig,
 ) -> Perception {
     let n = positions.len();
-    let grid = UniformGrid::build(positions, cfg.radius);
+    let grid = UniformGrid::build(positions, 0.5 * cfg.radius);
     let obstacles = obstacles.filter(|m| m.any());
-    let views: Vec<AgentView> = (0..n)
+    let cone = FrontCone::new(cfg.front_cone);
+    let chunks: Vec<ChunkViews> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
-        .with_min_len(64)
-        .map(|i| view_of(i, positions, headings, &grid, obstacles, cfg))
+        .map_init(Scratch::default, |sc, c| {
+            let mut out = ChunkViews::default();
+            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                let ctx = Context {
+                    pos: positions,
+                    head: headings,
+                    grid: &grid,
+                    obstacles,
+                    cfg,
+                    cone,
+                };
+                view_of(i, &ctx, sc, &mut out);
+            }
+            out
+        })
         .collect();
-    let k = views
-        .iter()
-        .map(|v| v.neighbours.len())
-        .max()
-        .unwrap_or(0)
-        .max(1);
-    let ko = views
-        .iter()
-        .map(|v| v.obstacles.len())
-        .max()
-        .unwrap_or(0)
-        .max(1);
+    let widest = |f: fn(&ChunkViews) -> &Vec<u32>| {
+        chunks
+            .iter()
+            .flat_map(|c| f(c).iter().copied())
+            .max()
+            .unwrap_or(0)
+            .max(1) as usize
+    };
+    let (k, ko) = (widest(|c| &c.nb_len), widest(|c| &c.ob_len));
     let mut out = Perception {
         n,
         k,
-        neighbours: Vec::with_capacity(n * k),
-        neighbour_mask: Vec::with_capacity(n * k),
-        neighbour_branch: Vec::with_capacity(n * k),
+        neighbours: vec![0; n * k],
+        neighbour_mask: vec![0; n * k],
+        neighbour_branch: vec![0; n * k],
         ko,
-        obstacle_points: Vec::with_capacity(n * ko),
-        obstacle_mask: Vec::with_capacity(n * ko),
-        obstacle_branch: Vec::with_capacity(n * ko),
+        obstacle_points: vec![[0.0; 2]; n * ko],
+        obstacle_mask: vec![0; n * ko],
+        obstacle_branch: vec![0; n * ko],
         front_count: Vec::with_capacity(n),
         density: Vec::with_capacity(n),
     };
     let area = std::f64::consts::PI * cfg.radius * cfg.radius;
-    for (i, v) in views.into_iter().enumerate() {
-        for s in 0..k {
-            match v.neighbours.get(s) {
-                Some(&j) => {
-                    out.neighbours.push(j);
-                    out.neighbour_mask.push(1);
-                    let (p, q) = (positions[i], positions[j as usize]);
-                    out.neighbour_branch
-                        .push(branch_of(headings[i], [q[0] - p[0], q[1] - p[1]]));
-                }
-                None => {
-                    out.neighbours.push(i as u32);
-                    out.neighbour_mask.push(0);
-                    out.neighbour_branch.push(0);
-                }
-            }
-        }
-        for s in 0..ko {
-            match v.obstacles.get(s) {
-                Some(&q) => {
-                    out.obstacle_points.push(q);
-                    out.obstacle_mask.push(1);
-                    let p = positions[i];
-                    out.obstacle_branch
-                        .push(branch_of(headings[i], [q[0] - p[0], q[1] - p[1]]));
-                }
-                None => {
-                    out.obstacle_points.push(positions[i]);
-                    out.obstacle_mask.push(0);
-                    out.obstacle_branch.push(0);
-                }
-            }
-        }
-        out.front_count.push(v.front);
-        out.density.push(v.in_range as f64 / area);
+    for c in &chunks {
+        out.front_count.extend_from_slice(&c.front);
+        out.density
+            .extend(c.in_range.iter().map(|&m| m as f64 / area));
     }
+    // Padded rows, chunk by chunk in parallel: padding holds the agent's own index / position.
+    out.neighbours
+        .par_chunks_mut(CHUNK * k)
+        .zip(out.neighbour_mask.par_chunks_mut(CHUNK * k))
+        .zip(out.neighbour_branch.par_chunks_mut(CHUNK * k))
+        .zip(&chunks)
+        .enumerate()
+        .for_each(|(c, (((idx, mask), branch), v))| {
+            let mut src = 0;
+            for (a, &len) in v.nb_len.iter().enumerate() {
+                let (row, len) = (a * k, len as usize);
+                idx[row..row + k].fill((c * CHUNK + a) as u32);
+                idx[row..row + len].copy_from_slice(&v.nb[src..src + len]);
+                mask[row..row + len].fill(1);
+                branch[row..row + len].copy_from_slice(&v.nb_branch[src..src + len]);
+                src += len;
+            }
+        });
+    out.obstacle_points
+        .par_chunks_mut(CHUNK * ko)
+        .zip(out.obstacle_mask.par_chunks_mut(CHUNK * ko))
+        .zip(out.obstacle_branch.par_chunks_mut(CHUNK * ko))
+        .zip(&chunks)
+        .enumerate()
+        .for_each(|(c, (((pts, mask), branch), v))| {
+            let mut src = 0;
+            for (a, &len) in v.ob_len.iter().enumerate() {
+                let (row, len) = (a * ko, len as usize);
+                pts[row..row + ko].fill(positions[c * CHUNK + a]);
+                pts[row..row + len].copy_from_slice(&v.ob[src..src + len]);
+                mask[row..row + len].fill(1);
+                branch[row..row + len].copy_from_slice(&v.ob_branch[src..src + len]);
+                src += len;
+            }
+        });
     out
 }
 
-fn view_of(
-    i: usize,
-    pos: &[P2],
-    head: &[P2],
-    grid: &UniformGrid,
-    obstacles: Option<&ObstacleMap>,
-    cfg: &PerceptionConfig,
-) -> AgentView {
-    let p = pos[i];
-    let r2 = cfg.radius * cfg.radius;
-    // In-range candidates sorted by distance (ties by index: deterministic).
-    let mut cand: Vec<(f64, u32)> = Vec::with_capacity(32);
-    grid.for_each_candidate(p, cfg.radius, |j| {
-        if j != i {
-            let d2 = (pos[j][0] - p[0]).powi(2) + (pos[j][1] - p[1]).powi(2);
-            // Coincident agents have no bearing: they are not perceived.
-            if d2 < r2 && d2 > 1e-18 {
-                cand.push((d2, j as u32));
+/// The front-cone test `bearing(h, u) ≤ cone` without atan2 away from the cone's edge: with
+/// `(dot, |cross|)` of h and u, the bearing is within the cone iff
+/// `|cross|·cos(cone) − dot·sin(cone) ≤ 0`; within a relative margin of the edge the exact
+/// [`bearing`] decides, so the result is that of the atan2 form.
+#[derive(Clone, Copy)]
+struct FrontCone {
+    cone: f64,
+    cos: f64,
+    sin: f64,
+}
+
+impl FrontCone {
+    fn new(cone: f64) -> Self {
+        FrontCone {
+            cone,
+            cos: cone.cos(),
+            sin: cone.sin(),
+        }
+    }
+
+    #[inline]
+    fn contains(&self, h: P2, u: P2, d2: f64) -> bool {
+        let dot = h[0] * u[0] + h[1] * u[1];
+        let cross = (h[0] * u[1] - h[1] * u[0]).abs();
+        let m = cross * self.cos - dot * self.sin;
+        let margin = 1e-9 * d2.sqrt();
+        if m < -margin {
+            true
+        } else if m > margin {
+            false
+        } else {
+            bearing(h, u) <= self.cone
+        }
+    }
+}
+
+struct Context<'a> {
+    pos: &'a [P2],
+    head: &'a [P2],
+    grid: &'a UniformGrid,
+    obstacles: Option<&'a ObstacleMap>,
+    cfg: &'a PerceptionConfig,
+    cone: FrontCone,
+}
+
+impl Context<'_> {
+    /// Is the segment from agent `i` (at `p`) to `target` (offset `t`, squared length `d2`)
+    /// touched by the capsule of a candidate closer than `d2`?
+    ///
+    /// Two division-free bounds decide most candidates; the rest go through
+    /// [`Capsule::blocks`], and both bounds keep a relative margin, so every decision is exactly
+    /// that test's. With `P = t × o` (the centre's distance from the line through the segment,
+    /// times |t|) and `S = l·|t × h_k|` (how far the body's half-length l reaches across it):
+    /// - reject if `|P| − S > r·|t|`: the body segment stays more than r from the line;
+    /// - reject if the centre is more than l + r from the segment (the test's own first check);
+    /// - accept if the centre is within r of the segment (it lies on the body segment).
+    #[inline]
+    fn blocked_by_closer(&self, p: P2, target: P2, t: P2, d2: f64, cand: &[Cand]) -> bool {
+        let (l, r) = (self.cfg.capsule.half_length, self.cfg.capsule.radius);
+        let reach2 = (l + r) * (l + r) * (1.0 + 1e-6) + 1e-12;
+        let r2_in = r * r * (1.0 - 1e-6) - 1e-12;
+        let band = r * d2.sqrt() * (1.0 + 1e-6) + 1e-12;
+        cand.iter().take_while(|c| c.d2 < d2).any(|c| {
+            let perp = (t[0] * c.o[1] - t[1] * c.o[0]).abs();
+            let across = l * (t[0] * c.h[1] - t[1] * c.h[0]).abs();
+            if perp - across > band {
+                return false;
             }
+            let along = c.o[0] * t[0] + c.o[1] * t[1];
+            // Squared distance of the centre from the segment, times d2 (a closer candidate
+            // projects inside the segment when `along` > 0).
+            let dist2_d2 = if along <= 0.0 {
+                c.d2 * d2
+            } else {
+                c.d2 * d2 - along * along
+            };
+            if dist2_d2 > reach2 * d2 {
+                false
+            } else if dist2_d2 < r2_in * d2 {
+                true
+            } else {
+                self.cfg
+                    .capsule
+                    .blocks(p, target, self.pos[c.j as usize], c.h)
+            }
+        })
+    }
+}
+
+fn view_of(i: usize, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) {
+    let (pos, cfg) = (ctx.pos, ctx.cfg);
+    let p = pos[i];
+    let h = ctx.head[i];
+    let r2 = cfg.radius * cfg.radius;
+    // In-range candidates sorted by distance (ties by index: deterministic). d2 > 0, so its
+    // bit pattern orders like the value.
+    let keys = &mut sc.keys;
+    keys.clear();
+    ctx.grid.for_each_candidate(p, cfg.radius, |j| {
+        let d2 = (pos[j][0] - p[0]).powi(2) + (pos[j][1] - p[1]).powi(2);
+        // Coincident agents have no bearing: they are not perceived.
+        if d2 < r2 && d2 > 1e-18 && j != i {
+            keys.push((d2.to_bits(), j as u32));
         }
     });
-    cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    let in_range = cand.len() as u32 + 1;
-    let blocked_by_closer = |target: P2, d2: f64| -> bool {
-        cand.iter().take_while(|c| c.0 < d2).any(|&(_, k)| {
-            cfg.capsule
-                .blocks(p, target, pos[k as usize], head[k as usize])
-        })
-    };
-    let mut neighbours = Vec::with_capacity(cand.len().min(cfg.max_neighbours));
-    let mut front = 0u32;
-    for &(d2, j) in &cand {
+    keys.sort_unstable();
+    sc.cand.clear();
+    sc.cand.extend(keys.iter().map(|&(b, j)| {
         let q = pos[j as usize];
+        Cand {
+            d2: f64::from_bits(b),
+            j,
+            o: [q[0] - p[0], q[1] - p[1]],
+            h: ctx.head[j as usize],
+        }
+    }));
+    let (cand, pts) = (&sc.cand, &mut sc.pts);
+    out.in_range.push(cand.len() as u32 + 1);
+    let mut kept = 0u32;
+    let mut front = 0u32;
+    for c in cand {
+        let q = pos[c.j as usize];
         let visible = !cfg.occlusion
-            || (!blocked_by_closer(q, d2) && !obstacles.is_some_and(|o| o.segment_blocked(p, q)));
+            || (!ctx.blocked_by_closer(p, q, c.o, c.d2, cand)
+                && !ctx.obstacles.is_some_and(|o| o.segment_blocked(p, q)));
         if !visible {
             continue;
         }
-        if bearing(head[i], [q[0] - p[0], q[1] - p[1]]) <= cfg.front_cone {
+        if ctx.cone.contains(h, c.o, c.d2) {
             front += 1;
         }
-        if neighbours.len() < cfg.max_neighbours {
-            neighbours.push(j);
+        if (kept as usize) < cfg.max_neighbours {
+            out.nb.push(c.j);
+            out.nb_branch.push(branch_of(h, c.o));
+            kept += 1;
         }
     }
-    let mut obs = Vec::new();
-    if let Some(map) = obstacles {
-        let mut pts = Vec::new();
-        map.blocked_in_range(p, cfg.radius, &mut pts);
+    out.nb_len.push(kept);
+    out.front.push(front);
+    let mut kept_obs = 0u32;
+    if let Some(map) = ctx.obstacles {
+        pts.clear();
+        map.blocked_in_range(p, cfg.radius, pts);
         pts.sort_unstable_by(|a, b| {
             a.0.total_cmp(&b.0)
                 .then(a.1[0].total_cmp(&b.1[0]))
                 .then(a.1[1].total_cmp(&b.1[1]))
         });
-        for (d2, q) in pts {
-            if obs.len() >= cfg.max_obstacles {
+        for &(d2, q) in pts.iter() {
+            if kept_obs as usize >= cfg.max_obstacles {
                 break;
             }
-            let visible =
-                !cfg.occlusion || (!map.segment_blocked(p, q) && !blocked_by_closer(q, d2));
+            let t = [q[0] - p[0], q[1] - p[1]];
+            let visible = !cfg.occlusion
+                || (!map.segment_blocked(p, q) && !ctx.blocked_by_closer(p, q, t, d2, cand));
             if visible {
-                obs.push(q);
+                out.ob.push(q);
+                out.ob_branch.push(branch_of(h, t));
+                kept_obs += 1;
             }
         }
     }
-    AgentView {
-        neighbours,
-        obstacles: obs,
-        front,
-        in_range,
-    }
+    out.ob_len.push(kept_obs);
 }
 
 #[cfg(test)]
@@ -319,6 +454,45 @@ mod tests {
                     "seed {seed} occ {occ}"
                 );
                 assert_eq!(got.neighbours.len(), got.n * got.k);
+            }
+        }
+    }
+
+    /// Branch codes, front-cone counts (atan2 bearing) and densities by their definitions, on the
+    /// brute-force lists.
+    #[test]
+    fn branches_front_counts_and_density_match_definitions() {
+        for seed in 20..23 {
+            let (pos, head, map) = scene(seed, 300);
+            let c = cfg(true);
+            let got = perceive(&pos, &head, Some(&map), &c);
+            let want = brute(&pos, &head, &map, &c);
+            for (i, w) in want.iter().enumerate() {
+                let off = |j: u32| {
+                    [
+                        pos[j as usize][0] - pos[i][0],
+                        pos[j as usize][1] - pos[i][1],
+                    ]
+                };
+                let front = w
+                    .iter()
+                    .filter(|&&j| bearing(head[i], off(j)) <= c.front_cone)
+                    .count();
+                assert_eq!(got.front_count[i] as usize, front, "agent {i}");
+                for (s, &j) in w.iter().enumerate() {
+                    assert_eq!(
+                        got.neighbour_branch[i * got.k + s],
+                        branch_of(head[i], off(j))
+                    );
+                }
+                let in_range = (0..pos.len())
+                    .filter(|&j| {
+                        let d2 = (pos[j][0] - pos[i][0]).powi(2) + (pos[j][1] - pos[i][1]).powi(2);
+                        d2 < 16.0 && (j == i || d2 > 1e-18)
+                    })
+                    .count();
+                let area = std::f64::consts::PI * 16.0;
+                assert_eq!(got.density[i], in_range as f64 / area);
             }
         }
     }

@@ -5,7 +5,7 @@ use crate::backend::{cpu_device, Precision};
 use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::Result;
 use crate::herd::scenario::{bench_model, objective};
-use crate::herd::sim::{theta_tensor, Decide, HerdState};
+use crate::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState};
 use crate::progress::Progress;
 use rand::SeedableRng;
 use serde::Serialize;
@@ -32,6 +32,8 @@ pub struct BenchReport {
     pub k: usize,
     /// burn's balanced gradient checkpointing was on for the forward+backward pass.
     pub checkpointing: bool,
+    /// Which implementation computed the forces of eq. 3–5.
+    pub force_kernel: ForceKernel,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -57,20 +59,23 @@ pub fn peak_rss_mb() -> f64 {
 }
 
 /// Runs the benchmark: `steps` live simulation steps (median per step), then, unless `sim_only`,
-/// `repeats` forward + backward passes through `steps` unrolled steps (median per step).
+/// `repeats` forward + backward passes through `steps` unrolled steps (median per step), with
+/// the forces computed by `force_kernel`.
 pub fn run_bench(
     agents: usize,
     steps: usize,
     sim_only: bool,
     repeats: usize,
     checkpointing: bool,
+    force_kernel: ForceKernel,
     mut progress: impl FnMut(),
 ) -> Result<BenchReport> {
     if steps == 0 {
         return Err(crate::Error::config("steps", "must be ≥ 1"));
     }
     let device = cpu_device(Precision::F32)?;
-    let (model, init) = bench_model(agents, 1)?;
+    let (mut model, init) = bench_model(agents, 1)?;
+    model.force_kernel = force_kernel;
     let theta_v = model.params.to_vec();
     let theta = theta_tensor(&theta_v, &device);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
@@ -149,6 +154,7 @@ pub fn run_bench(
         mean_neighbours,
         k,
         checkpointing,
+        force_kernel,
     })
 }
 
@@ -164,6 +170,8 @@ pub struct BenchConfig {
     pub repeats: usize,
     /// burn's balanced gradient checkpointing in the backward pass.
     pub checkpointing: bool,
+    /// Which implementation computes the forces of eq. 3–5.
+    pub force_kernel: ForceKernel,
 }
 
 impl Default for BenchConfig {
@@ -174,6 +182,7 @@ impl Default for BenchConfig {
             sim_only: false,
             repeats: 3,
             checkpointing: false,
+            force_kernel: ForceKernel::Fused,
         }
     }
 }
@@ -206,6 +215,7 @@ pub fn run(cfg: &BenchConfig, json: &Path, progress: &mut dyn Progress) -> Resul
         cfg.sim_only,
         cfg.repeats,
         cfg.checkpointing,
+        cfg.force_kernel,
         || progress.inc(1),
     )?;
     progress.finish();

@@ -27,6 +27,7 @@ pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
             guidance: Guidance::None,
         },
         dt: 1.0 / clip.meta.fps,
+        force_kernel: crate::herd::sim::ForceKernel::default(),
     }
 }
 

@@ -44,6 +44,7 @@ pub fn default_scenario(params: Params, agents: usize, seed: u64) -> Result<Scen
             params,
             world,
             dt: 1.0 / 25.0,
+            force_kernel: crate::herd::sim::ForceKernel::default(),
         },
         init,
     })
@@ -82,6 +83,7 @@ pub fn bench_model(
             params,
             world,
             dt: 1.0 / 25.0,
+            force_kernel: crate::herd::sim::ForceKernel::default(),
         },
         init,
     ))

@@ -164,6 +164,7 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
         params,
         world,
         dt: 1.0 / cfg.fps,
+        force_kernel: crate::herd::sim::ForceKernel::default(),
     };
     let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
     let theta = theta_tensor(&model.params.to_vec(), &device);

@@ -108,6 +108,7 @@ pub fn synthesise(
         params: cfg.params.clone(),
         world,
         dt: 1.0 / cfg.fps,
+        force_kernel: crate::herd::sim::ForceKernel::default(),
     };
     let theta = theta_tensor(&model.params.to_vec(), device);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005e_ed0f_5eed);

@@ -4,6 +4,7 @@ use crate::cli::args::with_flags;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::bench::{run, BenchConfig};
+use crate::herd::sim::ForceKernel;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -23,6 +24,10 @@ pub struct BenchArgs {
     /// checkpointing): less memory for long windows, more time.
     #[arg(long)]
     pub checkpointing: bool,
+    /// Compute the forces with the tensor-op reference implementation instead of the fused op
+    /// (the same values to round-off; slower).
+    #[arg(long)]
+    pub reference_forces: bool,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: PathBuf,
@@ -35,6 +40,7 @@ pub fn exec(a: BenchArgs) -> Result<()> {
         sim_only: a.sim_only,
         repeats: a.repeats,
         checkpointing: a.checkpointing,
+        force_kernel: ForceKernel::reference_if(a.reference_forces),
     };
     let r = run(&cfg, &a.json, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     println!("{r}");

@@ -56,6 +56,10 @@ pub struct FitArgs {
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
+    /// Compute the forces with the tensor-op reference implementation instead of the fused op
+    /// (the same values to round-off; slower).
+    #[arg(long)]
+    pub reference_forces: bool,
     /// Iterations settling each epoch's starting herd into the model's spacing (0: none).
     #[arg(long, value_name = "N", default_value_t = Settle::default().iterations)]
     pub settle: usize,
@@ -111,6 +115,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             settle: Settle::with_iterations(a.settle),
             replicas: a.replicas,
             guidance_scale: a.guidance_scale,
+            force_kernel: crate::herd::sim::ForceKernel::reference_if(a.reference_forces),
         },
         eval_seeds: a.eval_seeds,
         checkpoint: a.checkpoint,

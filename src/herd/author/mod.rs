@@ -245,6 +245,7 @@ pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result
             },
         },
         dt: 1.0 / f.fps,
+        force_kernel: crate::herd::sim::ForceKernel::default(),
     };
     let sets: Vec<[f64; N_PARAMS]> = scene.params.iter().map(|p| p.to_vec()).collect();
     let region: Vec<usize> = rows.iter().map(|r| scene.region_at([r.x, r.y])).collect();

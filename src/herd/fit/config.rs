@@ -52,6 +52,13 @@ pub struct FitConfig {
     /// ([`crate::herd::guidance::guidance_field`]).
     #[serde(default = "default_guidance_scale")]
     pub guidance_scale: f64,
+    /// How the forces of eq. 3–5 are computed in the training loop (the fused op by default; not
+    /// written when it is the default, so checkpoints keep their bytes).
+    #[serde(
+        default,
+        skip_serializing_if = "crate::herd::sim::ForceKernel::is_fused"
+    )]
+    pub force_kernel: crate::herd::sim::ForceKernel,
 }
 
 fn default_guidance_scale() -> f64 {
@@ -105,6 +112,7 @@ impl Default for FitConfig {
             settle: Settle::default(),
             replicas: 1,
             guidance_scale: GUIDANCE_SCALE,
+            force_kernel: crate::herd::sim::ForceKernel::Fused,
         }
     }
 }

@@ -299,6 +299,7 @@ impl<'a> FitRun<'a> {
         let mut speed_params = self.params.clone();
         speed_params.speed = SpeedModel::of_clip(clip, &self.init.speed);
         let mut model = clip_model(speed_params.with_vec(&learnt.theta), clip);
+        model.force_kernel = cfg.force_kernel;
         let mut herds = self.start_herds(&model, clip, a, rng)?;
         let mut f = a;
         while f + 1 < b {

@@ -3,18 +3,23 @@
 //! One step k → k+1 is a pipeline of named stages:
 //! 1. [`Model::decide`] — perception, roles and OU noise, **no gradient** (kernels crate). The
 //!    result, [`StepDecisions`], can be recorded and replayed ([`Recording`]).
-//! 2. [`Model::forces`] — the Gaussian-weighted forces of eq. 3–5 as tensor ops over padded
-//!    neighbour lists, so gradients flow to the 12 parameters.
+//! 2. [`Model::forces`] — the Gaussian-weighted forces of eq. 3–5, by one fused operation with a
+//!    hand-written backward ([`fused_forces`], ndarray backend) or as tensor ops over the padded
+//!    neighbour lists ([`Model::reference_forces`]); either way gradients flow to the 12
+//!    parameters.
 //! 3. [`Model::step`] — the direction update of eq. 2, the OU speed of eq. 6 and the position
 //!    update.
 //!
 //! [`Model::rollout`] unrolls T steps; on an autodiff device the final state carries the gradient
 //! of the whole unrolled run.
 
+mod fused;
 mod herd;
+mod reference;
 mod rollout;
 mod world;
 
+pub use fused::{fused_forces, ForceKernel};
 pub use herd::{random_herd, HerdSpec};
 pub use rollout::{Decide, Guided, StepHooks};
 pub use world::{obstacle_map, Guidance, World};
@@ -23,10 +28,8 @@ use crate::data::agents::AgentRow;
 use crate::data::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::herd::params::{Constants, Params, N_PARAMS};
-use burn::tensor::{Device, Int, Tensor, TensorData};
-use herdfit_kernels::{
-    perceive, Capsule, Perception, PerceptionConfig, BRANCH_BEHIND, BRANCH_RIGHT, P2,
-};
+use burn::tensor::{Device, Tensor, TensorData};
+use herdfit_kernels::{perceive, Capsule, Perception, PerceptionConfig, P2};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
@@ -229,6 +232,9 @@ pub struct ForceTensors {
     pub gamma: [Tensor<2>; 4],
     /// `[n, 1]` tensors: one parameter set per agent (authoring with behaviour regions).
     pub per_agent: bool,
+    /// The same values packed for the fused op: `[1, 12]` (or `[n, 12]` per agent) as
+    /// `[w_C, w_V, w_A, w_O, α_C, …, α_O, γ_C, …, γ_O]` ([`herdfit_kernels::Coefficients`]).
+    pub coef: Tensor<2>,
 }
 
 impl ForceTensors {
@@ -245,11 +251,20 @@ impl ForceTensors {
             |i: usize, scale2: f64| at(i).square().mul_scalar(scale2).recip().mul_scalar(-0.5);
         let alpha = std::array::from_fn(|g| inv(3 * g + 1, r2));
         let gamma = std::array::from_fn(|g| inv(3 * g + 2, pi2));
+        let coef = Tensor::cat(
+            w.iter()
+                .chain(&alpha)
+                .chain(&gamma)
+                .cloned()
+                .collect::<Vec<_>>(),
+            1,
+        );
         ForceTensors {
             w,
             alpha,
             gamma,
             per_agent: false,
+            coef,
         }
     }
 
@@ -263,11 +278,21 @@ impl ForceTensors {
         let w = std::array::from_fn(|g| col(&|t| t[3 * g] * c.sensitivity));
         let alpha = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 1] * r).powi(2)));
         let gamma = std::array::from_fn(|g| col(&|t| -0.5 / (t[3 * g + 2] * pi).powi(2)));
+        let coef = thetas
+            .iter()
+            .flat_map(|t| {
+                let w = (0..4).map(|g| t[3 * g] * c.sensitivity);
+                let a = (0..4).map(|g| -0.5 / (t[3 * g + 1] * r).powi(2));
+                let y = (0..4).map(|g| -0.5 / (t[3 * g + 2] * pi).powi(2));
+                w.chain(a).chain(y).collect::<Vec<_>>()
+            })
+            .collect();
         ForceTensors {
             w,
             alpha,
             gamma,
             per_agent: true,
+            coef: mat_tensor(coef, n, herdfit_kernels::N_COEF, device),
         }
     }
 }
@@ -284,6 +309,8 @@ pub struct Model {
     pub world: World,
     /// Time step Δt (s) = 1 / fps.
     pub dt: f64,
+    /// Fused force op (default) or the tensor-op reference ([`Model::forces`]).
+    pub force_kernel: ForceKernel,
 }
 
 impl Model {
@@ -332,130 +359,27 @@ impl Model {
         }
     }
 
-    /// Squared distances and squared bearings `[1, n·k]` of offsets `(dx, dy)` `[n, k]` seen from
-    /// headings `(hx, hy)` `[n, 1]`.
-    ///
-    /// The unsigned bearing φ ∈ [0, π] of eq. 4 uses atan2 (never acos) on the recorded branch
-    /// (side s = ±1, behind σ = −1 / ahead σ = +1, see [`herdfit_kernels::branch_of`]):
-    /// φ = [σ < 0]·π + σ·atan2(s·(h × d), σ·(h · d)). At the recorded state this equals
-    /// |atan2(h × d, h · d)|; around it, it is the smooth continuation through φ = 0 and φ = π.
-    /// `guard` (1 on padded entries) keeps atan2 away from (0, 0), whose gradient is NaN.
-    fn distances_and_bearings(
-        dx: &Tensor<2>,
-        dy: &Tensor<2>,
-        hx: &Tensor<2>,
-        hy: &Tensor<2>,
-        branch: &[u8],
-        guard: Tensor<2>,
-    ) -> (Tensor<2>, Tensor<2>) {
-        let device = dx.device();
-        let [n, k] = dx.dims();
-        let side: Vec<f64> = branch
-            .iter()
-            .map(|&b| if b & BRANCH_RIGHT != 0 { -1.0 } else { 1.0 })
-            .collect();
-        let behind: Vec<f64> = branch
-            .iter()
-            .map(|&b| if b & BRANCH_BEHIND != 0 { -1.0 } else { 1.0 })
-            .collect();
-        let offset: Vec<f64> = behind
-            .iter()
-            .map(|&s| if s < 0.0 { std::f64::consts::PI } else { 0.0 })
-            .collect();
-        let side = mat_tensor(side, n, k, &device);
-        let behind = mat_tensor(behind, n, k, &device);
-        let offset = mat_tensor(offset, n, k, &device);
-        let d2 = (dx.clone().square() + dy.clone().square()).reshape([1, n * k]);
-        let dot = (hx.clone() * dx.clone() + hy.clone() * dy.clone()) * behind.clone() + guard;
-        let cross = (hx.clone() * dy.clone() - hy.clone() * dx.clone()) * side;
-        let phi = cross.atan2(dot) * behind + offset;
-        (d2, phi.square().reshape([1, n * k]))
-    }
-
-    /// `Ω·W_F·WR_F·WA_F` (eq. 3–4) for force `g` on `[1, n·k]` pair tensors, zero on padding.
-    fn pair_weight(
-        f: &ForceTensors,
-        g: usize,
-        d2: &Tensor<2>,
-        phi2: &Tensor<2>,
-        mask: &Tensor<2>,
-        n: usize,
-    ) -> Tensor<2> {
-        if f.per_agent {
-            let k = d2.dims()[1] / n.max(1);
-            let d2 = d2.clone().reshape([n, k]);
-            let phi2 = phi2.clone().reshape([n, k]);
-            ((d2 * f.alpha[g].clone() + phi2 * f.gamma[g].clone()).exp()
-                * f.w[g].clone()
-                * mask.clone().reshape([n, k]))
-            .reshape([1, n * k])
-        } else {
-            (d2.clone() * f.alpha[g].clone() + phi2.clone() * f.gamma[g].clone()).exp()
-                * f.w[g].clone()
-                * mask.clone()
-        }
-    }
-
     /// Stage 2: the total force F_i of eq. 3 with the components of eq. 5 and the Gaussian
     /// weights of eq. 4, as `[n, 1]` tensors (x and y).
     ///
     /// FC = Σ WR·WA·(p_j − p_i), FV = −Σ WR·WA·(p_j − p_i), FA = Σ WR·WA·d_j,
     /// FO = −Σ_o WR·WA·(q_o − p_i); F = Ω (W_C FC + W_V FV + W_A FA + W_O FO).
+    ///
+    /// With [`ForceKernel::Fused`] on the ndarray backend this is one operation with a
+    /// hand-written backward ([`fused_forces`]); otherwise the tensor ops of
+    /// [`Model::reference_forces`].
     pub fn forces(
         &self,
         f: &ForceTensors,
         s: &HerdState,
         dec: &StepDecisions,
     ) -> (Tensor<2>, Tensor<2>) {
-        let device = s.x.device();
-        let p = &dec.perception;
-        let (n, k) = (p.n, p.k);
-        let idx: Vec<i64> = p.neighbours.iter().map(|&j| j as i64).collect();
-        let idx = Tensor::<1, Int>::from_data(TensorData::new(idx, [n * k]), &device);
-        let maskv: Vec<f64> = p.neighbour_mask.iter().map(|&b| b as f64).collect();
-        let guard = mat_tensor(maskv.iter().map(|m| 1.0 - m).collect(), n, k, &device);
-        let mask = mat_tensor(maskv, 1, n * k, &device);
-        let xi = s.x.clone().reshape([n, 1]);
-        let yi = s.y.clone().reshape([n, 1]);
-        let hxi = s.hx.clone().reshape([n, 1]);
-        let hyi = s.hy.clone().reshape([n, 1]);
-        let gather = |t: &Tensor<1>| t.clone().gather(0, idx.clone()).reshape([n, k]);
-        let dx = gather(&s.x) - xi.clone();
-        let dy = gather(&s.y) - yi.clone();
-        let (d2, phi2) =
-            Self::distances_and_bearings(&dx, &dy, &hxi, &hyi, &p.neighbour_branch, guard);
-        let cc = Self::pair_weight(f, 0, &d2, &phi2, &mask, n);
-        let cv = Self::pair_weight(f, 1, &d2, &phi2, &mask, n);
-        let ca = Self::pair_weight(f, 2, &d2, &phi2, &mask, n).reshape([n, k]);
-        let cp = (cc - cv).reshape([n, k]);
-        let mut fx = (cp.clone() * dx + ca.clone() * gather(&s.hx)).sum_dim(1);
-        let mut fy = (cp * dy + ca * gather(&s.hy)).sum_dim(1);
-        if p.obstacle_mask.contains(&1) {
-            let ko = p.ko;
-            let om: Vec<f64> = p.obstacle_mask.iter().map(|&b| b as f64).collect();
-            let oguard = mat_tensor(om.iter().map(|m| 1.0 - m).collect(), n, ko, &device);
-            let omask = mat_tensor(om, 1, n * ko, &device);
-            let ox = mat_tensor(
-                p.obstacle_points.iter().map(|q| q[0]).collect(),
-                n,
-                ko,
-                &device,
-            );
-            let oy = mat_tensor(
-                p.obstacle_points.iter().map(|q| q[1]).collect(),
-                n,
-                ko,
-                &device,
-            );
-            let dox = ox - xi;
-            let doy = oy - yi;
-            let (d2o, phi2o) =
-                Self::distances_and_bearings(&dox, &doy, &hxi, &hyi, &p.obstacle_branch, oguard);
-            let co = Self::pair_weight(f, 3, &d2o, &phi2o, &omask, n).reshape([n, ko]);
-            fx = fx - (co.clone() * dox).sum_dim(1);
-            fy = fy - (co * doy).sum_dim(1);
+        if self.force_kernel == ForceKernel::Fused {
+            if let Some(out) = fused_forces(f, s, dec) {
+                return out;
+            }
         }
-        (fx, fy)
+        Self::reference_forces(f, s, dec)
     }
 
     /// New speeds by the OU process of eq. 6, v' = v − θ(v − v_μ(ρ_i))Δt + v_σ√Δt ξ, with v_μ(ρ)

@@ -1,0 +1,229 @@
+//! The fused force operation: eq. 3–5 of the herd model as **one** burn operation with a
+//! hand-written backward (DESIGN §9), computed by [`herdfit_kernels::forces_forward`] /
+//! [`herdfit_kernels::forces_backward`] over compact pair lists.
+//!
+//! The tensor-op path of [`super::Model::forces`] builds ≈ 60 small `[N, K]` operations per step,
+//! each with its own allocation and autodiff node; this op replaces them with one node whose
+//! backward recomputes the pair terms from the saved inputs (positions, headings, coefficients).
+//!
+//! How it reaches burn's autodiff (ARCHITECTURE.md, "Departures"): the project's tensors are
+//! backend-erased (`Tensor<D>` on a runtime `Device`). burn 0.22's `extension` feature lets a
+//! caller downcast such a tensor to the primitive of a concrete backend
+//! (`Tensor::try_into_primitive::<Autodiff<NdArray, C>>()`), register a step that implements
+//! burn-autodiff's `Backward` trait, and wrap the result back (`Tensor::from_primitive`). The op
+//! is therefore available on the ndarray backend (with or without autodiff, with either
+//! checkpointing strategy); on any other backend [`fused_forces`] returns `None` and the caller
+//! uses the tensor-op reference.
+
+// The design card fixes burn's ndarray backend, which burn 0.22 marks deprecated (as in
+// `backend.rs`).
+#![allow(deprecated)]
+
+use super::{ForceTensors, HerdState, StepDecisions};
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::{
+    BalancedCheckpointing, CheckpointStrategy, NoCheckpointing,
+};
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::ops::FloatTensorOps;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Autodiff, DispatchKindConversion, DispatchTensor, NdArray, TensorMetadata};
+use burn::tensor::{read_sync, DType, Tensor, TensorData};
+use herdfit_kernels::{
+    forces_backward, forces_forward, AgentsRef, Coefficients, PairLists, N_COEF,
+};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// Which implementation computes the forces of eq. 3–5.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ForceKernel {
+    /// The fused operation where the backend supports it (ndarray), the tensor ops elsewhere.
+    #[default]
+    Fused,
+    /// Always the tensor-op reference implementation.
+    Reference,
+}
+
+impl ForceKernel {
+    /// [`ForceKernel::Reference`] when `reference` is set, else the default.
+    pub fn reference_if(reference: bool) -> Self {
+        if reference {
+            ForceKernel::Reference
+        } else {
+            ForceKernel::Fused
+        }
+    }
+
+    /// The default, [`ForceKernel::Fused`].
+    pub fn is_fused(&self) -> bool {
+        *self == ForceKernel::Fused
+    }
+}
+
+type NdDevice = <NdArray as burn::backend::BackendTypes>::Device;
+
+fn read(t: FloatTensor<NdArray>) -> Vec<f64> {
+    let data = read_sync(NdArray::float_into_data(t)).expect("ndarray tensors are always readable");
+    data.try_into_vec_as::<f64>()
+        .expect("float tensors convert to f64")
+}
+
+fn upload(v: Vec<f64>, shape: Vec<usize>, dtype: DType) -> FloatTensor<NdArray> {
+    NdArray::float_from_data(
+        TensorData::new(v, shape).convert_dtype(dtype),
+        &NdDevice::default(),
+    )
+}
+
+/// Inputs saved for the backward pass (plain values, f64).
+#[derive(Debug)]
+struct Saved {
+    lists: PairLists,
+    x: Vec<f64>,
+    y: Vec<f64>,
+    hx: Vec<f64>,
+    hy: Vec<f64>,
+    coef: Vec<f64>,
+    coef_rows: usize,
+    dtype: DType,
+}
+
+impl Saved {
+    fn agents(&self) -> AgentsRef<'_> {
+        AgentsRef {
+            x: &self.x,
+            y: &self.y,
+            hx: &self.hx,
+            hy: &self.hy,
+        }
+    }
+
+    fn forward(&self) -> Vec<f64> {
+        let mut out = vec![0.0; 2 * self.lists.n];
+        forces_forward(
+            &self.lists,
+            self.agents(),
+            Coefficients(&self.coef),
+            &mut out,
+        );
+        out
+    }
+}
+
+/// The backward step of the fused op; parents: x, y, hx, hy (`[n]`) and the coefficients
+/// (`[1, 12]` or `[n, 12]`); output `[n, 2]` = (F_x, F_y).
+#[derive(Debug)]
+struct FusedForcesBackward;
+
+impl Backward<NdArray, 5> for FusedForcesBackward {
+    type State = Arc<Saved>;
+
+    fn backward(self, ops: Ops<Self::State, 5>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let s = ops.state;
+        let up = read(grads.consume::<NdArray>(&ops.node));
+        let g = forces_backward(&s.lists, s.agents(), Coefficients(&s.coef), &up);
+        let n = s.lists.n;
+        let values = [g.x, g.y, g.hx, g.hy, g.coef];
+        let shapes = [
+            vec![n],
+            vec![n],
+            vec![n],
+            vec![n],
+            vec![s.coef_rows, N_COEF],
+        ];
+        for ((parent, v), shape) in ops.parents.iter().zip(values).zip(shapes) {
+            if let Some(node) = parent {
+                grads.register::<NdArray>(node.id, upload(v, shape, s.dtype));
+            }
+        }
+    }
+}
+
+fn saved(values: [Vec<f64>; 5], coef_rows: usize, dtype: DType, dec: &StepDecisions) -> Saved {
+    let [x, y, hx, hy, coef] = values;
+    Saved {
+        lists: PairLists::from_perception(&dec.perception),
+        x,
+        y,
+        hx,
+        hy,
+        coef,
+        coef_rows,
+        dtype,
+    }
+}
+
+/// The five inputs of the op in parent order — x, y, hx, hy (`[n]`) and the coefficients
+/// (`[1, 12]` or `[n, 12]`) — as primitives of backend `B`, or `None` if they live elsewhere.
+fn primitives<B: burn::backend::Backend>(
+    f: &ForceTensors,
+    s: &HerdState,
+) -> Option<[FloatTensor<B>; 5]>
+where
+    DispatchTensor: DispatchKindConversion<B>,
+{
+    let one = |t: &Tensor<1>| t.clone().try_into_primitive::<B>().ok();
+    Some([
+        one(&s.x)?,
+        one(&s.y)?,
+        one(&s.hx)?,
+        one(&s.hy)?,
+        f.coef.clone().try_into_primitive::<B>().ok()?,
+    ])
+}
+
+/// On an autodiff device with checkpointing strategy `C`: the op with its backward step.
+fn on_autodiff<C: CheckpointStrategy>(
+    f: &ForceTensors,
+    s: &HerdState,
+    dec: &StepDecisions,
+) -> Option<Tensor<2>>
+where
+    DispatchTensor: DispatchKindConversion<Autodiff<NdArray, C>>,
+{
+    let prims = primitives::<Autodiff<NdArray, C>>(f, s)?;
+    let dtype = prims[0].primitive().dtype();
+    let coef_rows = prims[4].primitive().shape()[0];
+    let values = prims.each_ref().map(|p| read(p.primitive().clone()));
+    let state = saved(values, coef_rows, dtype, dec);
+    let out = upload(state.forward(), vec![state.lists.n, 2], dtype);
+    let nodes = prims.each_ref().map(|p| p.node());
+    let out = match FusedForcesBackward
+        .prepare::<C>(nodes)
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(prep) => prep.finish(Arc::new(state), out),
+        OpsKind::UnTracked(prep) => prep.finish(out),
+    };
+    Some(Tensor::from_primitive::<Autodiff<NdArray, C>>(out))
+}
+
+/// On a plain ndarray device: the forward pass only.
+fn on_ndarray(f: &ForceTensors, s: &HerdState, dec: &StepDecisions) -> Option<Tensor<2>> {
+    let prims = primitives::<NdArray>(f, s)?;
+    let dtype = prims[0].dtype();
+    let coef_rows = prims[4].shape()[0];
+    let state = saved(prims.map(read), coef_rows, dtype, dec);
+    let out = upload(state.forward(), vec![state.lists.n, 2], dtype);
+    Some(Tensor::from_primitive::<NdArray>(out))
+}
+
+/// The forces of eq. 3–5 by the fused op, as `[n, 1]` tensors (x and y), or `None` where the
+/// tensors do not live on the ndarray backend.
+pub fn fused_forces(
+    f: &ForceTensors,
+    s: &HerdState,
+    dec: &StepDecisions,
+) -> Option<(Tensor<2>, Tensor<2>)> {
+    let out = if s.x.device().is_autodiff() {
+        on_autodiff::<NoCheckpointing>(f, s, dec)
+            .or_else(|| on_autodiff::<BalancedCheckpointing>(f, s, dec))?
+    } else {
+        on_ndarray(f, s, dec)?
+    };
+    Some((out.clone().narrow(1, 0, 1), out.narrow(1, 1, 1)))
+}
