@@ -11,6 +11,7 @@ pub mod cli;
 pub mod data;
 pub mod error;
 pub mod fields;
+pub mod flock;
 pub mod io;
 pub mod metrics;
 pub mod params;

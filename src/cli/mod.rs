@@ -17,6 +17,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use std::path::PathBuf;
 
+pub mod commands {
+    pub mod flock;
+}
+
 /// Learn how animal groups move from video and replay that behaviour anywhere.
 #[derive(Parser, Debug)]
 #[command(name = "herdfit", version, about)]
@@ -51,6 +55,9 @@ pub enum Command {
     /// The built-in walk-through: a synthetic herd rendered to video, extracted, fitted on the first
     /// half from a generic start, validated on the second half; prints a summary.
     Demo(DemoArgs),
+    /// Line-formation flocks (V, U, J, line) from a marked example: synth, extract, animate.
+    #[command(subcommand)]
+    Flock(commands::flock::FlockCommand),
 }
 
 #[derive(Args, Debug)]
@@ -543,6 +550,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::ImportReference(a) => import_cmd(a),
         Command::FieldsInfo(a) => fields_info(a),
         Command::Demo(a) => demo(a),
+        Command::Flock(c) => commands::flock::run(c),
     }
 }
 
@@ -890,6 +898,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         report_dir.join("report.md").display(),
         t0.elapsed().as_secs_f64()
     );
+    println!("{}", crate::flock::demo(&a.out, &mut Bars::default())?);
     Ok(())
 }
 
