@@ -102,14 +102,26 @@ fn key_shape(c: &mut Criterion) {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let k = steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng);
     let x: Vec<f64> = k.pos.iter().map(|p| p[0]).collect();
-    let y0: Vec<f64> = s.first.pos.iter().map(|p| p[1] - s.first.pos[0][1]).collect();
+    let y0: Vec<f64> = s
+        .first
+        .pos
+        .iter()
+        .map(|p| p[1] - s.first.pos[0][1])
+        .collect();
     let lm = LevenbergMarquardt::new()
         .with_ftol(1e-15)
         .with_xtol(1e-15)
         .with_gtol(1e-15)
         .with_patience(400);
     g.bench_function("one_solve_analytic", |b| {
-        b.iter(|| lm.minimize(PositionProblem::new(x.clone(), k.xi_target.clone(), 0, y0.clone())))
+        b.iter(|| {
+            lm.minimize(PositionProblem::new(
+                x.clone(),
+                k.xi_target.clone(),
+                0,
+                y0.clone(),
+            ))
+        })
     });
     g.bench_function("one_solve_finite_differences", |b| {
         b.iter(|| {
@@ -124,7 +136,9 @@ fn key_shape(c: &mut Criterion) {
     g.finish();
     let pos: Vec<[f64; 2]> = k.pos.clone();
     let mut g = c.benchmark_group("flock_savings");
-    g.bench_function("e_i_40_birds", |b| b.iter(|| power::savings_unchecked(&pos)));
+    g.bench_function("e_i_40_birds", |b| {
+        b.iter(|| power::savings_unchecked(&pos))
+    });
     g.finish();
 }
 

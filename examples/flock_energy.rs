@@ -41,7 +41,10 @@ fn wts_for(n: usize, want: f64) -> f64 {
 
 fn main() {
     println!("induced-power saving (%) of a 30° V, Hummel 1983 horseshoe model (C = 1)");
-    println!("{:>4} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8}", "N", "WTS/b", "mean", "leader", "2nd", "middle", "tip");
+    println!(
+        "{:>4} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8}",
+        "N", "WTS/b", "mean", "leader", "2nd", "middle", "tip"
+    );
     for n in [9usize, 15, 25, 41] {
         for wts in [-0.15, -0.1, -0.05, 0.0, 0.1, 0.2, 0.5, 1.0] {
             let e = power::savings(&v(n, wts)).unwrap();
@@ -67,5 +70,9 @@ fn main() {
     }
     let pair = power::g(1.0, 1e9);
     println!();
-    println!("one bird far behind one other at WTS = 0: {:.1} %; abreast: {:.1} %", 100.0 * pair, 100.0 * power::g(1.0, 0.0));
+    println!(
+        "one bird far behind one other at WTS = 0: {:.1} %; abreast: {:.1} %",
+        100.0 * pair,
+        100.0 * power::g(1.0, 0.0)
+    );
 }

@@ -156,10 +156,7 @@ fn hand_over(delta: f64, w: f64, t: f64, big_t: f64) -> (f64, f64) {
     let h1 = s - 6.0 * s.powi(3) + 8.0 * s.powi(4) - 3.0 * s.powi(5);
     let d0 = (-30.0 * s.powi(2) + 60.0 * s.powi(3) - 30.0 * s.powi(4)) / big_t;
     let d1 = (1.0 - 18.0 * s.powi(2) + 32.0 * s.powi(3) - 15.0 * s.powi(4)) / big_t;
-    (
-        delta * h0 + w * big_t * h1,
-        delta * d0 + w * big_t * d1,
-    )
+    (delta * h0 + w * big_t * h1, delta * d0 + w * big_t * d1)
 }
 
 /// Key shapes until the timeline covers `duration` seconds.
@@ -176,8 +173,16 @@ fn build_keys(
 ) -> (Vec<KeyShape>, Timeline) {
     let means: Vec<f64> = params.frames.iter().map(|f| f.mean_gap).collect();
     let gap_range = [
-        means.iter().cloned().fold(f64::INFINITY, f64::min).max(cfg.min_gap),
-        means.iter().cloned().fold(f64::NEG_INFINITY, f64::max).max(cfg.min_gap),
+        means
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min)
+            .max(cfg.min_gap),
+        means
+            .iter()
+            .cloned()
+            .fold(f64::NEG_INFINITY, f64::max)
+            .max(cfg.min_gap),
     ];
     let mut keys = vec![first];
     let estimate = (duration / cfg.key_interval).ceil() as u64 + 1;
@@ -267,12 +272,19 @@ fn assign_slots(run: &InitiationRun, target: &Target) -> Vec<usize> {
 }
 
 /// Computes the animation (no files).
-pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress: &mut dyn Progress) -> Result<Animation> {
+pub fn animate(
+    params: &ShapeParams,
+    source: &str,
+    cfg: &AnimateConfig,
+    progress: &mut dyn Progress,
+) -> Result<Animation> {
     cfg.check()?;
     params.check()?;
     let n = cfg.birds.unwrap_or(params.birds);
     if n < 3 {
-        return Err(Error::invalid(format!("birds = {n}: a formation needs at least 3")));
+        return Err(Error::invalid(format!(
+            "birds = {n}: a formation needs at least 3"
+        )));
     }
     let wingspan_m = cfg.wingspan_m.unwrap_or(if params.units == Units::Metres {
         params.wingspan
@@ -287,7 +299,15 @@ pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress
     let first = steady::first_key(&init.shapes[0])?;
     let steady_s = (cfg.frames - 1) as f64 / fps;
     let (keys, timeline) = build_keys(
-        first, init.nl, init.nr, &range, params, steady_s, &cfg.steady, &mut rng, progress,
+        first,
+        init.nl,
+        init.nr,
+        &range,
+        params,
+        steady_s,
+        &cfg.steady,
+        &mut rng,
+        progress,
     );
     let target = Target {
         pos: timeline.keys[0].clone(),
@@ -295,7 +315,8 @@ pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress
         nr: init.nr,
     };
     let run = initiate(&target, n, cfg, &mut rng, progress)?;
-    let jitter = Normal::new(0.0, cfg.altitude_jitter).map_err(|e| Error::Internal(e.to_string()))?;
+    let jitter =
+        Normal::new(0.0, cfg.altitude_jitter).map_err(|e| Error::Internal(e.to_string()))?;
     let z: Vec<f64> = (0..n)
         .map(|_| cfg.altitude_m + wingspan_m * jitter.sample(&mut rng))
         .collect();
@@ -346,7 +367,10 @@ pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress
     let wmax = w.iter().map(|d| d[0].hypot(d[1])).fold(0.0, f64::max);
     let a = cfg.steady.max_accel;
     let hand_s = if run.is_some() {
-        (steady::MIN_JERK_PEAK * dmax / a).sqrt().max(6.0 * wmax / a).max(1.0)
+        (steady::MIN_JERK_PEAK * dmax / a)
+            .sqrt()
+            .max(6.0 * wmax / a)
+            .max(1.0)
     } else {
         0.0
     };
@@ -359,7 +383,10 @@ pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress
         for i in 0..n {
             let (hx, dhx) = hand_over(delta[i][0], w[i][0], t, hand_s);
             let (hy, dhy) = hand_over(delta[i][1], w[i][1], t, hand_s);
-            p[i] = [origin[0] + rel[i][0] + hx, origin[1] + v * t + rel[i][1] + hy];
+            p[i] = [
+                origin[0] + rel[i][0] + hx,
+                origin[1] + v * t + rel[i][1] + hy,
+            ];
             vv[i] = [relv[i][0] + dhx, v + relv[i][1] + dhy];
         }
         headings.push(
@@ -382,7 +409,9 @@ pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress
     let mut counted = 0usize;
     for (f, (p, vv)) in frames.iter().zip(&vels).enumerate() {
         let time = f as f64 / fps;
-        let leader = (0..n).max_by(|&a, &b| p[a][1].total_cmp(&p[b][1])).unwrap_or(0);
+        let leader = (0..n)
+            .max_by(|&a, &b| p[a][1].total_cmp(&p[b][1]))
+            .unwrap_or(0);
         for i in 0..n {
             rows.push(TrackRow {
                 frame: f as u64,
@@ -409,8 +438,10 @@ pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress
         let mut m: f64 = 0.0;
         for f in from.max(1)..to.min(frames.len().saturating_sub(1)) {
             for i in 0..n {
-                let ax = (frames[f + 1][i][0] - 2.0 * frames[f][i][0] + frames[f - 1][i][0]) * fps * fps;
-                let ay = (frames[f + 1][i][1] - 2.0 * frames[f][i][1] + frames[f - 1][i][1]) * fps * fps;
+                let ax =
+                    (frames[f + 1][i][0] - 2.0 * frames[f][i][0] + frames[f - 1][i][0]) * fps * fps;
+                let ay =
+                    (frames[f + 1][i][1] - 2.0 * frames[f][i][1] + frames[f - 1][i][1]) * fps * fps;
                 m = m.max(ax.hypot(ay));
             }
         }
@@ -418,7 +449,11 @@ pub fn animate(params: &ShapeParams, source: &str, cfg: &AnimateConfig, progress
     };
     let hand_frames = init_frames + (hand_s * fps).ceil() as usize;
     let max_accel_steady = accel(hand_frames + 1, frames.len());
-    let max_accel_hand_over = if run.is_some() { accel(init_frames + 1, hand_frames + 1) } else { 0.0 };
+    let max_accel_hand_over = if run.is_some() {
+        accel(init_frames + 1, hand_frames + 1)
+    } else {
+        0.0
+    };
     let mut meta = TracksMeta::new(Units::Metres, fps, 3);
     meta.provenance = serde_json::json!({
         "generator": "herdfit flock animate",
@@ -475,7 +510,12 @@ pub fn savings_csv(rows: &[(u64, f64, u64, f64, f64)]) -> String {
 /// Reads `shape` (a `herdfit.flock-shape/1` file), animates it and writes the folder `out`
 /// (all-or-nothing): `tracks.csv`/`tracks.json`, `savings.csv`/`savings.json`, `report.json`,
 /// `shapes.png`, `savings.png` and, with the `video` feature and `video`, `flock.avi`.
-pub fn animate_file(shape: &Path, out: &Path, cfg: &AnimateConfig, progress: &mut dyn Progress) -> Result<AnimationReport> {
+pub fn animate_file(
+    shape: &Path,
+    out: &Path,
+    cfg: &AnimateConfig,
+    progress: &mut dyn Progress,
+) -> Result<AnimationReport> {
     let params = ShapeParams::load(shape)?;
     let anim = animate(&params, &shape.display().to_string(), cfg, progress)?;
     write_outputs(&anim, out, progress)?;
@@ -498,8 +538,16 @@ pub fn write_outputs(anim: &Animation, out: &Path, progress: &mut dyn Progress) 
         },
         "frames": "steady flight only (the model assumes steady formation flight)",
     });
-    dir.write("savings.json", format!("{}\n", serde_json::to_string_pretty(&side).map_err(|e| Error::Internal(e.to_string()))?).as_bytes())?;
-    let rep = serde_json::to_string_pretty(&anim.report).map_err(|e| Error::Internal(format!("report: {e}")))?;
+    dir.write(
+        "savings.json",
+        format!(
+            "{}\n",
+            serde_json::to_string_pretty(&side).map_err(|e| Error::Internal(e.to_string()))?
+        )
+        .as_bytes(),
+    )?;
+    let rep = serde_json::to_string_pretty(&anim.report)
+        .map_err(|e| Error::Internal(format!("report: {e}")))?;
     dir.write("report.json", format!("{rep}\n").as_bytes())?;
     super::figures::shapes_png(&dir.path("shapes.png"), &anim.report)?;
     super::figures::savings_png(&dir.path("savings.png"), &anim.savings, anim.report.birds)?;

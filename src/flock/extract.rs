@@ -317,8 +317,9 @@ pub fn extract(tracks: &Tracks, source: &str, cfg: &ExtractConfig) -> Result<Sha
                     "wingspan unknown: set wingspan or provenance.wingspan in the sidecar",
                 )
             })?;
-            v.as_f64()
-                .ok_or_else(|| Error::invalid(format!("provenance.wingspan = {v} is not a number")))?
+            v.as_f64().ok_or_else(|| {
+                Error::invalid(format!("provenance.wingspan = {v} is not a number"))
+            })?
         }
     };
     if !(b.is_finite() && b > 0.0) {
@@ -463,13 +464,7 @@ fn fit_side(
         idx.iter()
             .map(|&i| ((pts[i].1[0] - l[0]).abs(), pts[i].1[1] - l[1])),
     );
-    ransac::fit(
-        model,
-        &uv,
-        cfg.inlier_threshold,
-        cfg.ransac_iterations,
-        rng,
-    )
+    ransac::fit(model, &uv, cfg.inlier_threshold, cfg.ransac_iterations, rng)
 }
 
 fn side_angle(model: Model, coef: &[f64], umax: f64) -> f64 {
@@ -530,7 +525,10 @@ fn frame_shape(
     }
     let pos: Vec<[f64; 2]> = birds.iter().map(|b| [b.x, b.y]).collect();
     if power::check_lateral(&pos).is_ok() {
-        for (b, xi) in birds.iter_mut().zip(power::relative(&power::savings_unchecked(&pos))) {
+        for (b, xi) in birds
+            .iter_mut()
+            .zip(power::relative(&power::savings_unchecked(&pos)))
+        {
             b.xi = Some(xi);
         }
     }
@@ -589,7 +587,8 @@ fn classify(
         }
     }
     let rms = |k: usize| (sse[k] / inl[k].max(1) as f64).sqrt();
-    let curved = inl[1] as f64 > 1.05 * inl[0] as f64 || (inl[1] >= inl[0] && rms(1) < 0.6 * rms(0));
+    let curved =
+        inl[1] as f64 > 1.05 * inl[0] as f64 || (inl[1] >= inl[0] && rms(1) < 0.6 * rms(0));
     match (2 * two_sided > per_frame.len(), curved) {
         (true, false) => ShapeKind::V,
         (true, true) => ShapeKind::U,

@@ -68,7 +68,11 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
             .draw()
             .map_err(|e| fail(e.to_string()))?;
         for (c, &k) in shown.iter().enumerate() {
-            let colour = if k == 0 { BLACK } else { PALETTE[c % PALETTE.len()] };
+            let colour = if k == 0 {
+                BLACK
+            } else {
+                PALETTE[c % PALETTE.len()]
+            };
             let t = r.key_times.get(k).copied().unwrap_or(0.0);
             chart
                 .draw_series(
@@ -97,7 +101,10 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
             .fold(0.0, f64::max)
             * 1.1;
         let mut chart = ChartBuilder::on(&rt)
-            .caption("relative saving ξ per bird: range and key shapes", ("sans-serif", 20))
+            .caption(
+                "relative saving ξ per bird: range and key shapes",
+                ("sans-serif", 20),
+            )
             .margin(12)
             .x_label_area_size(36)
             .y_label_area_size(60)
@@ -123,15 +130,17 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
             }))
             .map_err(|e| fail(e.to_string()))?
             .label("feasible range")
-            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 16, y + 5)], RGBColor(200, 200, 200).filled()));
+            .legend(|(x, y)| {
+                Rectangle::new(
+                    [(x, y - 5), (x + 16, y + 5)],
+                    RGBColor(200, 200, 200).filled(),
+                )
+            });
         for k in &r.keys {
             chart
-                .draw_series(
-                    order
-                        .iter()
-                        .enumerate()
-                        .map(|(c, &i)| Circle::new((c as f64, k.xi[i]), 2, RGBColor(31, 119, 180).filled())),
-                )
+                .draw_series(order.iter().enumerate().map(|(c, &i)| {
+                    Circle::new((c as f64, k.xi[i]), 2, RGBColor(31, 119, 180).filled())
+                }))
                 .map_err(|e| fail(e.to_string()))?;
         }
         chart

@@ -80,13 +80,11 @@ pub fn hull_3d_faces(pts: &[[f64; 3]]) -> Option<Vec<[usize; 3]>> {
     let eps = 1e-12 * scale;
     // Initial tetrahedron: extreme points along x, the farthest from their line and plane.
     let a = (0..n).min_by(|&i, &j| pts[i][0].total_cmp(&pts[j][0]))?;
-    let b = (0..n).max_by(|&i, &j| {
-        norm3(sub(pts[i], pts[a])).total_cmp(&norm3(sub(pts[j], pts[a])))
-    })?;
+    let b = (0..n)
+        .max_by(|&i, &j| norm3(sub(pts[i], pts[a])).total_cmp(&norm3(sub(pts[j], pts[a]))))?;
     let ab = sub(pts[b], pts[a]);
     let c = (0..n).max_by(|&i, &j| {
-        norm3(cross3(ab, sub(pts[i], pts[a])))
-            .total_cmp(&norm3(cross3(ab, sub(pts[j], pts[a]))))
+        norm3(cross3(ab, sub(pts[i], pts[a]))).total_cmp(&norm3(cross3(ab, sub(pts[j], pts[a]))))
     })?;
     let nrm = cross3(ab, sub(pts[c], pts[a]));
     if norm3(nrm) <= eps * scale {
@@ -136,9 +134,10 @@ pub fn hull_3d_faces(pts: &[[f64; 3]]) -> Option<Vec<[usize; 3]>> {
             }
             for e in 0..3 {
                 let (u, v) = (face[e], face[(e + 1) % 3]);
-                let shared_hidden = faces.iter().enumerate().any(|(g, h)| {
-                    !visible[g] && (0..3).any(|k| h[k] == v && h[(k + 1) % 3] == u)
-                });
+                let shared_hidden = faces
+                    .iter()
+                    .enumerate()
+                    .any(|(g, h)| !visible[g] && (0..3).any(|k| h[k] == v && h[(k + 1) % 3] == u));
                 if shared_hidden {
                     horizon.push((u, v));
                 }
@@ -269,7 +268,14 @@ mod tests {
 
     #[test]
     fn hull_2d_drops_interior_and_collinear_points() {
-        let pts = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0]];
+        let pts = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [1.0, 0.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [1.0, 1.0],
+        ];
         let mut h = hull_2d(&pts);
         h.sort_unstable();
         assert_eq!(h, vec![0, 1, 3, 4]);
@@ -301,7 +307,12 @@ mod tests {
         cube.push([0.5, 0.5, 0.5]);
         assert_eq!(hull_3d(&cube), (0..8).collect::<Vec<_>>());
         // Coplanar points: the planar hull.
-        let flat = [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0], [0.2, 0.2, 1.0]];
+        let flat = [
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [0.0, 1.0, 1.0],
+            [0.2, 0.2, 1.0],
+        ];
         assert_eq!(hull_3d(&flat), vec![0, 1, 2]);
     }
 
@@ -316,7 +327,7 @@ mod tests {
             .collect();
         assert!(visible_2d([0.0, 0.0], &ring, 0.5).iter().all(|&v| v));
         // A row of birds ahead and a bird right behind the middle one: that one is hidden.
-        let pts = [[-1.0, 2.0], [0.0, 2.0], [1.0, 2.0], [0.0, 4.0], [3.0, 6.0]];
+        let pts = [[-1.0, 2.0], [0.0, 2.0], [1.0, 2.0], [0.0, 4.0], [4.0, 3.0]];
         let v = visible_2d([0.0, 0.0], &pts, 0.5);
         assert_eq!(v, vec![true, true, true, false, true]);
         // The same in 3D, lifted off the plane a little.
@@ -326,7 +337,12 @@ mod tests {
             .map(|(i, p)| [p[0], p[1], 0.01 * i as f64])
             .collect();
         let mut p3 = p3;
-        p3.extend([[-1.0, 2.0, 1.0], [1.0, 2.0, -1.0], [0.0, 2.0, 1.0], [0.0, 2.0, -1.0]]);
+        p3.extend([
+            [-1.0, 2.0, 1.0],
+            [1.0, 2.0, -1.0],
+            [0.0, 2.0, 1.0],
+            [0.0, 2.0, -1.0],
+        ]);
         let v3 = visible_3d([0.0, 0.0, 0.0], &p3, 0.5);
         assert!(!v3[3], "the bird behind the middle one is hidden in 3D too");
         assert!(v3[1] && v3[4]);

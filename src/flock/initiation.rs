@@ -77,7 +77,7 @@ impl Default for InitiationConfig {
             max_speed: 1.6,
             converge_distance: 0.5,
             hold: 2.0,
-            max_time: 240.0,
+            max_time: 60.0,
             start_spread: 3.0,
             start_heading_deg: 60.0,
         }
@@ -197,7 +197,10 @@ impl Target {
     /// chain, the chain's last gap again.
     pub fn delta(&self, t: Option<usize>, next: Option<usize>, s: Side) -> [f64; 2] {
         match (t, next) {
-            (Some(a), Some(b)) => [self.pos[b][0] - self.pos[a][0], self.pos[b][1] - self.pos[a][1]],
+            (Some(a), Some(b)) => [
+                self.pos[b][0] - self.pos[a][0],
+                self.pos[b][1] - self.pos[a][1],
+            ],
             _ => {
                 let (start, len) = match s {
                     Side::Left => (1, self.nl),
@@ -240,7 +243,15 @@ pub struct Initiation {
     switching: Vec<Option<Side>>,
     /// The current leader (front-most, with a hysteresis of [`LEADER_MARGIN`]).
     leader: Option<usize>,
+    /// Steps taken, and the step each switch started.
+    steps: usize,
+    /// Last step's references: a bird keeps its reference while it stays visible.
+    prev_refs: Vec<Option<usize>>,
+    switch_since: Vec<usize>,
 }
+
+/// A side switch is abandoned after this long (seconds).
+pub const SWITCH_TIMEOUT: f64 = 15.0;
 
 /// Another bird takes the lead only once it is this far (wingspans) ahead of the leader, so a
 /// follower overshooting its place does not flip the leadership back and forth.
@@ -276,6 +287,9 @@ impl Initiation {
             birds,
             switching: vec![None; n],
             leader: None,
+            steps: 0,
+            prev_refs: vec![None; n],
+            switch_since: vec![0; n],
         })
     }
 
@@ -293,7 +307,9 @@ impl Initiation {
                 continue;
             }
             let r = [o.pos[0] - b.pos[0], o.pos[1] - b.pos[1]];
-            let ang = (d[0] * r[1] - d[1] * r[0]).atan2(d[0] * r[0] + d[1] * r[1]).abs();
+            let ang = (d[0] * r[1] - d[1] * r[0])
+                .atan2(d[0] * r[0] + d[1] * r[1])
+                .abs();
             if ang <= eye && (r[0] != 0.0 || r[1] != 0.0) {
                 cand.push((j, ang, r[0].hypot(r[1])));
                 pts.push(o.pos);
@@ -376,7 +392,20 @@ impl Initiation {
     fn references(&self, leader: usize) -> Vec<Option<usize>> {
         let n = self.birds.len();
         let prefs: Vec<Vec<usize>> = (0..n)
-            .map(|i| if i == leader { vec![] } else { self.preferences(i) })
+            .map(|i| {
+                if i == leader {
+                    return vec![];
+                }
+                let mut p = self.preferences(i);
+                // Keep last step's reference first while it is still visible.
+                if let Some(j) = self.prev_refs[i] {
+                    if let Some(k) = p.iter().position(|&c| c == j) {
+                        p.remove(k);
+                        p.insert(0, j);
+                    }
+                }
+                p
+            })
             .collect();
         let mut pick = vec![0usize; n];
         let mut refs: Vec<Option<usize>> = vec![None; n];
@@ -429,7 +458,12 @@ impl Initiation {
 
     /// Target slots (§6.2.1 target distances): the leader takes slot 0; a bird whose reference
     /// has a slot takes the next slot on its side.
-    fn slots(&self, refs: &[Option<usize>], sides: &[Option<Side>], leader: usize) -> Vec<Option<usize>> {
+    fn slots(
+        &self,
+        refs: &[Option<usize>],
+        sides: &[Option<Side>],
+        leader: usize,
+    ) -> Vec<Option<usize>> {
         let n = self.birds.len();
         let mut slots: Vec<Option<Option<usize>>> = vec![None; n];
         slots[leader] = Some(Some(0));
@@ -465,7 +499,11 @@ impl Initiation {
             taken[*t] = true;
         }
         for s in [Side::Left, Side::Right] {
-            let other = if s == Side::Left { Side::Right } else { Side::Left };
+            let other = if s == Side::Left {
+                Side::Right
+            } else {
+                Side::Left
+            };
             // End of the other side's chain: its deepest taken slot's bird.
             let mut end_slot = 0;
             while let Some(nx) = self.target.next(end_slot, other) {
@@ -475,7 +513,9 @@ impl Initiation {
                 end_slot = nx;
             }
             let free = self.target.next(end_slot, other).is_some();
-            let end_bird = (0..n).find(|&i| slots[i] == Some(end_slot)).unwrap_or(leader);
+            let end_bird = (0..n)
+                .find(|&i| slots[i] == Some(end_slot))
+                .unwrap_or(leader);
             // Switching birds already heading there follow the chain's end.
             let mut heading_there = 0;
             for i in 0..n {
@@ -484,7 +524,12 @@ impl Initiation {
                     refs[i] = Some(end_bird).filter(|&e| e != i);
                 }
             }
-            if !free || heading_there > 0 {
+            let count = |side: Side| sides.iter().filter(|x| **x == Some(side)).count();
+            let want = |side: Side| match side {
+                Side::Left => self.target.nl,
+                Side::Right => self.target.nr,
+            };
+            if !free || heading_there > 0 || count(s) <= want(s) || count(other) >= want(other) {
                 continue;
             }
             // Rear-most bird on side s beyond the end of its chain, followed by nobody.
@@ -498,9 +543,9 @@ impl Initiation {
                         && self.switching[i].is_none()
                 })
                 .min_by(|&a, &b| self.birds[a].pos[1].total_cmp(&self.birds[b].pos[1]));
-            let longer = (0..n).any(|i| sides[i] == Some(s) && slots[i].is_none() && refs[i].is_some());
-            if let (Some(b), true) = (beyond, longer) {
+            if let Some(b) = beyond {
                 self.switching[b] = Some(other);
+                self.switch_since[b] = self.steps;
                 refs[b] = Some(end_bird);
             }
         }
@@ -522,8 +567,16 @@ impl Initiation {
         };
         self.leader = Some(leader);
         self.switching[leader] = None;
+        self.steps += 1;
+        let timeout = (SWITCH_TIMEOUT * self.cfg.fps) as usize;
+        for i in 0..n {
+            if self.switching[i].is_some() && self.steps - self.switch_since[i] > timeout {
+                self.switching[i] = None;
+            }
+        }
         let mut refs = self.references(leader);
         self.balance(&mut refs, leader);
+        self.prev_refs = refs.clone();
         let sides = self.sides(&refs, leader);
         let slots = self.slots(&refs, &sides, leader);
         let mean_error = self.mean_error(&slots, leader);
@@ -537,7 +590,10 @@ impl Initiation {
                 (false, Some(j), Some(s)) => {
                     let rb = self.birds[j];
                     let d = self.target.delta(slots[j], slots[i], s);
-                    let pj = [rb.pos[0] + rb.v * rb.dir()[0], rb.pos[1] + rb.v * rb.dir()[1]];
+                    let pj = [
+                        rb.pos[0] + rb.v * rb.dir()[0],
+                        rb.pos[1] + rb.v * rb.dir()[1],
+                    ];
                     let t = [pj[0] + d[0], pj[1] + d[1]];
                     let to = [t[0] - b.pos[0], t[1] - b.pos[1]];
                     let r = to[0].hypot(to[1]);

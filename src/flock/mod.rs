@@ -95,7 +95,11 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
     let example = synth::synth(&scfg)?;
     let ex_path = dir.join("example.csv");
     example.save(&ex_path)?;
-    let shape = extract::extract(&example, &ex_path.display().to_string(), &extract::ExtractConfig::default())?;
+    let shape = extract::extract(
+        &example,
+        &ex_path.display().to_string(),
+        &extract::ExtractConfig::default(),
+    )?;
     let shape_path = dir.join("shape.json");
     shape.save(&shape_path)?;
     let outliers_true = example
@@ -109,12 +113,13 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
         .flat_map(|f| &f.birds)
         .filter(|b| b.outlier)
         .count();
-    let cfg = animate::AnimateConfig {
+    let mut cfg = animate::AnimateConfig {
         birds: Some(14),
         frames: 250,
         seed: 3,
         ..animate::AnimateConfig::default()
     };
+    cfg.init.max_time = 20.0;
     let anim_dir = dir.join("animation");
     let rep = animate::animate_file(&shape_path, &anim_dir, &cfg, progress)?;
     let fold = |f: fn(f64, f64) -> f64, init: f64| rep.mean_saving.iter().cloned().fold(init, f);

@@ -36,8 +36,13 @@ pub fn render(path: &Path, anim: &Animation, progress: &mut dyn Progress) -> Res
         }
     }
     let even = |v: f64| ((v.ceil() as usize).div_ceil(2) * 2).max(64);
-    let s = s0.min(1800.0 / (2.0 * ext[0] + 4.0)).min(1000.0 / (2.0 * ext[1] + 4.0));
-    let (w, h) = (even((2.0 * ext[0] + 4.0) * s), even((2.0 * ext[1] + 4.0) * s));
+    let s = s0
+        .min(1800.0 / (2.0 * ext[0] + 4.0))
+        .min(1000.0 / (2.0 * ext[1] + 4.0));
+    let (w, h) = (
+        even((2.0 * ext[0] + 4.0) * s),
+        even((2.0 * ext[1] + 4.0) * s),
+    );
     let tmp = crate::io::temp_sibling(path, ".avi")?;
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
     let name = tmp.path().to_string_lossy().into_owned();
@@ -50,7 +55,10 @@ pub fn render(path: &Path, anim: &Animation, progress: &mut dyn Progress) -> Res
     )
     .map_err(cv(path))?;
     if !writer.is_opened().map_err(cv(path))? {
-        return Err(Error::file(path, "OpenCV cannot open an MJPG AVI writer here"));
+        return Err(Error::file(
+            path,
+            "OpenCV cannot open an MJPG AVI writer here",
+        ));
     }
     // Sky: light blue at the top to paler at the bottom (BGR).
     let mut sky = Mat::new_rows_cols_with_default(h as i32, w as i32, CV_8UC3, Scalar::all(0.0))
@@ -88,17 +96,29 @@ pub fn render(path: &Path, anim: &Animation, progress: &mut dyn Progress) -> Res
         let lead = leader_of(f);
         for (i, (p, d)) in f.iter().zip(hd).enumerate() {
             let r = [d[1], -d[0]];
-            let at = |a: f64, b: f64| to_px([p[0] + a * d[0] + b * r[0], p[1] + a * d[1] + b * r[1]]);
-            let poly: Vector<Point> =
-                Vector::from_iter([at(0.2, 0.0), at(-0.15, 0.5), at(-0.05, 0.0), at(-0.15, -0.5)]);
+            let at =
+                |a: f64, b: f64| to_px([p[0] + a * d[0] + b * r[0], p[1] + a * d[1] + b * r[1]]);
+            let poly: Vector<Point> = Vector::from_iter([
+                at(0.2, 0.0),
+                at(-0.15, 0.5),
+                at(-0.05, 0.0),
+                at(-0.15, -0.5),
+            ]);
             let colour = if i == lead {
                 Scalar::new(40.0, 40.0, 200.0, 0.0)
             } else {
                 Scalar::new(50.0, 50.0, 50.0, 0.0)
             };
             let polys: Vector<Vector<Point>> = Vector::from_iter([poly]);
-            imgproc::fill_poly(&mut frame, &polys, colour, imgproc::LINE_AA, 0, Point::new(0, 0))
-                .map_err(cv(path))?;
+            imgproc::fill_poly(
+                &mut frame,
+                &polys,
+                colour,
+                imgproc::LINE_AA,
+                0,
+                Point::new(0, 0),
+            )
+            .map_err(cv(path))?;
         }
         writer.write(&frame).map_err(cv(path))?;
         progress.inc(1);

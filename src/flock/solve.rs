@@ -203,7 +203,11 @@ mod tests {
         let start: Vec<f64> = y.iter().map(|v| 0.9 * v).collect();
         let s = solve(PositionProblem::new(x, xi, 0, start), 200);
         assert!(s.max_relative_error < 1e-9, "{}", s.max_relative_error);
-        let d = s.y.iter().zip(&y).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let d =
+            s.y.iter()
+                .zip(&y)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
         assert!(d < 1e-6, "positions off by {d}");
     }
 }

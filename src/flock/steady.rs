@@ -274,7 +274,13 @@ pub fn draw_xi(
         .collect();
     let u: Vec<f64> = bx
         .iter()
-        .map(|b| if b[1] > b[0] { rng.gen_range(b[0]..=b[1]) } else { b[0] })
+        .map(|b| {
+            if b[1] > b[0] {
+                rng.gen_range(b[0]..=b[1])
+            } else {
+                b[0]
+            }
+        })
         .collect();
     let sum = |l: f64| -> f64 {
         u.iter()
@@ -370,7 +376,7 @@ pub fn next_key(
             .collect();
         (x, xi)
     };
-    let (mut t, mut dt) = (0.0, 1.0);
+    let (mut t, mut dt) = (0.0f64, 1.0f64);
     let mut y = y0;
     let (mut solves, mut evals) = (0, 0);
     let mut err = prev.max_relative_error;
@@ -380,12 +386,11 @@ pub fn next_key(
         let s = solve::solve(PositionProblem::new(x, xi, 0, y.clone()), 400);
         solves += 1;
         evals += s.evaluations;
-        let step = s
-            .y
-            .iter()
-            .zip(&y)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let step =
+            s.y.iter()
+                .zip(&y)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
         if s.max_relative_error <= cfg.solve_tol && step <= cfg.max_key_step {
             t = tn;
             y = s.y;
@@ -403,7 +408,11 @@ pub fn next_key(
         xi_target,
         xi,
         max_relative_error: err,
-        gap: if t >= 1.0 { gap } else { prev.gap + t * (gap - prev.gap) },
+        gap: if t >= 1.0 {
+            gap
+        } else {
+            prev.gap + t * (gap - prev.gap)
+        },
         reached: t,
         solves,
         evaluations: evals,

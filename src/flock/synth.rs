@@ -154,8 +154,7 @@ pub fn synth(cfg: &SynthConfig) -> Result<Tracks> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
     let (nl, nr) = side_counts(cfg.shape, cfg.birds);
     let gap = Normal::new(cfg.gap, cfg.gap_std).map_err(|e| Error::invalid(format!("gap: {e}")))?;
-    let noise =
-        Normal::new(0.0, cfg.noise).map_err(|e| Error::invalid(format!("noise: {e}")))?;
+    let noise = Normal::new(0.0, cfg.noise).map_err(|e| Error::invalid(format!("noise: {e}")))?;
     let jitter = Normal::new(0.0, 0.02).map_err(|e| Error::Internal(e.to_string()))?;
     // Per bird: side sign, gap to the previous bird on the side, outlier offset.
     struct Bird {
@@ -206,7 +205,9 @@ pub fn synth(cfg: &SynthConfig) -> Result<Tracks> {
                     ShapeKind::V | ShapeKind::Line => -u / tan,
                     ShapeKind::U | ShapeKind::J => -cfg.curvature * u * u,
                 };
-                let off = bird.offset.map_or(0.0, |o| o + 0.1 * jitter.sample(&mut rng));
+                let off = bird
+                    .offset
+                    .map_or(0.0, |o| o + 0.1 * jitter.sample(&mut rng));
                 (bird.side * u, y + off)
             };
             let (x, y) = (x + noise.sample(&mut rng), y + noise.sample(&mut rng));

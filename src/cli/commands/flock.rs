@@ -200,7 +200,10 @@ fn extract_cmd(a: ExtractArgs) -> Result<()> {
         .iter()
         .map(|f| f.birds.iter().filter(|b| b.outlier).count())
         .sum();
-    let ang = |s| p.mean_angle(s).map_or("-".into(), |v: f64| format!("{v:.1}°"));
+    let ang = |s| {
+        p.mean_angle(s)
+            .map_or("-".into(), |v: f64| format!("{v:.1}°"))
+    };
     println!(
         "flock extract: {} birds, {} frames, shape {}, side angles {} (left) / {} (right), \
          {outliers} outlier marks → {}",
