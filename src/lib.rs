@@ -34,6 +34,7 @@ pub mod backend;
 pub mod cli;
 pub mod data;
 pub mod error;
+pub mod flock;
 pub mod herd;
 pub mod measure;
 pub mod optim;

@@ -12,7 +12,7 @@ const FONT_PATHS: [&str; 2] = [
     "/usr/share/fonts/dejavu/DejaVuSans.ttf",
 ];
 
-fn font_ready() -> Result<()> {
+pub(crate) fn font_ready() -> Result<()> {
     static READY: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     READY
         .get_or_init(|| {

@@ -46,6 +46,9 @@ pub enum Command {
     /// The built-in walk-through: a synthetic herd rendered to video, extracted, fitted on the first
     /// half from a generic start, validated on the second half; prints a summary.
     Demo(demo::DemoArgs),
+    /// Line-formation flocks (V, U, J, line) from a marked example: synth, extract, animate.
+    #[command(subcommand)]
+    Flock(flock::FlockCommand),
 }
 
 /// Runs the parsed command line.
@@ -62,5 +65,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::ImportReference(a) => import_reference::exec(a),
         Command::FieldsInfo(a) => fields_info::exec(a),
         Command::Demo(a) => demo::exec(a),
+        Command::Flock(c) => flock::run(c),
     }
 }

@@ -17,5 +17,6 @@ pub fn exec(a: DemoArgs) -> Result<()> {
     println!("{DEMO_HEADER}");
     let summary = demo(&a.out, &mut Bars::default())?;
     print!("{summary}");
+    println!("{}", crate::flock::demo(&a.out, &mut Bars::default())?);
     Ok(())
 }

@@ -7,6 +7,7 @@ pub mod demo;
 pub mod extract;
 pub mod fields_info;
 pub mod fit;
+pub mod flock;
 pub mod gradcheck;
 pub mod import_reference;
 pub mod simulate;
