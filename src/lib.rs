@@ -8,6 +8,7 @@ pub mod author;
 pub mod backend;
 pub mod bench;
 pub mod cli;
+pub mod crowd;
 pub mod data;
 pub mod error;
 pub mod fields;

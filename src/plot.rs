@@ -276,3 +276,8 @@ pub fn scene_plot(
     }
     crate::io::persist(tmp, path)
 }
+
+/// Registers the plot font (for modules that draw their own charts with plotters).
+pub(crate) fn ensure_font() -> Result<()> {
+    font_ready()
+}

@@ -51,6 +51,13 @@ pub enum Command {
     /// The built-in walk-through: a synthetic herd rendered to video, extracted, fitted on the first
     /// half from a generic start, validated on the second half; prints a summary.
     Demo(DemoArgs),
+    /// Crowds learnt from tracked trajectories (Lee et al. 2007): learn, simulate, evaluate, compare.
+    #[command(subcommand)]
+    Crowd(commands::crowd::CrowdCommand),
+}
+
+pub mod commands {
+    pub mod crowd;
 }
 
 #[derive(Args, Debug)]
@@ -543,6 +550,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::ImportReference(a) => import_cmd(a),
         Command::FieldsInfo(a) => fields_info(a),
         Command::Demo(a) => demo(a),
+        Command::Crowd(c) => commands::crowd::run(c),
     }
 }
 
