@@ -52,7 +52,7 @@ fn agents(m: &CrowdModel, n: usize) -> Vec<Agent> {
         .map(|e| {
             let back = [e.position[0] - e.velocity[0] * dt, e.position[1] - e.velocity[1] * dt];
             let h = herdfit::crowd::features::unit(e.velocity).unwrap_or([1.0, 0.0]);
-            Agent::new(e.id, vec![back, e.position], h, e.goal, 0)
+            Agent::new(e.id, vec![back, e.position], h, e.goal, 0, dt)
         })
         .collect()
 }

@@ -37,6 +37,9 @@ pub struct ActionConfig {
     pub attraction: f64,
     /// Candidate outputs per axis (speed, direction) within that range.
     pub attraction_grid: usize,
+    /// Outputs are kept within the chosen cluster's mean speed and direction ± this many of its
+    /// standard deviations (§5.3: "to avoid excessive extrapolations").
+    pub max_deviation: f64,
     pub choice: ClusterChoice,
     /// Lloyd iterations of k-means at most.
     pub kmeans_iterations: usize,
@@ -50,6 +53,7 @@ impl Default for ActionConfig {
             bandwidth_neighbour: 5,
             attraction: 0.5,
             attraction_grid: 5,
+            max_deviation: 2.0,
             choice: ClusterChoice::Sample,
             kmeans_iterations: 20,
         }
@@ -74,6 +78,9 @@ impl ActionConfig {
         }
         if !(self.attraction.is_finite() && self.attraction >= 0.0) {
             return bad("attraction", format!("= {} must be ≥ 0", self.attraction));
+        }
+        if !(self.max_deviation.is_finite() && self.max_deviation >= 0.0) {
+            return bad("max_deviation", format!("= {} must be ≥ 0", self.max_deviation));
         }
         if self.attraction_grid == 0 {
             return bad("attraction_grid", "must be ≥ 1".into());
@@ -205,11 +212,14 @@ impl ActionModel {
             rows.push((self.samples.state(i as usize), acts[j], d2));
         }
         let lwr_out = lwr(s, &rows, h2, &mut sc.ata, &mut sc.atb);
-        let action = if cfg.attraction > 0.0 {
-            attract(lwr_out, &rows, h2, cfg.attraction, cfg.attraction_grid)
-        } else {
-            lwr_out
-        };
+        let action = attract(
+            lwr_out,
+            &rows,
+            h2,
+            cfg.attraction,
+            cfg.attraction_grid,
+            cfg.max_deviation,
+        );
         Decision {
             action,
             cluster_mean: centres[c],
@@ -450,18 +460,25 @@ fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
     Some(b.to_vec())
 }
 
-/// §5.3 attraction: candidates on a regular `grid × grid` lattice of speed and direction within
-/// ±`c` standard deviations (of the cluster's speeds and directions) of the regression output;
-/// returns the one nearest to a sample of the cluster in the joint (state, action) space, state
+/// §5.3 attraction: the regression output is first kept within the cluster's mean speed and
+/// direction ± `limit` standard deviations; then candidates on a regular `grid × grid` lattice of
+/// speed and direction within ±`c` standard deviations of it (and within that range) compete, and
+/// the one nearest to a sample of the cluster in the joint (state, action) space wins, state
 /// distances scaled by the bandwidth and action distances by the cluster's action spread.
-pub fn attract(out: V2, rows: &[(&[f64], V2, f64)], h2: f64, c: f64, grid: usize) -> V2 {
+pub fn attract(
+    out: V2,
+    rows: &[(&[f64], V2, f64)],
+    h2: f64,
+    c: f64,
+    grid: usize,
+    limit: f64,
+) -> V2 {
     if rows.len() < 2 {
-        return out;
+        return rows.first().map_or(out, |r| r.1);
     }
     let n = rows.len() as f64;
     let speeds: Vec<f64> = rows.iter().map(|r| r.1[0].hypot(r.1[1])).collect();
     let angles: Vec<f64> = rows.iter().map(|r| r.1[1].atan2(r.1[0])).collect();
-    let (v0, a0) = (out[0].hypot(out[1]), out[1].atan2(out[0]));
     let mean_v = speeds.iter().sum::<f64>() / n;
     let sd_v = (speeds.iter().map(|v| (v - mean_v).powi(2)).sum::<f64>() / n).sqrt();
     // Circular spread of the directions about their mean.
@@ -475,6 +492,14 @@ pub fn attract(out: V2, rows: &[(&[f64], V2, f64)], h2: f64, c: f64, grid: usize
         .sum::<f64>()
         / n)
         .sqrt();
+    let (lo_v, hi_v) = ((mean_v - limit * sd_v).max(0.0), mean_v + limit * sd_v);
+    let clamp_a = |a: f64| mean_a + wrap(a - mean_a).clamp(-limit * sd_a, limit * sd_a);
+    let v0 = out[0].hypot(out[1]).clamp(lo_v, hi_v);
+    let a0 = clamp_a(out[1].atan2(out[0]));
+    let out = [v0 * a0.cos(), v0 * a0.sin()];
+    if c <= 0.0 {
+        return out;
+    }
     let mean_act = rows.iter().fold([0.0, 0.0], |m, r| {
         [m[0] + r.1[0] / n, m[1] + r.1[1] / n]
     });
@@ -496,8 +521,8 @@ pub fn attract(out: V2, rows: &[(&[f64], V2, f64)], h2: f64, c: f64, grid: usize
                     2.0 * i as f64 / (steps - 1) as f64 - 1.0
                 }
             };
-            let v = (v0 + c * sd_v * t(iv)).max(0.0);
-            let a = a0 + c * sd_a * t(ia);
+            let v = (v0 + c * sd_v * t(iv)).clamp(lo_v, hi_v);
+            let a = clamp_a(a0 + c * sd_a * t(ia));
             let cand = [v * a.cos(), v * a.sin()];
             let sc = score(cand);
             if sc < best.0 {

@@ -163,7 +163,7 @@ fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig)
         let hist: Vec<V2> = s.pos[a0 - s.start..=f - s.start].to_vec();
         let heads = headings(&hist, fc.still_speed * scene.dt);
         let h = *heads.last().expect("history");
-        let mut a = Agent::new(s.id, hist.clone(), h, None, cfg.seed ^ (f as u64) << 20);
+        let mut a = Agent::new(s.id, hist.clone(), h, None, cfg.seed ^ ((f as u64) << 20), scene.dt);
         let hp = heads[heads.len() - 2];
         a.prev_formation = formation(hist[hist.len() - 2], hp, scene.others(f - 1, k), fc.radius);
         if a0 + obs == f + 1 && s.end() > f + pred {

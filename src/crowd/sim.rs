@@ -41,7 +41,7 @@ impl Default for SimConfig {
         SimConfig {
             steps: 0,
             seed: 0,
-            arrive: 0.5,
+            arrive: 1.0,
             timeout: 3.0,
             behaviours: true,
             line_spacing: 0.8,
@@ -405,7 +405,7 @@ pub fn simulate(
                 e.position[0] - e.velocity[0] * dt,
                 e.position[1] - e.velocity[1] * dt,
             ];
-            agents.push(Agent::new(e.id, vec![back, e.position], h, e.goal, cfg.seed));
+            agents.push(Agent::new(e.id, vec![back, e.position], h, e.goal, cfg.seed, dt));
             minds.push(Mind {
                 goal: e.goal,
                 deadline: t + expected(e, cfg, dt),

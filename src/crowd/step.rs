@@ -38,13 +38,21 @@ pub struct Agent {
 }
 
 impl Agent {
-    /// An agent at `history`'s last position (at least one), with generator stream `id` of `seed`.
-    pub fn new(id: u64, history: Vec<V2>, heading: V2, goal: Option<V2>, seed: u64) -> Agent {
+    /// An agent at `history`'s last position (at least one; positions `dt` seconds apart), with
+    /// generator stream `id` of `seed`. m_prev starts as its last velocity in its own frame.
+    pub fn new(
+        id: u64,
+        history: Vec<V2>,
+        heading: V2,
+        goal: Option<V2>,
+        seed: u64,
+        dt: f64,
+    ) -> Agent {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(id);
         let pos = *history.last().expect("an agent needs a position");
         let speed_prev = match history.as_slice() {
-            [.., a, b] => to_local([b[0] - a[0], b[1] - a[1]], heading),
+            [.., a, b] => to_local([(b[0] - a[0]) / dt, (b[1] - a[1]) / dt], heading),
             _ => [0.0, 0.0],
         };
         Agent {
