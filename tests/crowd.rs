@@ -105,7 +105,7 @@ fn eq3_lwr_is_ols_at_infinite_bandwidth_and_exact_on_linear_data() {
         .map(|(s, a)| (s.as_slice(), *a, d2(s)))
         .collect();
     let (mut ata, mut atb) = (Vec::new(), Vec::new());
-    let got = lwr(&q, &rows, f64::INFINITY, &mut ata, &mut atb);
+    let got = lwr(&q, &rows, f64::INFINITY, 0.0, &mut ata, &mut atb);
     let design: Vec<Vec<f64>> = states
         .iter()
         .map(|s| std::iter::once(1.0).chain(s.iter().copied()).collect())
@@ -123,7 +123,7 @@ fn eq3_lwr_is_ols_at_infinite_bandwidth_and_exact_on_linear_data() {
         .map(|s| (s.as_slice(), lin(s), d2(s)))
         .collect();
     for h2 in [0.5, 2.0, 50.0] {
-        let g = lwr(&q, &exact, h2, &mut ata, &mut atb);
+        let g = lwr(&q, &exact, h2, 0.0, &mut ata, &mut atb);
         let w = lin(&q);
         assert!((g[0] - w[0]).abs() < 1e-9 && (g[1] - w[1]).abs() < 1e-9, "{g:?} {w:?}");
     }

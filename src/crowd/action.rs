@@ -30,8 +30,13 @@ pub struct ActionConfig {
     pub k: usize,
     /// k-means clusters of their actions.
     pub clusters: usize,
-    /// The regression's Gaussian bandwidth is the distance to this neighbour (1-based).
+    /// The regression's Gaussian bandwidth is the distance to this neighbour (1-based)…
     pub bandwidth_neighbour: usize,
+    /// …times this factor.
+    pub bandwidth_scale: f64,
+    /// Ridge penalty on the regression's slopes, relative to the mean weighted variance of the
+    /// states (0: eq. 3 as written; a few effective samples in 8–12 dimensions make it unstable).
+    pub ridge: f64,
     /// Half-width of the attraction's perturbation range in standard deviations of the cluster's
     /// speed and direction (§5.3); 0 turns attraction off.
     pub attraction: f64,
@@ -51,6 +56,8 @@ impl Default for ActionConfig {
             k: 100,
             clusters: 3,
             bandwidth_neighbour: 5,
+            bandwidth_scale: 1.0,
+            ridge: 0.0,
             attraction: 0.5,
             attraction_grid: 5,
             max_deviation: 2.0,
@@ -78,6 +85,12 @@ impl ActionConfig {
         }
         if !(self.attraction.is_finite() && self.attraction >= 0.0) {
             return bad("attraction", format!("= {} must be ≥ 0", self.attraction));
+        }
+        if !(self.bandwidth_scale.is_finite() && self.bandwidth_scale > 0.0) {
+            return bad("bandwidth_scale", format!("= {} must be > 0", self.bandwidth_scale));
+        }
+        if !(self.ridge.is_finite() && self.ridge >= 0.0) {
+            return bad("ridge", format!("= {} must be ≥ 0", self.ridge));
         }
         if !(self.max_deviation.is_finite() && self.max_deviation >= 0.0) {
             return bad("max_deviation", format!("= {} must be ≥ 0", self.max_deviation));
@@ -205,13 +218,13 @@ impl ActionModel {
         sc.members.clear();
         sc.members
             .extend((0..sc.nn.len()).filter(|&j| sc.assign[j] == c));
-        let h2 = bandwidth2(&sc.nn, cfg.bandwidth_neighbour);
+        let h2 = bandwidth2(&sc.nn, cfg.bandwidth_neighbour) * cfg.bandwidth_scale.powi(2);
         let mut rows = Vec::with_capacity(sc.members.len());
         for &j in &sc.members {
             let (d2, i) = sc.nn[j];
             rows.push((self.samples.state(i as usize), acts[j], d2));
         }
-        let lwr_out = lwr(s, &rows, h2, &mut sc.ata, &mut sc.atb);
+        let lwr_out = lwr(s, &rows, h2, cfg.ridge, &mut sc.ata, &mut sc.atb);
         let action = attract(
             lwr_out,
             &rows,
@@ -352,11 +365,13 @@ pub fn kmeans(
 /// Eq. 3, locally weighted linear regression at query `s`: β = (SᵀWS)⁻¹SᵀW a over the rows
 /// (state s_i, action a_i, ‖s − s_i‖²), S's rows `[1, s_i − s]`, W_ii = exp(−½ ‖s − s_i‖²/h²);
 /// the prediction at `s` is β's intercept. With too few rows or a singular system it falls back
-/// to the weighted mean (the intercept-only fit). `h2 = ∞` gives ordinary least squares.
+/// to the weighted mean (the intercept-only fit). `h2 = ∞` and `ridge = 0` give ordinary least
+/// squares; `ridge > 0` adds `ridge × (mean slope diagonal)` to the slopes' diagonal.
 pub fn lwr(
     s: &[f64],
     rows: &[(&[f64], V2, f64)],
     h2: f64,
+    ridge: f64,
     ata: &mut Vec<f64>,
     atb: &mut Vec<f64>,
 ) -> V2 {
@@ -410,6 +425,12 @@ pub fn lwr(
     for i in 0..m {
         for j in 0..i {
             ata[i * m + j] = ata[j * m + i];
+        }
+    }
+    if ridge > 0.0 {
+        let lam = ridge * (1..m).map(|i| ata[i * m + i]).sum::<f64>() / d.max(1) as f64;
+        for i in 1..m {
+            ata[i * m + i] += lam;
         }
     }
     match cholesky_solve(ata, atb, m) {
