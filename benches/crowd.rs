@@ -26,7 +26,10 @@ fn model() -> CrowdModel {
         ..LearnConfig::default()
     };
     let m = learn(&[src], &cfg, &mut NoProgress).unwrap();
-    assert!(m.behaviours[0].model.samples.len() >= 5000, "≥ 5,000 samples");
+    assert!(
+        m.behaviours[0].model.samples.len() >= 5000,
+        "≥ 5,000 samples"
+    );
     assert_eq!(m.config.action.k, 100);
     m
 }
@@ -36,7 +39,10 @@ fn agents(m: &CrowdModel, n: usize) -> Vec<Agent> {
     let mut layout = herdfit::crowd::layout::Layout::default();
     let side = (n as f64).sqrt().ceil() as usize;
     for i in 0..n {
-        let (x, y) = ((i % side) as f64 * 40.0 / side as f64, (i / side) as f64 * 40.0 / side as f64);
+        let (x, y) = (
+            (i % side) as f64 * 40.0 / side as f64,
+            (i / side) as f64 * 40.0 / side as f64,
+        );
         layout.spawns.push(herdfit::crowd::layout::Spawn {
             position: [x, y],
             spread: 0.3,
@@ -50,7 +56,10 @@ fn agents(m: &CrowdModel, n: usize) -> Vec<Agent> {
     entries_from_layout(&layout, dt, typical_speed(m), 0)
         .into_iter()
         .map(|e| {
-            let back = [e.position[0] - e.velocity[0] * dt, e.position[1] - e.velocity[1] * dt];
+            let back = [
+                e.position[0] - e.velocity[0] * dt,
+                e.position[1] - e.velocity[1] * dt,
+            ];
             let h = herdfit::crowd::features::unit(e.velocity).unwrap_or([1.0, 0.0]);
             Agent::new(e.id, vec![back, e.position], h, e.goal, 0, dt)
         })

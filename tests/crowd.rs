@@ -78,7 +78,9 @@ fn ols_qr(x: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
         rr[j][j] = norm;
         q[j].iter_mut().for_each(|v| *v /= norm);
     }
-    let qty: Vec<f64> = (0..m).map(|j| (0..n).map(|i| q[j][i] * y[i]).sum()).collect();
+    let qty: Vec<f64> = (0..m)
+        .map(|j| (0..n).map(|i| q[j][i] * y[i]).sum())
+        .collect();
     let mut b = vec![0.0; m];
     for j in (0..m).rev() {
         b[j] = (qty[j] - (j + 1..m).map(|k| rr[j][k] * b[k]).sum::<f64>()) / rr[j][j];
@@ -98,7 +100,12 @@ fn eq3_lwr_is_ols_at_infinite_bandwidth_and_exact_on_linear_data() {
         .iter()
         .map(|s| [s[0] - 0.5 * s[2] + rng.gen_range(-0.3..0.3), s[1] * s[3]])
         .collect();
-    let d2 = |s: &[f64]| s.iter().zip(&q).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+    let d2 = |s: &[f64]| {
+        s.iter()
+            .zip(&q)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+    };
     let rows: Vec<(&[f64], [f64; 2], f64)> = states
         .iter()
         .zip(&noisy)
@@ -114,7 +121,11 @@ fn eq3_lwr_is_ols_at_infinite_bandwidth_and_exact_on_linear_data() {
         let y: Vec<f64> = noisy.iter().map(|a| a[c]).collect();
         let b = ols_qr(&design, &y);
         let pred = b[0] + (0..d).map(|k| b[k + 1] * q[k]).sum::<f64>();
-        assert!((got[c] - pred).abs() < 1e-9, "axis {c}: {} vs OLS {pred}", got[c]);
+        assert!(
+            (got[c] - pred).abs() < 1e-9,
+            "axis {c}: {} vs OLS {pred}",
+            got[c]
+        );
     }
     // A linear function is reproduced exactly at any bandwidth.
     let lin = |s: &[f64]| [0.3 + s[0] - 2.0 * s[1], -1.0 + 0.5 * s[2] + s[3]];
@@ -125,7 +136,10 @@ fn eq3_lwr_is_ols_at_infinite_bandwidth_and_exact_on_linear_data() {
     for h2 in [0.5, 2.0, 50.0] {
         let g = lwr(&q, &exact, h2, 0.0, &mut ata, &mut atb);
         let w = lin(&q);
-        assert!((g[0] - w[0]).abs() < 1e-9 && (g[1] - w[1]).abs() < 1e-9, "{g:?} {w:?}");
+        assert!(
+            (g[0] - w[0]).abs() < 1e-9 && (g[1] - w[1]).abs() < 1e-9,
+            "{g:?} {w:?}"
+        );
     }
 }
 
@@ -139,7 +153,9 @@ fn kd_tree_knn_equals_brute_force() {
         let tree = StateTree::build(&pts, dims).unwrap();
         let mut got = Vec::new();
         for _ in 0..40 {
-            let q: Vec<f64> = (0..dims).map(|k| rng.gen_range(-2.0..2.0) * (1.0 + k as f64)).collect();
+            let q: Vec<f64> = (0..dims)
+                .map(|k| rng.gen_range(-2.0..2.0) * (1.0 + k as f64))
+                .collect();
             tree.nearest(&q, 100, &mut got);
             let want = brute_force(&pts, dims, &q, 100);
             assert_eq!(got.len(), 100);
@@ -162,7 +178,10 @@ fn kmeans_matches_linfa_on_separated_clusters() {
     let pts: Vec<[f64; 2]> = (0..99)
         .map(|i| {
             let c = centres[i % 3];
-            [c[0] + rng.gen_range(-0.1..0.1), c[1] + rng.gen_range(-0.1..0.1)]
+            [
+                c[0] + rng.gen_range(-0.1..0.1),
+                c[1] + rng.gen_range(-0.1..0.1),
+            ]
         })
         .collect();
     let mut assign = Vec::new();
@@ -184,7 +203,16 @@ fn kmeans_matches_linfa_on_separated_clusters() {
 
 fn synth(dir: &Path, name: &str, seed: u64, secs: f64) -> PathBuf {
     let p = dir.join(name);
-    ok(&["crowd", "synth", "--seed", &seed.to_string(), "--duration", &secs.to_string(), "--out", s(&p)]);
+    ok(&[
+        "crowd",
+        "synth",
+        "--seed",
+        &seed.to_string(),
+        "--duration",
+        &secs.to_string(),
+        "--out",
+        s(&p),
+    ]);
     p
 }
 
@@ -193,12 +221,30 @@ fn simulation_bytes_depend_on_seed_not_threads() {
     let dir = tempfile::tempdir().unwrap();
     let src = synth(dir.path(), "corridor.csv", 3, 40.0);
     let model = dir.path().join("model.json");
-    ok(&["crowd", "learn", s(&src), "--max-samples", "3000", "--out", s(&model)]);
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "3000",
+        "--out",
+        s(&model),
+    ]);
     let run = |name: &str, seed: &str, threads: &str| {
         let out = dir.path().join(name);
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_herdfit"))
             .env("RAYON_NUM_THREADS", threads)
-            .args(["crowd", "simulate", s(&model), "--entries", s(&src), "--seed", seed, "--out", s(&out)])
+            .args([
+                "crowd",
+                "simulate",
+                s(&model),
+                "--entries",
+                s(&src),
+                "--seed",
+                seed,
+                "--out",
+                s(&out),
+            ])
             .output()
             .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -212,8 +258,19 @@ fn simulation_bytes_depend_on_seed_not_threads() {
     assert_ne!(a, c, "another seed draws other clusters");
     // The model file round-trips to the same bytes.
     let again = dir.path().join("again.json");
-    ok(&["crowd", "learn", s(&src), "--max-samples", "3000", "--out", s(&again)]);
-    assert_eq!(std::fs::read(&model).unwrap(), std::fs::read(&again).unwrap());
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "3000",
+        "--out",
+        s(&again),
+    ]);
+    assert_eq!(
+        std::fs::read(&model).unwrap(),
+        std::fs::read(&again).unwrap()
+    );
 }
 
 #[test]
@@ -226,37 +283,81 @@ fn bad_input_gets_one_line_and_writes_nothing() {
         p
     };
     let out = d.join("model.json");
-    let one = write("one.csv", "frame,time,id,x,y\n0,0,1,0,0\n1,0.4,1,1,0\n2,0.8,1,2,0\n");
+    let one = write(
+        "one.csv",
+        "frame,time,id,x,y\n0,0,1,0,0\n1,0.4,1,1,0\n2,0.8,1,2,0\n",
+    );
     let e = fails(&["crowd", "learn", s(&one), "--out", s(&out)]);
     assert!(e.contains("one.csv") && e.contains("1 individual"), "{e}");
-    let dup = write("dup.csv", "frame,time,id,x,y\n0,0,1,0,0\n0,0,1,1,0\n1,0.4,2,2,0\n");
+    let dup = write(
+        "dup.csv",
+        "frame,time,id,x,y\n0,0,1,0,0\n0,0,1,1,0\n1,0.4,2,2,0\n",
+    );
     let e = fails(&["crowd", "learn", s(&dup), "--out", s(&out)]);
-    assert!(e.contains("dup.csv") && e.contains("duplicate (frame, id)"), "{e}");
-    let back = write("back.csv", "frame,time,id,x,y\n0,0,1,0,0\n0,0,2,1,0\n1,0,1,2,0\n1,0,2,3,0\n");
+    assert!(
+        e.contains("dup.csv") && e.contains("duplicate (frame, id)"),
+        "{e}"
+    );
+    let back = write(
+        "back.csv",
+        "frame,time,id,x,y\n0,0,1,0,0\n0,0,2,1,0\n1,0,1,2,0\n1,0,2,3,0\n",
+    );
     let e = fails(&["crowd", "learn", s(&back), "--out", s(&out)]);
-    assert!(e.contains("back.csv") && e.contains("does not increase"), "{e}");
+    assert!(
+        e.contains("back.csv") && e.contains("does not increase"),
+        "{e}"
+    );
     assert!(!out.exists());
     // A layout polygon with two points.
     let src = synth(d, "c.csv", 1, 30.0);
-    ok(&["crowd", "learn", s(&src), "--max-samples", "2000", "--out", s(&out)]);
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "2000",
+        "--out",
+        s(&out),
+    ]);
     let lay = write(
         "layout.json",
         r#"{"schema": "herdfit.crowd-layout/1", "obstacles": [[[0, 0], [1, 1]]],
             "spawns": [{"position": [0, 1], "goal": [10, 1], "count": 3}]}"#,
     );
     let sim = d.join("sim.csv");
-    let e = fails(&["crowd", "simulate", s(&out), "--layout", s(&lay), "--out", s(&sim)]);
+    let e = fails(&[
+        "crowd",
+        "simulate",
+        s(&out),
+        "--layout",
+        s(&lay),
+        "--out",
+        s(&sim),
+    ]);
     assert!(
         e.contains("layout.json") && e.contains("obstacles[0]") && e.contains("at least 3 points"),
         "{e}"
     );
-    let e = fails(&["crowd", "learn", s(&src), "--k", "0", "--out", s(&d.join("m2.json"))]);
+    let e = fails(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--k",
+        "0",
+        "--out",
+        s(&d.join("m2.json")),
+    ]);
     assert!(e.contains("action.k"), "{e}");
     let names: Vec<String> = std::fs::read_dir(d)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert!(!names.iter().any(|n| n.starts_with("sim") || n.starts_with("m2") || n.starts_with(".herdfit")), "{names:?}");
+    assert!(
+        !names
+            .iter()
+            .any(|n| n.starts_with("sim") || n.starts_with("m2") || n.starts_with(".herdfit")),
+        "{names:?}"
+    );
 }
 
 #[test]
@@ -265,20 +366,44 @@ fn layout_simulation_forms_a_line_and_writes_a_picture() {
     let d = dir.path();
     let src = synth(d, "c.csv", 2, 60.0);
     let model = d.join("m.json");
-    ok(&["crowd", "learn", s(&src), "--max-samples", "5000", "--out", s(&model)]);
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "5000",
+        "--out",
+        s(&model),
+    ]);
     let lay = d.join("hall.json");
     herdfit::crowd::demo_layout().save(&lay).unwrap();
     let (out, png) = (d.join("hall.csv"), d.join("hall.png"));
-    let text = ok(&["crowd", "simulate", s(&model), "--layout", s(&lay), "--png", s(&png), "--out", s(&out)]);
+    let text = ok(&[
+        "crowd",
+        "simulate",
+        s(&model),
+        "--layout",
+        s(&lay),
+        "--png",
+        s(&png),
+        "--out",
+        s(&out),
+    ]);
     assert!(text.contains("80 agents"), "{text}");
     let t = herdfit::data::tracks::Tracks::load(&out).unwrap();
     let roles: std::collections::BTreeSet<&str> =
         t.rows.iter().filter_map(|r| r.role.as_deref()).collect();
-    assert!(roles.contains("line") && roles.contains("locomotion"), "{roles:?}");
+    assert!(
+        roles.contains("line") && roles.contains("locomotion"),
+        "{roles:?}"
+    );
     // Nobody walks through the walls at y = 0 and y = 10 or into the pillar.
     for r in &t.rows {
         assert!(r.pos[1] > 0.0 && r.pos[1] < 10.0, "{r:?}");
-        assert!(!(r.pos[0] > 14.0 && r.pos[0] < 16.0 && r.pos[1] > 4.0 && r.pos[1] < 6.0), "{r:?}");
+        assert!(
+            !(r.pos[0] > 14.0 && r.pos[0] < 16.0 && r.pos[1] > 4.0 && r.pos[1] < 6.0),
+            "{r:?}"
+        );
     }
     assert!(std::fs::metadata(&png).unwrap().len() > 10_000);
 }
@@ -290,13 +415,29 @@ fn eth_ucy_hotel_fold_beats_constant_velocity() {
     let data = shared_data().join("pedestrians/eth-ucy");
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("eval.json");
-    let text = ok(&["crowd", "evaluate", "--data", s(&data), "--scene", "HOTEL", "--json", s(&json)]);
-    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let text = ok(&[
+        "crowd",
+        "evaluate",
+        "--data",
+        s(&data),
+        "--scene",
+        "HOTEL",
+        "--json",
+        s(&json),
+    ]);
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(rep["schema"], "herdfit.crowd-eval/1");
     let f = &rep["folds"][0];
     let g = |a: &str, b: &str| f[a][b].as_f64().unwrap();
-    assert!((g("constant_velocity", "ade") - 0.32).abs() < 0.005, "{text}");
-    assert!((g("constant_velocity", "fde") - 0.61).abs() < 0.005, "{text}");
+    assert!(
+        (g("constant_velocity", "ade") - 0.32).abs() < 0.005,
+        "{text}"
+    );
+    assert!(
+        (g("constant_velocity", "fde") - 0.61).abs() < 0.005,
+        "{text}"
+    );
     assert!(f["windows"].as_u64().unwrap() > 1000, "{text}");
     assert!(g("model", "ade") < g("constant_velocity", "ade"), "{text}");
     assert!(g("model", "fde") < g("constant_velocity", "fde"), "{text}");

@@ -87,13 +87,19 @@ impl ActionConfig {
             return bad("attraction", format!("= {} must be ≥ 0", self.attraction));
         }
         if !(self.bandwidth_scale.is_finite() && self.bandwidth_scale > 0.0) {
-            return bad("bandwidth_scale", format!("= {} must be > 0", self.bandwidth_scale));
+            return bad(
+                "bandwidth_scale",
+                format!("= {} must be > 0", self.bandwidth_scale),
+            );
         }
         if !(self.ridge.is_finite() && self.ridge >= 0.0) {
             return bad("ridge", format!("= {} must be ≥ 0", self.ridge));
         }
         if !(self.max_deviation.is_finite() && self.max_deviation >= 0.0) {
-            return bad("max_deviation", format!("= {} must be ≥ 0", self.max_deviation));
+            return bad(
+                "max_deviation",
+                format!("= {} must be ≥ 0", self.max_deviation),
+            );
         }
         if self.attraction_grid == 0 {
             return bad("attraction_grid", "must be ≥ 1".into());
@@ -263,10 +269,7 @@ fn bandwidth2(nn: &[(f64, u32)], nth: usize) -> f64 {
             return d;
         }
     }
-    nn.iter()
-        .map(|n| n.0)
-        .find(|&d| d > 0.0)
-        .unwrap_or(1.0)
+    nn.iter().map(|n| n.0).find(|&d| d > 0.0).unwrap_or(1.0)
 }
 
 /// Eq. 2: p_i = (1/‖m_i − m_prev‖) / Σ_j 1/‖m_j − m_prev‖. A cluster whose mean is m_prev gets
@@ -507,12 +510,7 @@ pub fn attract(
         .iter()
         .fold((0.0, 0.0), |(c, s), a| (c + a.cos(), s + a.sin()));
     let mean_a = sn.atan2(cs);
-    let sd_a = (angles
-        .iter()
-        .map(|a| wrap(a - mean_a).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt();
+    let sd_a = (angles.iter().map(|a| wrap(a - mean_a).powi(2)).sum::<f64>() / n).sqrt();
     let (lo_v, hi_v) = ((mean_v - limit * sd_v).max(0.0), mean_v + limit * sd_v);
     let clamp_a = |a: f64| mean_a + wrap(a - mean_a).clamp(-limit * sd_a, limit * sd_a);
     let v0 = out[0].hypot(out[1]).clamp(lo_v, hi_v);
@@ -521,9 +519,9 @@ pub fn attract(
     if c <= 0.0 {
         return out;
     }
-    let mean_act = rows.iter().fold([0.0, 0.0], |m, r| {
-        [m[0] + r.1[0] / n, m[1] + r.1[1] / n]
-    });
+    let mean_act = rows
+        .iter()
+        .fold([0.0, 0.0], |m, r| [m[0] + r.1[0] / n, m[1] + r.1[1] / n]);
     let var_a = rows.iter().map(|r| d2(r.1, mean_act)).sum::<f64>() / n + 1e-12;
     let h2 = if h2.is_finite() && h2 > 0.0 { h2 } else { 1.0 };
     let score = |cand: V2| {

@@ -223,8 +223,7 @@ pub fn components(pts: &[V2], r: f64) -> Vec<Vec<usize>> {
         while let Some(i) = stack.pop() {
             members.push(i);
             for j in 0..pts.len() {
-                if comp[j] == usize::MAX
-                    && (pts[i][0] - pts[j][0]).hypot(pts[i][1] - pts[j][1]) < r
+                if comp[j] == usize::MAX && (pts[i][0] - pts[j][0]).hypot(pts[i][1] - pts[j][1]) < r
                 {
                     comp[j] = id;
                     stack.push(j);

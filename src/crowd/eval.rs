@@ -163,7 +163,14 @@ fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig)
         let hist: Vec<V2> = s.pos[a0 - s.start..=f - s.start].to_vec();
         let heads = headings(&hist, fc.still_speed * scene.dt);
         let h = *heads.last().expect("history");
-        let mut a = Agent::new(s.id, hist.clone(), h, None, cfg.seed ^ ((f as u64) << 20), scene.dt);
+        let mut a = Agent::new(
+            s.id,
+            hist.clone(),
+            h,
+            None,
+            cfg.seed ^ ((f as u64) << 20),
+            scene.dt,
+        );
         let hp = heads[heads.len() - 2];
         a.prev_formation = formation(hist[hist.len() - 2], hp, scene.others(f - 1, k), fc.radius);
         if a0 + obs == f + 1 && s.end() > f + pred {
@@ -204,10 +211,12 @@ fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig)
     for (x, &(i, k)) in scored.iter().enumerate() {
         for &(j, l) in &scored[x + 1..] {
             acc.pairs += 1;
-            let hit = |g: &dyn Fn(usize) -> (V2, V2)| (0..pred).any(|t| {
-                let (a, b) = g(t);
-                dist(a, b) < r
-            });
+            let hit = |g: &dyn Fn(usize) -> (V2, V2)| {
+                (0..pred).any(|t| {
+                    let (a, b) = g(t);
+                    dist(a, b) < r
+                })
+            };
             acc.coll[0] += usize::from(hit(&|t| (paths[i][t], paths[j][t])));
             acc.coll[1] += usize::from(hit(&|t| (cv(k, t), cv(l, t))));
             acc.coll[2] += usize::from(hit(&|t| (truth(k, t), truth(l, t))));

@@ -172,19 +172,14 @@ pub fn unit(v: V2) -> Option<V2> {
 /// 45° wide and centred on its direction).
 pub fn sector(d: V2) -> usize {
     let a = d[1].atan2(d[0]) + std::f64::consts::PI / SECTORS as f64;
-    let s = (a.rem_euclid(std::f64::consts::TAU) / (std::f64::consts::TAU / SECTORS as f64))
-        as usize;
+    let s =
+        (a.rem_euclid(std::f64::consts::TAU) / (std::f64::consts::TAU / SECTORS as f64)) as usize;
     s.min(SECTORS - 1)
 }
 
 /// Eq. 1: in each sector, f = (r − d)²/r² for the nearest neighbour at distance d < r, else 0.
 /// `frame` is the unit x axis of the sectors (the heading, or the pivot's orientation).
-pub fn formation(
-    p: V2,
-    frame: V2,
-    neighbours: impl Iterator<Item = V2>,
-    r: f64,
-) -> [f64; SECTORS] {
+pub fn formation(p: V2, frame: V2, neighbours: impl Iterator<Item = V2>, r: f64) -> [f64; SECTORS] {
     let mut nearest = [f64::INFINITY; SECTORS];
     for q in neighbours {
         let d = [q[0] - p[0], q[1] - p[1]];
@@ -216,7 +211,8 @@ pub struct Segment {
 impl Segment {
     /// Position at scene frame `f`, if the segment covers it.
     pub fn at(&self, f: usize) -> Option<V2> {
-        f.checked_sub(self.start).and_then(|j| self.pos.get(j).copied())
+        f.checked_sub(self.start)
+            .and_then(|j| self.pos.get(j).copied())
     }
     /// One past the last frame covered.
     pub fn end(&self) -> usize {
@@ -420,7 +416,10 @@ mod tests {
     fn headings_hold_through_stops() {
         let p = vec![[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
         let h = headings(&p, 1e-6);
-        assert_eq!(h, vec![[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]);
+        assert_eq!(
+            h,
+            vec![[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]
+        );
         assert_eq!(to_world(to_local([0.3, -2.0], h[4]), h[4]), [0.3, -2.0]);
     }
 }

@@ -223,12 +223,15 @@ impl Layout {
     /// the first edge crossed; else no move at all.
     pub fn constrain(&self, segs: &[[V2; 2]], p: V2, q: V2) -> V2 {
         let blocked = |a: V2, b: V2| {
-            segs.iter().find(|s| crosses(a, b, s[0], s[1])).copied().or_else(|| {
-                self.obstacles
-                    .iter()
-                    .any(|o| inside(o, b))
-                    .then_some([b, b])
-            })
+            segs.iter()
+                .find(|s| crosses(a, b, s[0], s[1]))
+                .copied()
+                .or_else(|| {
+                    self.obstacles
+                        .iter()
+                        .any(|o| inside(o, b))
+                        .then_some([b, b])
+                })
         };
         let Some(s) = blocked(p, q) else { return q };
         let t = [s[1][0] - s[0][0], s[1][1] - s[0][1]];
@@ -247,7 +250,8 @@ impl Layout {
 
 /// Whether segments a–b and c–d properly intersect.
 pub fn crosses(a: V2, b: V2, c: V2, d: V2) -> bool {
-    let orient = |p: V2, q: V2, r: V2| (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]);
+    let orient =
+        |p: V2, q: V2, r: V2| (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]);
     let (o1, o2) = (orient(a, b, c), orient(a, b, d));
     let (o3, o4) = (orient(c, d, a), orient(c, d, b));
     o1 * o2 < 0.0 && o3 * o4 < 0.0
@@ -283,7 +287,10 @@ mod tests {
         let segs = l.segments();
         assert_eq!(l.constrain(&segs, [1.0, 0.5], [1.5, 0.7]), [1.5, 0.7]);
         let q = l.constrain(&segs, [1.0, 0.5], [2.0, 1.5]);
-        assert!((q[0] - 2.0).abs() < 1e-12 && (q[1] - 0.5).abs() < 1e-12, "{q:?}");
+        assert!(
+            (q[0] - 2.0).abs() < 1e-12 && (q[1] - 0.5).abs() < 1e-12,
+            "{q:?}"
+        );
         assert!(inside(&l.obstacles[0], [5.5, -0.5]));
         let q = l.constrain(&segs, [4.5, -0.5], [5.5, -0.5]);
         assert!(!inside(&l.obstacles[0], q), "{q:?}");
@@ -292,6 +299,9 @@ mod tests {
             ..Layout::default()
         };
         let e = bad.check().unwrap_err().to_string();
-        assert!(e.contains("obstacles[0]") && e.contains("at least 3 points"), "{e}");
+        assert!(
+            e.contains("obstacles[0]") && e.contains("at least 3 points"),
+            "{e}"
+        );
     }
 }

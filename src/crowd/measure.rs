@@ -232,12 +232,7 @@ pub fn compare(
         b: nb.into(),
         measures: vec![
             row("speed", format!("{unit_name}/s"), &ma.speed, &mb.speed),
-            row(
-                "nearest_neighbour",
-                unit_name.to_string(),
-                &ma.nn,
-                &mb.nn,
-            ),
+            row("nearest_neighbour", unit_name.to_string(), &ma.nn, &mb.nn),
             row("turning_rate", "rad/s".into(), &ma.turning, &mb.turning),
             row(
                 "polarization",

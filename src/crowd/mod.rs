@@ -84,7 +84,10 @@ pub fn demo_layout() -> layout::Layout {
     use layout::{Layout, NamedPivot, Region, Spawn};
     Layout {
         bounds: Some([[-1.0, -1.0], [31.0, 11.0]]),
-        walls: vec![vec![[0.0, 0.0], [30.0, 0.0]], vec![[0.0, 10.0], [30.0, 10.0]]],
+        walls: vec![
+            vec![[0.0, 0.0], [30.0, 0.0]],
+            vec![[0.0, 10.0], [30.0, 10.0]],
+        ],
         obstacles: vec![vec![[14.0, 4.0], [16.0, 4.0], [16.0, 6.0], [14.0, 6.0]]],
         pivots: vec![NamedPivot {
             name: "booth".into(),
@@ -137,7 +140,13 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
     hall.save(&out.join("hall.json"))?;
     let entries = sim::entries_from_layout(&hall, m.dt, sim::typical_speed(&m), 1);
     let t0 = std::time::Instant::now();
-    let run = sim::simulate(&m, Some(&hall), &entries, &sim::SimConfig::default(), progress)?;
+    let run = sim::simulate(
+        &m,
+        Some(&hall),
+        &entries,
+        &sim::SimConfig::default(),
+        progress,
+    )?;
     let seconds = t0.elapsed().as_secs_f64();
     run.tracks.save(&out.join("hall.csv"))?;
     let picture = out.join("hall.png");

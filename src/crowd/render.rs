@@ -144,16 +144,10 @@ pub fn top_view_png(
                 .map_err(|e| fail(e.to_string()))?;
         }
         chart
-            .draw_series(
-                tracks
-                    .rows
-                    .iter()
-                    .filter(|r| r.frame == frame)
-                    .map(|r| {
-                        let (cr, cg, cb) = behaviour_colour(r.role.as_deref());
-                        Circle::new((r.pos[0], r.pos[1]), 4, RGBColor(cr, cg, cb).filled())
-                    }),
-            )
+            .draw_series(tracks.rows.iter().filter(|r| r.frame == frame).map(|r| {
+                let (cr, cg, cb) = behaviour_colour(r.role.as_deref());
+                Circle::new((r.pos[0], r.pos[1]), 4, RGBColor(cr, cg, cb).filled())
+            }))
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
@@ -169,9 +163,14 @@ pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f
     let cv = |e: opencv::Error| Error::file(path, format!("OpenCV: {}", e.message));
     let b = extent(&[tracks], layout);
     let even = |v: f64| ((v * px).ceil() as usize).div_ceil(2) as i32 * 2;
-    let (w, h) = (even(b[1][0] - b[0][0]).max(2), even(b[1][1] - b[0][1]).max(2));
+    let (w, h) = (
+        even(b[1][0] - b[0][0]).max(2),
+        even(b[1][1] - b[0][1]).max(2),
+    );
     if (w as i64) * (h as i64) > 4096 * 4096 {
-        return Err(Error::invalid(format!("a {w}×{h} video frame is too large")));
+        return Err(Error::invalid(format!(
+            "a {w}×{h} video frame is too large"
+        )));
     }
     let to_px = |p: V2| {
         Point::new(
@@ -186,7 +185,10 @@ pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f
     let mut writer =
         videoio::VideoWriter::new(&name, fourcc, fps, Size::new(w, h), true).map_err(cv)?;
     if !writer.is_opened().map_err(cv)? {
-        return Err(Error::file(path, "OpenCV cannot open an MJPG AVI writer here"));
+        return Err(Error::file(
+            path,
+            "OpenCV cannot open an MJPG AVI writer here",
+        ));
     }
     let bgr = |c: (u8, u8, u8)| Scalar::new(c.2 as f64, c.1 as f64, c.0 as f64, 0.0);
     let mut base =
@@ -198,8 +200,16 @@ pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f
         }
         for wl in &l.walls {
             for s in wl.windows(2) {
-                imgproc::line(&mut base, to_px(s[0]), to_px(s[1]), Scalar::all(0.0), 3, imgproc::LINE_AA, 0)
-                    .map_err(cv)?;
+                imgproc::line(
+                    &mut base,
+                    to_px(s[0]),
+                    to_px(s[1]),
+                    Scalar::all(0.0),
+                    3,
+                    imgproc::LINE_AA,
+                    0,
+                )
+                .map_err(cv)?;
             }
         }
     }
@@ -209,14 +219,30 @@ pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f
         for (_, pts) in trails(tracks, f.saturating_sub(8), f) {
             let c = bgr(behaviour_colour(pts.last().and_then(|p| p.1.as_deref())));
             for s in pts.windows(2) {
-                imgproc::line(&mut img, to_px(s[0].0), to_px(s[1].0), c, 1, imgproc::LINE_AA, 0)
-                    .map_err(cv)?;
+                imgproc::line(
+                    &mut img,
+                    to_px(s[0].0),
+                    to_px(s[1].0),
+                    c,
+                    1,
+                    imgproc::LINE_AA,
+                    0,
+                )
+                .map_err(cv)?;
             }
         }
         for r in &tracks.rows[range] {
             let c = bgr(behaviour_colour(r.role.as_deref()));
-            imgproc::circle(&mut img, to_px([r.pos[0], r.pos[1]]), radius, c, -1, imgproc::LINE_AA, 0)
-                .map_err(cv)?;
+            imgproc::circle(
+                &mut img,
+                to_px([r.pos[0], r.pos[1]]),
+                radius,
+                c,
+                -1,
+                imgproc::LINE_AA,
+                0,
+            )
+            .map_err(cv)?;
         }
         writer.write(&img).map_err(cv)?;
     }

@@ -333,9 +333,11 @@ impl Machine<'_> {
             if m.line.is_some() || m.served || m.group.is_some() {
                 continue;
             }
-            if let Some(li) = self.lines.iter().position(|(ri, _)| {
-                super::layout::inside(&layout.regions[*ri].polygon, a.pos)
-            }) {
+            if let Some(li) = self
+                .lines
+                .iter()
+                .position(|(ri, _)| super::layout::inside(&layout.regions[*ri].polygon, a.pos))
+            {
                 self.lines[li].1.push(a.id);
                 m.line = Some(li);
                 m.until = 0;
@@ -355,7 +357,9 @@ pub fn simulate(
 ) -> Result<SimResult> {
     cfg.check()?;
     if entries.is_empty() {
-        return Err(Error::invalid("no agents to simulate (no entries or spawns)"));
+        return Err(Error::invalid(
+            "no agents to simulate (no entries or spawns)",
+        ));
     }
     let dt = model.dt;
     let steps = if cfg.steps > 0 {
@@ -405,7 +409,14 @@ pub fn simulate(
                 e.position[0] - e.velocity[0] * dt,
                 e.position[1] - e.velocity[1] * dt,
             ];
-            agents.push(Agent::new(e.id, vec![back, e.position], h, e.goal, cfg.seed, dt));
+            agents.push(Agent::new(
+                e.id,
+                vec![back, e.position],
+                h,
+                e.goal,
+                cfg.seed,
+                dt,
+            ));
             minds.push(Mind {
                 goal: e.goal,
                 deadline: t + expected(e, cfg, dt),
@@ -440,7 +451,13 @@ pub fn simulate(
         if t == steps {
             break;
         }
-        advance(model, &mut agents, &plans, layout.map(|l| (l, segs.as_slice())), keep);
+        advance(
+            model,
+            &mut agents,
+            &plans,
+            layout.map(|l| (l, segs.as_slice())),
+            keep,
+        );
         agent_steps += agents.len() as u64;
         // Leave at the goal (unless queueing or grouped) or at the deadline.
         let mut i = 0;

@@ -129,9 +129,16 @@ impl Grid {
 
     /// Indices of the points in cells within `r` of `p` (a superset of those within `r`).
     pub fn near(&self, p: V2, r: f64) -> impl Iterator<Item = usize> + '_ {
-        let cell = |v: f64, o: f64, n: usize| (((v - o) / self.cell).floor().max(0.0) as usize).min(n - 1);
-        let (x0, x1) = (cell(p[0] - r, self.origin[0], self.nx), cell(p[0] + r, self.origin[0], self.nx));
-        let (y0, y1) = (cell(p[1] - r, self.origin[1], self.ny), cell(p[1] + r, self.origin[1], self.ny));
+        let cell =
+            |v: f64, o: f64, n: usize| (((v - o) / self.cell).floor().max(0.0) as usize).min(n - 1);
+        let (x0, x1) = (
+            cell(p[0] - r, self.origin[0], self.nx),
+            cell(p[0] + r, self.origin[0], self.nx),
+        );
+        let (y0, y1) = (
+            cell(p[1] - r, self.origin[1], self.ny),
+            cell(p[1] + r, self.origin[1], self.ny),
+        );
         (y0..=y1).flat_map(move |iy| {
             (x0..=x1).flat_map(move |ix| {
                 let k = iy * self.nx + ix;
@@ -152,13 +159,7 @@ pub struct Planned {
 }
 
 /// The state of `a` (unweighted) given the others' positions.
-pub fn perceive(
-    model: &CrowdModel,
-    a: &Agent,
-    i: usize,
-    pos: &[V2],
-    grid: &Grid,
-) -> StateParts {
+pub fn perceive(model: &CrowdModel, a: &Agent, i: usize, pos: &[V2], grid: &Grid) -> StateParts {
     let f = &model.config.features;
     let frame = a.pivot.as_ref().map_or(a.heading, |p| p.dir());
     let now = formation(

@@ -68,7 +68,9 @@ impl SynthConfig {
             }
         }
         if !(self.speed_sd >= 0.0 && self.repulsion >= 0.0) {
-            return Err(Error::invalid("synth.speed_sd and synth.repulsion must be ≥ 0"));
+            return Err(Error::invalid(
+                "synth.speed_sd and synth.repulsion must be ≥ 0",
+            ));
         }
         Ok(())
     }
@@ -101,7 +103,11 @@ pub fn corridor(cfg: &SynthConfig) -> Result<Tracks> {
             let right = rng.gen_bool(0.5);
             let y = rng.gen_range(0.4..cfg.width - 0.4);
             let speed = (cfg.speed + cfg.speed_sd * (rng.gen::<f64>() * 2.0 - 1.0) * 1.7).max(0.3);
-            let (x, gx) = if right { (0.0, cfg.length) } else { (cfg.length, 0.0) };
+            let (x, gx) = if right {
+                (0.0, cfg.length)
+            } else {
+                (cfg.length, 0.0)
+            };
             walkers.push(Walker {
                 id: next_id,
                 p: [x, y],
@@ -159,6 +165,7 @@ pub fn corridor(cfg: &SynthConfig) -> Result<Tracks> {
         walkers.retain(|w| (w.goal_x - w.p[0]) * (w.goal_x - cfg.length / 2.0) > 0.0);
     }
     let mut meta = TracksMeta::new(Units::Metres, cfg.fps, 2);
-    meta.provenance = serde_json::json!({"source": "herdfit crowd synth (social-force corridor)", "config": cfg});
+    meta.provenance =
+        serde_json::json!({"source": "herdfit crowd synth (social-force corridor)", "config": cfg});
     Tracks::new(meta, rows)
 }

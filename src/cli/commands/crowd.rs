@@ -6,7 +6,9 @@ use crate::crowd::features::{IntentWindow, Scene};
 use crate::crowd::layout::Layout;
 use crate::crowd::measure::compare;
 use crate::crowd::model::{learn, read_tracks, CrowdModel, LearnConfig};
-use crate::crowd::sim::{entries_from_layout, entries_from_tracks, simulate, typical_speed, SimConfig};
+use crate::crowd::sim::{
+    entries_from_layout, entries_from_tracks, simulate, typical_speed, SimConfig,
+};
 use crate::crowd::{render, synth};
 use crate::error::{Error, Result};
 use clap::{Args, Subcommand};
@@ -252,9 +254,14 @@ fn learn_cmd(a: LearnArgs) -> Result<()> {
 fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     let model = CrowdModel::load(&a.model)?;
     let layout = a.layout.as_deref().map(Layout::load).transpose()?;
-    for p in [Some(&a.out), a.png.as_ref(), a.video.as_ref(), a.compare.as_ref()]
-        .into_iter()
-        .flatten()
+    for p in [
+        Some(&a.out),
+        a.png.as_ref(),
+        a.video.as_ref(),
+        a.compare.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
     {
         crate::io::check_writable(p)?;
     }
@@ -399,7 +406,10 @@ fn compare_cmd(a: CompareArgs) -> Result<()> {
         &ua,
         a.cell,
     )?;
-    println!("{:<18} {:>10} {:>10} {:>10}", "measure", "mean A", "mean B", "W1");
+    println!(
+        "{:<18} {:>10} {:>10} {:>10}",
+        "measure", "mean A", "mean B", "W1"
+    );
     for m in &c.measures {
         println!(
             "{:<18} {:>10.4} {:>10.4} {:>10.4} {}",
