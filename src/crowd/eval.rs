@@ -50,9 +50,20 @@ pub struct EvalConfig {
 }
 
 impl Default for EvalConfig {
+    /// The forecasting configuration measured best in RESULTS.md §3: the kinematic features
+    /// (speed, intended direction; formation weight 0) in 4 PCA dimensions, tracks smoothed with
+    /// σ = 3 frames, eq. 3 over all k = 100 neighbours with 3 × the 5th neighbour's distance as
+    /// bandwidth, no clustering or attraction (both raised the error on every fold tried).
     fn default() -> Self {
         let mut learn = LearnConfig::default();
         learn.action.choice = super::action::ClusterChoice::Nearest;
+        learn.action.clusters = 1;
+        learn.action.attraction = 0.0;
+        learn.action.max_deviation = 100.0;
+        learn.action.bandwidth_scale = 3.0;
+        learn.features.weights.formation = 0.0;
+        learn.pca_dims = 4;
+        learn.smoothing = 3.0;
         EvalConfig {
             learn,
             data: PathBuf::from("../shared/data/pedestrians/eth-ucy"),
