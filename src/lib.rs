@@ -32,6 +32,7 @@ macro_rules! enum_names {
 
 pub mod backend;
 pub mod cli;
+pub mod crowd;
 pub mod data;
 pub mod error;
 pub mod flock;

@@ -285,3 +285,8 @@ pub fn scene_plot(
     }
     crate::data::atomic::persist(tmp, path)
 }
+
+/// Registers the plot font (for modules that draw their own charts with plotters).
+pub(crate) fn ensure_font() -> Result<()> {
+    font_ready()
+}

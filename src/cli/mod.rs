@@ -49,6 +49,9 @@ pub enum Command {
     /// Line-formation flocks (V, U, J, line) from a marked example: synth, extract, animate.
     #[command(subcommand)]
     Flock(flock::FlockCommand),
+    /// Crowds learnt from tracked trajectories (Lee et al. 2007): learn, simulate, evaluate, compare.
+    #[command(subcommand)]
+    Crowd(crowd::CrowdCommand),
 }
 
 /// Runs the parsed command line.
@@ -66,5 +69,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::FieldsInfo(a) => fields_info::exec(a),
         Command::Demo(a) => demo::exec(a),
         Command::Flock(c) => flock::run(c),
+        Command::Crowd(c) => crowd::run(c),
     }
 }

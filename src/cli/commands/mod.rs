@@ -3,6 +3,7 @@
 
 pub mod author;
 pub mod bench;
+pub mod crowd;
 pub mod demo;
 pub mod extract;
 pub mod fields_info;

@@ -1,0 +1,125 @@
+//! Crowd simulation throughput (agent-steps per second) with k = 100 and ≥ 5,000 training samples,
+//! and its parts against peers in the same run: kiddo's kd-tree vs brute-force kNN, our 2-D
+//! k-means vs linfa-clustering's KMeans on the same 100 actions.
+//!
+//! `cargo bench --bench crowd`
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use herdfit::crowd::action::{kmeans, ActionModel, Scratch};
+use herdfit::crowd::knn::brute_force;
+use herdfit::crowd::model::{learn, CrowdModel, LearnConfig};
+use herdfit::crowd::sim::{entries_from_layout, typical_speed};
+use herdfit::crowd::step::{advance, plan, Agent};
+use herdfit::crowd::synth::{corridor, SynthConfig};
+use herdfit::progress::NoProgress;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+fn model() -> CrowdModel {
+    let src = corridor(&SynthConfig {
+        duration: 120.0,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let cfg = LearnConfig {
+        max_samples: 6000,
+        ..LearnConfig::default()
+    };
+    let m = learn(&[src], &cfg, &mut NoProgress).unwrap();
+    assert!(
+        m.behaviours[0].model.samples.len() >= 5000,
+        "≥ 5,000 samples"
+    );
+    assert_eq!(m.config.action.k, 100);
+    m
+}
+
+/// `n` agents spread over a 40 × 40 m square walking in random directions.
+fn agents(m: &CrowdModel, n: usize) -> Vec<Agent> {
+    let mut layout = herdfit::crowd::layout::Layout::default();
+    let side = (n as f64).sqrt().ceil() as usize;
+    for i in 0..n {
+        let (x, y) = (
+            (i % side) as f64 * 40.0 / side as f64,
+            (i / side) as f64 * 40.0 / side as f64,
+        );
+        layout.spawns.push(herdfit::crowd::layout::Spawn {
+            position: [x, y],
+            spread: 0.3,
+            goal: [40.0 - y, x],
+            count: 1,
+            start: 0.0,
+            interval: 1.0,
+        });
+    }
+    let dt = m.dt;
+    entries_from_layout(&layout, dt, typical_speed(m), 0)
+        .into_iter()
+        .map(|e| {
+            let back = [
+                e.position[0] - e.velocity[0] * dt,
+                e.position[1] - e.velocity[1] * dt,
+            ];
+            let h = herdfit::crowd::features::unit(e.velocity).unwrap_or([1.0, 0.0]);
+            Agent::new(e.id, vec![back, e.position], h, e.goal, 0, dt)
+        })
+        .collect()
+}
+
+fn bench_step(c: &mut Criterion) {
+    let m = model();
+    let mut g = c.benchmark_group("crowd_step");
+    for n in [100usize, 400] {
+        let mut a = agents(&m, n);
+        g.throughput(Throughput::Elements(n as u64));
+        g.bench_with_input(BenchmarkId::new("agents", n), &n, |b, _| {
+            b.iter(|| {
+                let p = plan(&m, &mut a);
+                advance(&m, &mut a, &p, None, 8);
+            })
+        });
+    }
+    g.finish();
+}
+
+fn bench_parts(c: &mut Criterion) {
+    let m = model();
+    let am: &ActionModel = &m.behaviours[0].model;
+    let s = &am.samples;
+    let q: Vec<f64> = s.states[123 * s.dims..124 * s.dims].to_vec();
+    let mut g = c.benchmark_group("crowd_parts");
+    g.bench_function("knn_kdtree_k100", |b| {
+        let tree = herdfit::crowd::knn::StateTree::build(&s.states, s.dims).unwrap();
+        let mut out = Vec::new();
+        b.iter(|| tree.nearest(&q, 100, &mut out))
+    });
+    g.bench_function("knn_brute_force_k100", |b| {
+        b.iter(|| brute_force(&s.states, s.dims, &q, 100))
+    });
+    let acts: Vec<[f64; 2]> = s.actions[..100].to_vec();
+    g.bench_function("kmeans3_ours", |b| {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut assign = Vec::new();
+        b.iter(|| kmeans(&acts, 3, 20, &mut rng, &mut assign))
+    });
+    g.bench_function("kmeans3_linfa", |b| {
+        use linfa::traits::Fit;
+        let data = ndarray016::Array2::from_shape_fn((100, 2), |(i, j)| acts[i][j]);
+        let ds = linfa::DatasetBase::from(data);
+        b.iter(|| {
+            linfa_clustering::KMeans::params_with_rng(3, ChaCha8Rng::seed_from_u64(0))
+                .max_n_iterations(20)
+                .fit(&ds)
+                .unwrap()
+        })
+    });
+    g.bench_function("decide_one_query", |b| {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut sc = Scratch::default();
+        b.iter(|| am.decide(&q, [1.2, 0.0], &m.config.action, &mut rng, &mut sc))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_step, bench_parts);
+criterion_main!(benches);

@@ -1,0 +1,446 @@
+//! `herdfit crowd …`: learn a crowd model from tracks, simulate it, evaluate it on ETH/UCY,
+//! compare crowds. Each verb: flags → config → one library call → print.
+
+use crate::crowd::eval::{evaluate, EvalConfig};
+use crate::crowd::features::{IntentWindow, Scene};
+use crate::crowd::layout::Layout;
+use crate::crowd::measure::compare;
+use crate::crowd::model::{learn, read_tracks, CrowdModel, LearnConfig};
+use crate::crowd::sim::{
+    entries_from_layout, entries_from_tracks, simulate, typical_speed, SimConfig,
+};
+use crate::crowd::{render, synth};
+use crate::error::{Error, Result};
+use clap::{Args, Subcommand};
+use std::path::{Path, PathBuf};
+
+/// The crowd verbs.
+#[derive(Subcommand, Debug)]
+pub enum CrowdCommand {
+    /// Learn a crowd model (herdfit.crowd-model/1) from tracks: herdfit.tracks/1 CSV or ETH/UCY .txt.
+    Learn(LearnArgs),
+    /// Simulate a learnt crowd in a layout (its spawns) or entering as the agents of real tracks did.
+    Simulate(SimulateArgs),
+    /// ETH/UCY leave-one-scene-out forecasting (observe 8, predict 12) beside constant velocity.
+    Evaluate(EvaluateArgs),
+    /// Compare two crowds: speed, nearest-neighbour, turning and polarization distributions
+    /// (Wasserstein distances) and density maps.
+    Compare(CompareArgs),
+    /// Write a synthetic social-force corridor crowd (tracks CSV) to learn from.
+    Synth(SynthArgs),
+}
+
+/// Flags that override a learn configuration.
+#[derive(Args, Debug, Clone)]
+pub struct LearnFlags {
+    /// Configuration (LearnConfig JSON); the flags below override it.
+    #[arg(long, value_name = "learn.json")]
+    pub config: Option<PathBuf>,
+    /// Neighbourhood radius r of eq. 1 (tracks' unit).
+    #[arg(long, value_name = "R")]
+    pub radius: Option<f64>,
+    /// Nearest samples per query.
+    #[arg(long, value_name = "K")]
+    pub k: Option<usize>,
+    /// PCA dimensions.
+    #[arg(long, value_name = "D")]
+    pub pca_dims: Option<usize>,
+    /// σ (frames) of the Gaussian smoothing of the training tracks.
+    #[arg(long, value_name = "S")]
+    pub smoothing: Option<f64>,
+    /// At most this many samples per behaviour.
+    #[arg(long, value_name = "N")]
+    pub max_samples: Option<usize>,
+    /// Frames in the intended-direction window.
+    #[arg(long, value_name = "W")]
+    pub intent_window: Option<usize>,
+    /// Intended direction of training samples from past frames only (default: past and future).
+    #[arg(long)]
+    pub past_intent: bool,
+    /// Frame rate of ETH/UCY .txt inputs.
+    #[arg(long, value_name = "FPS")]
+    pub eth_fps: Option<f64>,
+}
+
+impl LearnFlags {
+    fn config(&self, base: LearnConfig) -> Result<LearnConfig> {
+        let mut c = match &self.config {
+            Some(p) => read_json::<LearnConfig>(p)?,
+            None => base,
+        };
+        if let Some(v) = self.radius {
+            c.features.radius = v;
+        }
+        if let Some(v) = self.k {
+            c.action.k = v;
+        }
+        if let Some(v) = self.pca_dims {
+            c.pca_dims = v;
+        }
+        if let Some(v) = self.smoothing {
+            c.smoothing = v;
+        }
+        if let Some(v) = self.max_samples {
+            c.max_samples = v;
+        }
+        if let Some(v) = self.intent_window {
+            c.features.intent_window = v;
+        }
+        if self.past_intent {
+            c.features.intent = IntentWindow::Past;
+        }
+        if let Some(v) = self.eth_fps {
+            c.eth_fps = v;
+        }
+        Ok(c)
+    }
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
+    let s = std::fs::read_to_string(p).map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
+    serde_json::from_str(&s).map_err(|e| Error::file(p, format!("bad configuration: {e}")))
+}
+
+fn write_json<T: serde::Serialize>(p: &Path, v: &T) -> Result<()> {
+    let s = serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()))?;
+    crate::data::atomic::write_atomic(p, format!("{s}\n").as_bytes())
+}
+
+#[derive(Args, Debug)]
+pub struct LearnArgs {
+    /// Training tracks (several allowed, same units and frame rate).
+    #[arg(value_name = "TRACKS", num_args = 1.., required = true)]
+    pub inputs: Vec<PathBuf>,
+    #[command(flatten)]
+    pub flags: LearnFlags,
+    /// Output model.
+    #[arg(long, value_name = "MODEL.json")]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    #[arg(value_name = "MODEL.json")]
+    pub model: PathBuf,
+    /// Layout with walls, obstacles, pivots, regions and spawns.
+    #[arg(long, value_name = "LAYOUT.json")]
+    pub layout: Option<PathBuf>,
+    /// Agents enter where and when those of these tracks did, heading to where they left.
+    #[arg(long, value_name = "TRACKS", required_unless_present = "layout")]
+    pub entries: Option<PathBuf>,
+    /// Steps (0: the layout's duration or until the last entry is done).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub steps: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// With --entries: agents keep their own past direction instead of heading to where the real
+    /// ones left, and stay until the end (--steps; default the tracks' length).
+    #[arg(long, requires = "entries")]
+    pub no_goals: bool,
+    /// Every agent uses locomotion (no groups or lines).
+    #[arg(long)]
+    pub no_behaviours: bool,
+    /// Top-view PNG of the middle frame.
+    #[arg(long, value_name = "OUT.png")]
+    pub png: Option<PathBuf>,
+    /// Top-view MJPG AVI (needs the `video` feature).
+    #[arg(long, value_name = "OUT.avi")]
+    pub video: Option<PathBuf>,
+    /// Comparison with the --entries tracks (JSON).
+    #[arg(long, value_name = "OUT.json", requires = "entries")]
+    pub compare: Option<PathBuf>,
+    /// Output tracks (herdfit.tracks/1 CSV + sidecar).
+    #[arg(long, value_name = "TRACKS.csv")]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct EvaluateArgs {
+    /// Folder of the ETH/UCY text files (default: $HERDFIT_SHARED_DATA/pedestrians/eth-ucy or
+    /// ../shared/data/pedestrians/eth-ucy).
+    #[arg(long, value_name = "DIR")]
+    pub data: Option<PathBuf>,
+    /// Test scene (repeat; default all five).
+    #[arg(long, value_name = "NAME")]
+    pub scene: Vec<String>,
+    #[command(flatten)]
+    pub flags: LearnFlags,
+    /// Sample a cluster with eq. 2's probabilities instead of taking the most probable.
+    #[arg(long)]
+    pub sample_clusters: bool,
+    /// Attraction range (standard deviations; 0: off).
+    #[arg(long, value_name = "C")]
+    pub attraction: Option<f64>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Report (herdfit.crowd-eval/1 JSON).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    #[arg(value_name = "A")]
+    pub a: PathBuf,
+    #[arg(value_name = "B")]
+    pub b: PathBuf,
+    /// Density-map cell (tracks' unit).
+    #[arg(long, value_name = "C", default_value_t = 1.0)]
+    pub cell: f64,
+    /// Frame rate of ETH/UCY .txt inputs.
+    #[arg(long, value_name = "FPS", default_value_t = 2.5)]
+    pub eth_fps: f64,
+    /// Report (herdfit.crowd-compare/1 JSON).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct SynthArgs {
+    /// Seconds simulated.
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long, value_name = "TRACKS.csv")]
+    pub out: PathBuf,
+}
+
+/// Runs a crowd verb.
+pub fn run(c: CrowdCommand) -> Result<()> {
+    match c {
+        CrowdCommand::Learn(a) => learn_cmd(a),
+        CrowdCommand::Simulate(a) => simulate_cmd(a),
+        CrowdCommand::Evaluate(a) => evaluate_cmd(a),
+        CrowdCommand::Compare(a) => compare_cmd(a),
+        CrowdCommand::Synth(a) => synth_cmd(a),
+    }
+}
+
+fn learn_cmd(a: LearnArgs) -> Result<()> {
+    let cfg = a.flags.config(LearnConfig::default())?;
+    cfg.check()?;
+    crate::data::atomic::check_writable(&a.out)?;
+    let inputs = a
+        .inputs
+        .iter()
+        .map(|p| read_tracks(p, cfg.eth_fps))
+        .collect::<Result<Vec<_>>>()?;
+    let mut bars = crate::cli::Bars::default();
+    let m = learn(&inputs, &cfg, &mut bars).map_err(|e| match a.inputs.as_slice() {
+        [one] => e.in_file(one),
+        _ => e,
+    })?;
+    m.save(&a.out)?;
+    let names: Vec<String> = m
+        .behaviours
+        .iter()
+        .map(|b| format!("{} {}", b.name, b.model.samples.len()))
+        .collect();
+    println!(
+        "crowd learn: {} samples ({}), PCA {} → {}; mean group {:.2}, interpersonal {:.2} {}; wrote {}",
+        m.samples(),
+        names.join(", "),
+        m.behaviours[0].pca.input(),
+        m.behaviours[0].pca.dims(),
+        m.fsm.group_size,
+        m.fsm.interpersonal,
+        m.units.as_str(),
+        a.out.display()
+    );
+    Ok(())
+}
+
+fn simulate_cmd(a: SimulateArgs) -> Result<()> {
+    let model = CrowdModel::load(&a.model)?;
+    let layout = a.layout.as_deref().map(Layout::load).transpose()?;
+    for p in [
+        Some(&a.out),
+        a.png.as_ref(),
+        a.video.as_ref(),
+        a.compare.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        crate::data::atomic::check_writable(p)?;
+    }
+    let real = match &a.entries {
+        Some(p) => {
+            let t = read_tracks(p, 1.0 / model.dt)?;
+            Some((Scene::from_tracks(&t, 0.0).map_err(|e| e.in_file(p))?, t))
+        }
+        None => None,
+    };
+    let mut steps = a.steps;
+    let entries = match (&real, &layout) {
+        (Some((s, _)), _) => {
+            let mut e = entries_from_tracks(s);
+            if a.no_goals {
+                e.iter_mut().for_each(|e| e.goal = None);
+                if steps == 0 {
+                    steps = s.frames().saturating_sub(1).max(1);
+                }
+            }
+            e
+        }
+        (None, Some(l)) => entries_from_layout(l, model.dt, typical_speed(&model), a.seed),
+        (None, None) => unreachable!("clap requires one"),
+    };
+    let cfg = SimConfig {
+        steps,
+        seed: a.seed,
+        behaviours: !a.no_behaviours,
+        ..SimConfig::default()
+    };
+    let mut bars = crate::cli::Bars::default();
+    let t0 = std::time::Instant::now();
+    let run = simulate(&model, layout.as_ref(), &entries, &cfg, &mut bars)?;
+    let secs = t0.elapsed().as_secs_f64();
+    if let Some(p) = &a.png {
+        let mid = run.tracks.rows.last().map_or(0, |r| r.frame) / 2;
+        render::top_view_png(
+            p,
+            "herdfit crowd simulate",
+            &run.tracks,
+            real.as_ref().map(|r| &r.1),
+            layout.as_ref(),
+            mid,
+            10,
+        )?;
+    }
+    if let Some(p) = &a.video {
+        #[cfg(feature = "video")]
+        render::top_view_avi(p, &run.tracks, layout.as_ref(), 24.0)?;
+        #[cfg(not(feature = "video"))]
+        return Err(Error::file(p, "AVI output needs the `video` feature"));
+    }
+    if let (Some(p), Some((s, _))) = (&a.compare, &real) {
+        let sim = Scene::from_tracks(&run.tracks, 0.0)?;
+        let c = compare(
+            s,
+            &sim,
+            "real",
+            "simulated",
+            model.config.features.still_speed,
+            model.units.as_str(),
+            1.0,
+        )?;
+        write_json(p, &c)?;
+    }
+    run.tracks.save(&a.out)?;
+    println!(
+        "crowd simulate: {} agents, {} agent-steps in {:.2} s ({:.0}/s); {} arrived, {} timed out, {} groups, {} joined a line; wrote {}",
+        entries.len(),
+        run.agent_steps,
+        secs,
+        run.agent_steps as f64 / secs.max(1e-9),
+        run.arrived,
+        run.timed_out,
+        run.groups_formed,
+        run.line_joins,
+        a.out.display()
+    );
+    Ok(())
+}
+
+/// The ETH/UCY folder: `$HERDFIT_SHARED_DATA/pedestrians/eth-ucy`, else
+/// `../shared/data/pedestrians/eth-ucy`.
+pub fn default_eth_ucy() -> PathBuf {
+    match std::env::var_os("HERDFIT_SHARED_DATA") {
+        Some(d) => PathBuf::from(d).join("pedestrians/eth-ucy"),
+        None => PathBuf::from("../shared/data/pedestrians/eth-ucy"),
+    }
+}
+
+fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
+    let base = EvalConfig::default();
+    let mut cfg = EvalConfig {
+        learn: a.flags.config(base.learn.clone())?,
+        data: a.data.clone().unwrap_or_else(default_eth_ucy),
+        scenes: a.scene.clone(),
+        seed: a.seed,
+        ..base
+    };
+    if a.sample_clusters {
+        cfg.learn.action.choice = crate::crowd::action::ClusterChoice::Sample;
+    }
+    if let Some(c) = a.attraction {
+        cfg.learn.action.attraction = c;
+    }
+    if let Some(p) = &a.json {
+        crate::data::atomic::check_writable(p)?;
+    }
+    let mut bars = crate::cli::Bars::default();
+    let rep = evaluate(&cfg, &mut bars)?;
+    print!("{rep}");
+    if let Some(p) = &a.json {
+        write_json(p, &rep)?;
+    }
+    Ok(())
+}
+
+fn compare_cmd(a: CompareArgs) -> Result<()> {
+    let load = |p: &Path| -> Result<(Scene, String)> {
+        let t = read_tracks(p, a.eth_fps)?;
+        let u = t.meta.units.as_str().to_string();
+        Ok((Scene::from_tracks(&t, 0.0).map_err(|e| e.in_file(p))?, u))
+    };
+    let ((sa, ua), (sb, ub)) = (load(&a.a)?, load(&a.b)?);
+    if ua != ub {
+        return Err(Error::invalid(format!(
+            "{} is in {ua} but {} in {ub}",
+            a.a.display(),
+            a.b.display()
+        )));
+    }
+    if let Some(p) = &a.json {
+        crate::data::atomic::check_writable(p)?;
+    }
+    let c = compare(
+        &sa,
+        &sb,
+        &a.a.display().to_string(),
+        &a.b.display().to_string(),
+        0.05,
+        &ua,
+        a.cell,
+    )?;
+    println!(
+        "{:<18} {:>10} {:>10} {:>10}",
+        "measure", "mean A", "mean B", "W1"
+    );
+    for m in &c.measures {
+        println!(
+            "{:<18} {:>10.4} {:>10.4} {:>10.4} {}",
+            m.name, m.mean_a, m.mean_b, m.wasserstein, m.unit
+        );
+    }
+    println!(
+        "density maps ({} cells): total variation {:.4}, correlation {:.4}",
+        a.cell, c.density_tv, c.density_correlation
+    );
+    if let Some(p) = &a.json {
+        write_json(p, &c)?;
+    }
+    Ok(())
+}
+
+fn synth_cmd(a: SynthArgs) -> Result<()> {
+    let mut cfg = synth::SynthConfig {
+        seed: a.seed,
+        ..synth::SynthConfig::default()
+    };
+    if let Some(d) = a.duration {
+        cfg.duration = d;
+    }
+    let t = synth::corridor(&cfg)?;
+    t.save(&a.out)?;
+    println!(
+        "crowd synth: {} walkers, {} rows; wrote {}",
+        t.ids().len(),
+        t.rows.len(),
+        a.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,558 @@
+//! The action model of §5: the k nearest samples of a query state (§5.1), k-means of their actions
+//! into output possibilities, one cluster chosen by eq. 2, locally weighted linear regression
+//! within it (eq. 3) and the attraction toward the nearest sample (§5.3).
+//!
+//! An action is the next step's velocity in the agent's frame, `(forward, left)` in units/s: its
+//! length is the speed and its angle the turn (§4). Clustering and regression work on this vector
+//! rather than on (speed, angle), which has no wrap-around at ±π.
+
+use super::features::V2;
+use super::knn::StateTree;
+use crate::error::{Error, Result};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+/// How a cluster is picked among the output possibilities.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClusterChoice {
+    /// At random with eq. 2's probabilities p_i ∝ 1/‖m_i − m_prev‖ (the paper).
+    Sample,
+    /// The most probable cluster of eq. 2 (the one nearest m_prev): a deterministic predictor.
+    Nearest,
+}
+
+/// Settings of the action model (§5, §7: k = 100, 3 clusters, bandwidth = 5th neighbour).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ActionConfig {
+    /// Nearest samples per query.
+    pub k: usize,
+    /// k-means clusters of their actions.
+    pub clusters: usize,
+    /// The regression's Gaussian bandwidth is the distance to this neighbour (1-based)…
+    pub bandwidth_neighbour: usize,
+    /// …times this factor.
+    pub bandwidth_scale: f64,
+    /// Ridge penalty on the regression's slopes, relative to the mean weighted variance of the
+    /// states (0: eq. 3 as written; a few effective samples in 8–12 dimensions make it unstable).
+    pub ridge: f64,
+    /// Half-width of the attraction's perturbation range in standard deviations of the cluster's
+    /// speed and direction (§5.3); 0 turns attraction off.
+    pub attraction: f64,
+    /// Candidate outputs per axis (speed, direction) within that range.
+    pub attraction_grid: usize,
+    /// Outputs are kept within the chosen cluster's mean speed and direction ± this many of its
+    /// standard deviations (§5.3: "to avoid excessive extrapolations").
+    pub max_deviation: f64,
+    pub choice: ClusterChoice,
+    /// Lloyd iterations of k-means at most.
+    pub kmeans_iterations: usize,
+}
+
+impl Default for ActionConfig {
+    fn default() -> Self {
+        ActionConfig {
+            k: 100,
+            clusters: 3,
+            bandwidth_neighbour: 5,
+            bandwidth_scale: 1.0,
+            ridge: 0.0,
+            attraction: 0.5,
+            attraction_grid: 5,
+            max_deviation: 2.0,
+            choice: ClusterChoice::Sample,
+            kmeans_iterations: 20,
+        }
+    }
+}
+
+impl ActionConfig {
+    /// Checks the values; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        let bad = |k: &str, m: String| Err(Error::invalid(format!("action.{k} {m}")));
+        if self.k == 0 {
+            return bad("k", "must be ≥ 1".into());
+        }
+        if self.clusters == 0 || self.clusters > self.k {
+            return bad("clusters", format!("= {} must be in 1..=k", self.clusters));
+        }
+        if self.bandwidth_neighbour == 0 || self.bandwidth_neighbour > self.k {
+            return bad(
+                "bandwidth_neighbour",
+                format!("= {} must be in 1..=k", self.bandwidth_neighbour),
+            );
+        }
+        if !(self.attraction.is_finite() && self.attraction >= 0.0) {
+            return bad("attraction", format!("= {} must be ≥ 0", self.attraction));
+        }
+        if !(self.bandwidth_scale.is_finite() && self.bandwidth_scale > 0.0) {
+            return bad(
+                "bandwidth_scale",
+                format!("= {} must be > 0", self.bandwidth_scale),
+            );
+        }
+        if !(self.ridge.is_finite() && self.ridge >= 0.0) {
+            return bad("ridge", format!("= {} must be ≥ 0", self.ridge));
+        }
+        if !(self.max_deviation.is_finite() && self.max_deviation >= 0.0) {
+            return bad(
+                "max_deviation",
+                format!("= {} must be ≥ 0", self.max_deviation),
+            );
+        }
+        if self.attraction_grid == 0 {
+            return bad("attraction_grid", "must be ≥ 1".into());
+        }
+        if self.kmeans_iterations == 0 {
+            return bad("kmeans_iterations", "must be ≥ 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// Samples of one behaviour: PCA states (row-major, `dims` columns) and their actions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ActionSamples {
+    pub dims: usize,
+    pub states: Vec<f64>,
+    pub actions: Vec<V2>,
+}
+
+impl ActionSamples {
+    pub fn len(&self) -> usize {
+        self.actions.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.actions.is_empty()
+    }
+    fn state(&self, i: usize) -> &[f64] {
+        &self.states[i * self.dims..(i + 1) * self.dims]
+    }
+}
+
+/// Samples and their kd-tree.
+pub struct ActionModel {
+    pub samples: ActionSamples,
+    tree: StateTree,
+}
+
+/// Scratch buffers of one query (reused across queries of a thread).
+#[derive(Default)]
+pub struct Scratch {
+    nn: Vec<(f64, u32)>,
+    assign: Vec<usize>,
+    members: Vec<usize>,
+    ata: Vec<f64>,
+    atb: Vec<f64>,
+}
+
+/// The outcome of one query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decision {
+    /// The action (local velocity, units/s).
+    pub action: V2,
+    /// The chosen cluster's mean action: m_prev of the next query (eq. 2).
+    pub cluster_mean: V2,
+}
+
+impl ActionModel {
+    /// Builds the kd-tree over `samples`.
+    pub fn new(samples: ActionSamples) -> Result<ActionModel> {
+        if samples.is_empty() {
+            return Err(Error::invalid("an action model needs at least one sample"));
+        }
+        if samples.states.len() != samples.len() * samples.dims {
+            return Err(Error::invalid(format!(
+                "samples: {} state values for {} actions of {} dimensions",
+                samples.states.len(),
+                samples.len(),
+                samples.dims
+            )));
+        }
+        if samples
+            .states
+            .iter()
+            .chain(samples.actions.iter().flatten())
+            .any(|v| !v.is_finite())
+        {
+            return Err(Error::invalid("samples: values are not finite"));
+        }
+        let tree = StateTree::build(&samples.states, samples.dims)?;
+        Ok(ActionModel { samples, tree })
+    }
+
+    /// The action for PCA state `s` given the previously chosen cluster's mean `m_prev`.
+    pub fn decide(
+        &self,
+        s: &[f64],
+        m_prev: V2,
+        cfg: &ActionConfig,
+        rng: &mut impl Rng,
+        sc: &mut Scratch,
+    ) -> Decision {
+        let k = cfg.k.min(self.samples.len());
+        self.tree.nearest(s, k, &mut sc.nn);
+        let acts: Vec<V2> = sc
+            .nn
+            .iter()
+            .map(|&(_, i)| self.samples.actions[i as usize])
+            .collect();
+        let centres = kmeans(
+            &acts,
+            cfg.clusters,
+            cfg.kmeans_iterations,
+            rng,
+            &mut sc.assign,
+        );
+        let probs = cluster_probabilities(&centres, m_prev);
+        let c = match cfg.choice {
+            ClusterChoice::Nearest => argmax(&probs),
+            ClusterChoice::Sample => {
+                let u: f64 = rng.gen();
+                let mut acc = 0.0;
+                probs
+                    .iter()
+                    .position(|p| {
+                        acc += p;
+                        u < acc
+                    })
+                    .unwrap_or(probs.len() - 1)
+            }
+        };
+        sc.members.clear();
+        sc.members
+            .extend((0..sc.nn.len()).filter(|&j| sc.assign[j] == c));
+        let h2 = bandwidth2(&sc.nn, cfg.bandwidth_neighbour) * cfg.bandwidth_scale.powi(2);
+        let mut rows = Vec::with_capacity(sc.members.len());
+        for &j in &sc.members {
+            let (d2, i) = sc.nn[j];
+            rows.push((self.samples.state(i as usize), acts[j], d2));
+        }
+        let lwr_out = lwr(s, &rows, h2, cfg.ridge, &mut sc.ata, &mut sc.atb);
+        let action = attract(
+            lwr_out,
+            &rows,
+            h2,
+            cfg.attraction,
+            cfg.attraction_grid,
+            cfg.max_deviation,
+        );
+        Decision {
+            action,
+            cluster_mean: centres[c],
+        }
+    }
+}
+
+fn argmax(p: &[f64]) -> usize {
+    let mut best = 0;
+    for (i, v) in p.iter().enumerate() {
+        if *v > p[best] {
+            best = i;
+        }
+    }
+    best
+}
+
+fn d2(a: V2, b: V2) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+/// Squared bandwidth: the squared distance to the `nth` neighbour (1-based), or the largest
+/// positive one before it when that is zero; 1 when every neighbour coincides with the query.
+fn bandwidth2(nn: &[(f64, u32)], nth: usize) -> f64 {
+    let i = nth.min(nn.len()).saturating_sub(1);
+    if let Some(&(d, _)) = nn.get(i) {
+        if d > 0.0 {
+            return d;
+        }
+    }
+    nn.iter().map(|n| n.0).find(|&d| d > 0.0).unwrap_or(1.0)
+}
+
+/// Eq. 2: p_i = (1/‖m_i − m_prev‖) / Σ_j 1/‖m_j − m_prev‖. A cluster whose mean is m_prev gets
+/// probability 1 (shared when several do).
+pub fn cluster_probabilities(means: &[V2], m_prev: V2) -> Vec<f64> {
+    let dist: Vec<f64> = means.iter().map(|m| d2(*m, m_prev).sqrt()).collect();
+    let zero = dist.iter().filter(|&&d| d <= 1e-12).count();
+    if zero > 0 {
+        return dist
+            .iter()
+            .map(|&d| if d <= 1e-12 { 1.0 / zero as f64 } else { 0.0 })
+            .collect();
+    }
+    let inv: Vec<f64> = dist.iter().map(|d| 1.0 / d).collect();
+    let s: f64 = inv.iter().sum();
+    inv.iter().map(|v| v / s).collect()
+}
+
+/// k-means (Lloyd, k-means++ seeding from `rng`) of 2-D points into at most `k` clusters; fills
+/// `assign` with each point's cluster and returns the means. Clusters left empty are dropped.
+pub fn kmeans(
+    pts: &[V2],
+    k: usize,
+    iters: usize,
+    rng: &mut impl Rng,
+    assign: &mut Vec<usize>,
+) -> Vec<V2> {
+    assign.clear();
+    assign.resize(pts.len(), 0);
+    if pts.is_empty() {
+        return vec![[0.0, 0.0]];
+    }
+    let mut centres = vec![pts[rng.gen_range(0..pts.len())]];
+    let mut dmin: Vec<f64> = pts.iter().map(|p| d2(*p, centres[0])).collect();
+    while centres.len() < k {
+        let total: f64 = dmin.iter().sum();
+        if total <= 0.0 {
+            break;
+        }
+        let u = rng.gen::<f64>() * total;
+        let mut acc = 0.0;
+        let j = dmin
+            .iter()
+            .position(|d| {
+                acc += d;
+                u < acc
+            })
+            .unwrap_or(pts.len() - 1);
+        centres.push(pts[j]);
+        for (d, p) in dmin.iter_mut().zip(pts) {
+            *d = d.min(d2(*p, pts[j]));
+        }
+    }
+    for it in 0..iters {
+        let mut changed = it == 0;
+        for (a, p) in assign.iter_mut().zip(pts) {
+            let mut best = 0;
+            for (c, m) in centres.iter().enumerate() {
+                if d2(*p, *m) < d2(*p, centres[best]) {
+                    best = c;
+                }
+            }
+            changed |= *a != best;
+            *a = best;
+        }
+        if !changed {
+            break;
+        }
+        let mut sum = vec![[0.0, 0.0, 0.0]; centres.len()];
+        for (a, p) in assign.iter().zip(pts) {
+            sum[*a][0] += p[0];
+            sum[*a][1] += p[1];
+            sum[*a][2] += 1.0;
+        }
+        for (m, s) in centres.iter_mut().zip(&sum) {
+            if s[2] > 0.0 {
+                *m = [s[0] / s[2], s[1] / s[2]];
+            }
+        }
+    }
+    // Drop empty clusters, renumbering the assignment.
+    let mut count = vec![0usize; centres.len()];
+    assign.iter().for_each(|&a| count[a] += 1);
+    let mut map = vec![usize::MAX; centres.len()];
+    let mut kept = Vec::new();
+    for (c, m) in centres.iter().enumerate() {
+        if count[c] > 0 {
+            map[c] = kept.len();
+            kept.push(*m);
+        }
+    }
+    assign.iter_mut().for_each(|a| *a = map[*a]);
+    kept
+}
+
+/// Eq. 3, locally weighted linear regression at query `s`: β = (SᵀWS)⁻¹SᵀW a over the rows
+/// (state s_i, action a_i, ‖s − s_i‖²), S's rows `[1, s_i − s]`, W_ii = exp(−½ ‖s − s_i‖²/h²);
+/// the prediction at `s` is β's intercept. With too few rows or a singular system it falls back
+/// to the weighted mean (the intercept-only fit). `h2 = ∞` and `ridge = 0` give ordinary least
+/// squares; `ridge > 0` adds `ridge × (mean slope diagonal)` to the slopes' diagonal.
+pub fn lwr(
+    s: &[f64],
+    rows: &[(&[f64], V2, f64)],
+    h2: f64,
+    ridge: f64,
+    ata: &mut Vec<f64>,
+    atb: &mut Vec<f64>,
+) -> V2 {
+    let d = s.len();
+    let m = d + 1;
+    let weight = |dist2: f64| {
+        if h2.is_infinite() {
+            1.0
+        } else {
+            (-0.5 * dist2 / h2).exp()
+        }
+    };
+    let (mut sw, mut mean) = (0.0, [0.0, 0.0]);
+    for &(_, a, dist2) in rows {
+        let w = weight(dist2);
+        sw += w;
+        mean[0] += w * a[0];
+        mean[1] += w * a[1];
+    }
+    if sw <= 1e-300 {
+        // Every weight underflowed: the nearest row's action.
+        return rows
+            .iter()
+            .min_by(|x, y| x.2.total_cmp(&y.2))
+            .map_or([0.0, 0.0], |r| r.1);
+    }
+    let mean = [mean[0] / sw, mean[1] / sw];
+    if rows.len() < m {
+        return mean;
+    }
+    ata.clear();
+    ata.resize(m * m, 0.0);
+    atb.clear();
+    atb.resize(2 * m, 0.0);
+    let mut x = vec![0.0; m];
+    for &(si, a, dist2) in rows {
+        let w = weight(dist2);
+        x[0] = 1.0;
+        for k in 0..d {
+            x[k + 1] = si[k] - s[k];
+        }
+        for i in 0..m {
+            let wxi = w * x[i];
+            for j in i..m {
+                ata[i * m + j] += wxi * x[j];
+            }
+            atb[i] += wxi * a[0];
+            atb[m + i] += wxi * a[1];
+        }
+    }
+    for i in 0..m {
+        for j in 0..i {
+            ata[i * m + j] = ata[j * m + i];
+        }
+    }
+    if ridge > 0.0 {
+        let lam = ridge * (1..m).map(|i| ata[i * m + i]).sum::<f64>() / d.max(1) as f64;
+        for i in 1..m {
+            ata[i * m + i] += lam;
+        }
+    }
+    match cholesky_solve(ata, atb, m) {
+        Some(beta) => [beta[0], beta[m]],
+        None => mean,
+    }
+}
+
+/// Solves `A [x y] = [b0 b1]` for symmetric positive definite `A` (`m × m`) in place; `None`
+/// when A is not (numerically) positive definite.
+fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
+    let scale = (0..m).map(|i| a[i * m + i].abs()).fold(0.0, f64::max);
+    for j in 0..m {
+        let mut diag = a[j * m + j];
+        for k in 0..j {
+            diag -= a[j * m + k] * a[j * m + k];
+        }
+        if diag <= 1e-12 * scale.max(1e-300) {
+            return None;
+        }
+        let l = diag.sqrt();
+        a[j * m + j] = l;
+        for i in j + 1..m {
+            let mut v = a[i * m + j];
+            for k in 0..j {
+                v -= a[i * m + k] * a[j * m + k];
+            }
+            a[i * m + j] = v / l;
+        }
+    }
+    for c in 0..2 {
+        let b = &mut b[c * m..(c + 1) * m];
+        for i in 0..m {
+            let mut v = b[i];
+            for k in 0..i {
+                v -= a[i * m + k] * b[k];
+            }
+            b[i] = v / a[i * m + i];
+        }
+        for i in (0..m).rev() {
+            let mut v = b[i];
+            for k in i + 1..m {
+                v -= a[k * m + i] * b[k];
+            }
+            b[i] = v / a[i * m + i];
+        }
+    }
+    Some(b.to_vec())
+}
+
+/// §5.3 attraction: the regression output is first kept within the cluster's mean speed and
+/// direction ± `limit` standard deviations; then candidates on a regular `grid × grid` lattice of
+/// speed and direction within ±`c` standard deviations of it (and within that range) compete, and
+/// the one nearest to a sample of the cluster in the joint (state, action) space wins, state
+/// distances scaled by the bandwidth and action distances by the cluster's action spread.
+pub fn attract(
+    out: V2,
+    rows: &[(&[f64], V2, f64)],
+    h2: f64,
+    c: f64,
+    grid: usize,
+    limit: f64,
+) -> V2 {
+    if rows.len() < 2 {
+        return rows.first().map_or(out, |r| r.1);
+    }
+    let n = rows.len() as f64;
+    let speeds: Vec<f64> = rows.iter().map(|r| r.1[0].hypot(r.1[1])).collect();
+    let angles: Vec<f64> = rows.iter().map(|r| r.1[1].atan2(r.1[0])).collect();
+    let mean_v = speeds.iter().sum::<f64>() / n;
+    let sd_v = (speeds.iter().map(|v| (v - mean_v).powi(2)).sum::<f64>() / n).sqrt();
+    // Circular spread of the directions about their mean.
+    let (cs, sn) = angles
+        .iter()
+        .fold((0.0, 0.0), |(c, s), a| (c + a.cos(), s + a.sin()));
+    let mean_a = sn.atan2(cs);
+    let sd_a = (angles.iter().map(|a| wrap(a - mean_a).powi(2)).sum::<f64>() / n).sqrt();
+    let (lo_v, hi_v) = ((mean_v - limit * sd_v).max(0.0), mean_v + limit * sd_v);
+    let clamp_a = |a: f64| mean_a + wrap(a - mean_a).clamp(-limit * sd_a, limit * sd_a);
+    let v0 = out[0].hypot(out[1]).clamp(lo_v, hi_v);
+    let a0 = clamp_a(out[1].atan2(out[0]));
+    let out = [v0 * a0.cos(), v0 * a0.sin()];
+    if c <= 0.0 {
+        return out;
+    }
+    let mean_act = rows
+        .iter()
+        .fold([0.0, 0.0], |m, r| [m[0] + r.1[0] / n, m[1] + r.1[1] / n]);
+    let var_a = rows.iter().map(|r| d2(r.1, mean_act)).sum::<f64>() / n + 1e-12;
+    let h2 = if h2.is_finite() && h2 > 0.0 { h2 } else { 1.0 };
+    let score = |cand: V2| {
+        rows.iter()
+            .map(|r| r.2 / h2 + d2(cand, r.1) / var_a)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut best = (score(out), out);
+    let steps = grid.max(1);
+    for iv in 0..steps {
+        for ia in 0..steps {
+            let t = |i: usize| {
+                if steps == 1 {
+                    0.0
+                } else {
+                    2.0 * i as f64 / (steps - 1) as f64 - 1.0
+                }
+            };
+            let v = (v0 + c * sd_v * t(iv)).clamp(lo_v, hi_v);
+            let a = clamp_a(a0 + c * sd_a * t(ia));
+            let cand = [v * a.cos(), v * a.sin()];
+            let sc = score(cand);
+            if sc < best.0 {
+                best = (sc, cand);
+            }
+        }
+    }
+    best.1
+}
+
+fn wrap(a: f64) -> f64 {
+    let t = std::f64::consts::TAU;
+    (a + std::f64::consts::PI).rem_euclid(t) - std::f64::consts::PI
+}

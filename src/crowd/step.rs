@@ -1,0 +1,264 @@
+//! One simulation step of learnt agents: perceive (eq. 1 over a uniform grid of positions), build
+//! the state of §4, ask the agent's action model (§5) and move. Agents decide in parallel
+//! (rayon); each draws from its own seeded generator, so a run's bytes do not depend on the
+//! number of threads.
+
+use super::action::{Decision, Scratch};
+use super::features::{
+    formation, mean_direction, pivot_parts, to_local, to_world, unit, StateParts, SECTORS, V2,
+};
+use super::layout::Layout;
+use super::model::{CrowdModel, Pivot};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+/// One simulated agent.
+#[derive(Clone, Debug)]
+pub struct Agent {
+    pub id: u64,
+    pub pos: V2,
+    /// Unit heading (direction of the last move faster than `still_speed`).
+    pub heading: V2,
+    /// Recent positions, oldest first, the current one last.
+    pub history: Vec<V2>,
+    /// Eq. 1 at the previous step, in that step's frame.
+    pub prev_formation: [f64; SECTORS],
+    /// Mean of the cluster chosen at the previous step (m_prev of eq. 2).
+    pub m_prev: V2,
+    /// Index of the agent's behaviour in the model.
+    pub behaviour: usize,
+    /// The pivot the behaviour is taken relative to, if any.
+    pub pivot: Option<Pivot>,
+    /// Where the agent heads for (the intended direction points there); `None`: it keeps the
+    /// mean direction of its own past steps.
+    pub goal: Option<V2>,
+    /// Seeded per agent.
+    pub rng: ChaCha8Rng,
+}
+
+impl Agent {
+    /// An agent at `history`'s last position (at least one; positions `dt` seconds apart), with
+    /// generator stream `id` of `seed`. m_prev starts as its last velocity in its own frame.
+    pub fn new(
+        id: u64,
+        history: Vec<V2>,
+        heading: V2,
+        goal: Option<V2>,
+        seed: u64,
+        dt: f64,
+    ) -> Agent {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(id);
+        let pos = *history.last().expect("an agent needs a position");
+        let speed_prev = match history.as_slice() {
+            [.., a, b] => to_local([(b[0] - a[0]) / dt, (b[1] - a[1]) / dt], heading),
+            _ => [0.0, 0.0],
+        };
+        Agent {
+            id,
+            pos,
+            heading,
+            history,
+            prev_formation: [0.0; SECTORS],
+            m_prev: speed_prev,
+            behaviour: 0,
+            pivot: None,
+            goal,
+            rng,
+        }
+    }
+}
+
+/// Positions bucketed in square cells of side `cell` for radius queries.
+pub struct Grid {
+    origin: V2,
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Grid {
+    /// A grid over `pos` (at most 512 cells a side: the cell grows for very spread-out agents).
+    pub fn new(pos: &[V2], cell: f64) -> Grid {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in pos {
+            for a in 0..2 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        if pos.is_empty() {
+            lo = [0.0, 0.0];
+            hi = [0.0, 0.0];
+        }
+        let span = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let cell = cell.max(span / 511.0).max(1e-9);
+        let nx = ((hi[0] - lo[0]) / cell) as usize + 1;
+        let ny = ((hi[1] - lo[1]) / cell) as usize + 1;
+        let key = |p: &V2| {
+            let ix = (((p[0] - lo[0]) / cell) as usize).min(nx - 1);
+            let iy = (((p[1] - lo[1]) / cell) as usize).min(ny - 1);
+            iy * nx + ix
+        };
+        let mut count = vec![0u32; nx * ny + 1];
+        for p in pos {
+            count[key(p) + 1] += 1;
+        }
+        for i in 1..count.len() {
+            count[i] += count[i - 1];
+        }
+        let mut fill = count.clone();
+        let mut items = vec![0u32; pos.len()];
+        for (i, p) in pos.iter().enumerate() {
+            let k = key(p);
+            items[fill[k] as usize] = i as u32;
+            fill[k] += 1;
+        }
+        Grid {
+            origin: lo,
+            cell,
+            nx,
+            ny,
+            start: count,
+            items,
+        }
+    }
+
+    /// Indices of the points in cells within `r` of `p` (a superset of those within `r`).
+    pub fn near(&self, p: V2, r: f64) -> impl Iterator<Item = usize> + '_ {
+        let cell =
+            |v: f64, o: f64, n: usize| (((v - o) / self.cell).floor().max(0.0) as usize).min(n - 1);
+        let (x0, x1) = (
+            cell(p[0] - r, self.origin[0], self.nx),
+            cell(p[0] + r, self.origin[0], self.nx),
+        );
+        let (y0, y1) = (
+            cell(p[1] - r, self.origin[1], self.ny),
+            cell(p[1] + r, self.origin[1], self.ny),
+        );
+        (y0..=y1).flat_map(move |iy| {
+            (x0..=x1).flat_map(move |ix| {
+                let k = iy * self.nx + ix;
+                self.items[self.start[k] as usize..self.start[k + 1] as usize]
+                    .iter()
+                    .map(|&i| i as usize)
+            })
+        })
+    }
+}
+
+/// What one agent decided in a step.
+#[derive(Clone, Copy, Debug)]
+pub struct Planned {
+    pub velocity: V2,
+    pub formation: [f64; SECTORS],
+    pub decision: Decision,
+}
+
+/// The state of `a` (unweighted) given the others' positions.
+pub fn perceive(model: &CrowdModel, a: &Agent, i: usize, pos: &[V2], grid: &Grid) -> StateParts {
+    let f = &model.config.features;
+    let frame = a.pivot.as_ref().map_or(a.heading, |p| p.dir());
+    let now = formation(
+        a.pos,
+        frame,
+        grid.near(a.pos, f.radius)
+            .filter(|&j| j != i)
+            .map(|j| pos[j]),
+        f.radius,
+    );
+    let speed = match a.history.as_slice() {
+        [.., p, q] => (q[0] - p[0]).hypot(q[1] - p[1]) / model.dt,
+        _ => 0.0,
+    };
+    let intent = match a.goal {
+        Some(g) => unit([g[0] - a.pos[0], g[1] - a.pos[1]]),
+        None => {
+            let n = a.history.len();
+            mean_direction(&a.history, n.saturating_sub(f.intent_window + 1), n - 1)
+        }
+    }
+    .unwrap_or(a.heading);
+    StateParts {
+        speed,
+        now,
+        prev: a.prev_formation,
+        pivot: a
+            .pivot
+            .as_ref()
+            .map(|p| pivot_parts(a.pos, a.heading, p.position, p.dir())),
+        intent: to_local(intent, a.heading),
+    }
+}
+
+/// Every agent's decision for this step (in parallel; the order of the output is the agents').
+pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
+    let pos: Vec<V2> = agents.iter().map(|a| a.pos).collect();
+    let grid = Grid::new(&pos, model.config.features.radius);
+    agents
+        .par_iter_mut()
+        .enumerate()
+        .map_init(
+            || (Scratch::default(), Vec::new(), Vec::new()),
+            |(sc, raw, z), (i, a)| {
+                let parts = perceive(model, a, i, &pos, &grid);
+                let b = &model.behaviours[a.behaviour.min(model.behaviours.len() - 1)];
+                raw.clear();
+                parts.write(&b.weights, raw);
+                if raw.len() != b.pca.input() {
+                    // A pivot behaviour without a pivot (or the reverse): pad or cut the state.
+                    raw.resize(b.pca.input(), 0.0);
+                }
+                z.resize(b.pca.dims(), 0.0);
+                b.pca.project(raw, z);
+                let d = b
+                    .model
+                    .decide(z, a.m_prev, &model.config.action, &mut a.rng, sc);
+                Planned {
+                    velocity: to_world(d.action, a.heading),
+                    formation: parts.now,
+                    decision: d,
+                }
+            },
+        )
+        .collect()
+}
+
+/// Applies planned decisions: moves (constrained by the layout's walls and obstacles), updates
+/// headings, histories (`keep` positions), formations and m_prev.
+pub fn advance(
+    model: &CrowdModel,
+    agents: &mut [Agent],
+    plans: &[Planned],
+    layout: Option<(&Layout, &[[V2; 2]])>,
+    keep: usize,
+) {
+    let still = model.config.features.still_speed * model.dt;
+    for (a, p) in agents.iter_mut().zip(plans) {
+        let q = [
+            a.pos[0] + p.velocity[0] * model.dt,
+            a.pos[1] + p.velocity[1] * model.dt,
+        ];
+        let q = match layout {
+            Some((l, segs)) => l.constrain(segs, a.pos, q),
+            None => q,
+        };
+        let d = [q[0] - a.pos[0], q[1] - a.pos[1]];
+        if d[0].hypot(d[1]) > still {
+            if let Some(h) = unit(d) {
+                a.heading = h;
+            }
+        }
+        a.pos = q;
+        a.history.push(q);
+        if a.history.len() > keep {
+            let extra = a.history.len() - keep;
+            a.history.drain(..extra);
+        }
+        a.prev_formation = p.formation;
+        a.m_prev = p.decision.cluster_mean;
+    }
+}

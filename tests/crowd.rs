@@ -1,0 +1,453 @@
+//! The crowd system (Lee et al. 2007): eq. 1 sectors, eq. 2 probabilities, eq. 3 regression,
+//! kd-tree against brute force, k-means against linfa, determinism, bad input, the ETH/UCY
+//! protocol on one fold and the imitation of herdfit's own herd model.
+
+mod common;
+
+use common::{fails, herdfit, ok, s};
+use herdfit::crowd::action::{cluster_probabilities, kmeans, lwr};
+use herdfit::crowd::features::{formation, SECTORS};
+use herdfit::crowd::knn::{brute_force, StateTree};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::path::{Path, PathBuf};
+
+/// `$HERDFIT_SHARED_DATA`, else `<repo>/../shared/data`, else `/work/shared/data`.
+fn shared_data() -> PathBuf {
+    if let Some(d) = std::env::var_os("HERDFIT_SHARED_DATA") {
+        return PathBuf::from(d);
+    }
+    let sibling = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    if sibling.is_dir() {
+        return sibling;
+    }
+    PathBuf::from("/work/shared/data")
+}
+
+#[test]
+fn eq1_sectors_on_hand_placed_neighbours() {
+    let r = 2.0;
+    let f = |d: f64| (r - d) * (r - d) / (r * r);
+    // Agent at (1, 1) heading +y: "ahead" is +y, "left" is −x.
+    let p = [1.0, 1.0];
+    let n = [
+        [1.0, 2.0],  // ahead, d = 1 → sector 0
+        [1.0, 1.5],  // ahead, nearer: d = 0.5 wins sector 0
+        [0.0, 1.0],  // left, d = 1 → sector 2
+        [1.0, -0.5], // behind, d = 1.5 → sector 4
+        [2.0, 0.0],  // behind-right, d = √2 → sector 5
+        [4.0, 1.0],  // right but d = 3 ≥ r → nothing
+    ];
+    let got = formation(p, [0.0, 1.0], n.iter().copied(), r);
+    let mut want = [0.0; SECTORS];
+    want[0] = f(0.5);
+    want[2] = f(1.0);
+    want[4] = f(1.5);
+    want[5] = f(2f64.sqrt());
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 1e-12, "{got:?} vs {want:?}");
+    }
+    assert!((got[0] - 0.5625).abs() < 1e-12, "(2 − 0.5)²/2² = 0.5625");
+}
+
+#[test]
+fn eq2_probabilities_are_inverse_distances() {
+    let m = [[1.0, 0.0], [0.0, 1.0], [3.0, 0.0]];
+    let p = cluster_probabilities(&m, [0.0, 0.0]);
+    for (g, w) in p.iter().zip([3.0 / 7.0, 3.0 / 7.0, 1.0 / 7.0]) {
+        assert!((g - w).abs() < 1e-12, "{p:?}");
+    }
+    // The previous cluster's mean itself is kept for sure.
+    assert_eq!(cluster_probabilities(&m, [3.0, 0.0]), vec![0.0, 0.0, 1.0]);
+}
+
+/// Ordinary least squares by modified Gram–Schmidt QR (independent of the normal equations).
+fn ols_qr(x: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
+    let (n, m) = (x.len(), x[0].len());
+    let mut q: Vec<Vec<f64>> = (0..m).map(|j| (0..n).map(|i| x[i][j]).collect()).collect();
+    let mut rr = vec![vec![0.0; m]; m];
+    for j in 0..m {
+        for k in 0..j {
+            let d: f64 = (0..n).map(|i| q[k][i] * q[j][i]).sum();
+            rr[k][j] = d;
+            for i in 0..n {
+                q[j][i] -= d * q[k][i];
+            }
+        }
+        let norm = q[j].iter().map(|v| v * v).sum::<f64>().sqrt();
+        rr[j][j] = norm;
+        q[j].iter_mut().for_each(|v| *v /= norm);
+    }
+    let qty: Vec<f64> = (0..m)
+        .map(|j| (0..n).map(|i| q[j][i] * y[i]).sum())
+        .collect();
+    let mut b = vec![0.0; m];
+    for j in (0..m).rev() {
+        b[j] = (qty[j] - (j + 1..m).map(|k| rr[j][k] * b[k]).sum::<f64>()) / rr[j][j];
+    }
+    b
+}
+
+#[test]
+fn eq3_lwr_is_ols_at_infinite_bandwidth_and_exact_on_linear_data() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let d = 4;
+    let q: Vec<f64> = (0..d).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let states: Vec<Vec<f64>> = (0..40)
+        .map(|_| (0..d).map(|_| rng.gen_range(-2.0..2.0)).collect())
+        .collect();
+    let noisy: Vec<[f64; 2]> = states
+        .iter()
+        .map(|s| [s[0] - 0.5 * s[2] + rng.gen_range(-0.3..0.3), s[1] * s[3]])
+        .collect();
+    let d2 = |s: &[f64]| {
+        s.iter()
+            .zip(&q)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+    };
+    let rows: Vec<(&[f64], [f64; 2], f64)> = states
+        .iter()
+        .zip(&noisy)
+        .map(|(s, a)| (s.as_slice(), *a, d2(s)))
+        .collect();
+    let (mut ata, mut atb) = (Vec::new(), Vec::new());
+    let got = lwr(&q, &rows, f64::INFINITY, 0.0, &mut ata, &mut atb);
+    let design: Vec<Vec<f64>> = states
+        .iter()
+        .map(|s| std::iter::once(1.0).chain(s.iter().copied()).collect())
+        .collect();
+    for c in 0..2 {
+        let y: Vec<f64> = noisy.iter().map(|a| a[c]).collect();
+        let b = ols_qr(&design, &y);
+        let pred = b[0] + (0..d).map(|k| b[k + 1] * q[k]).sum::<f64>();
+        assert!(
+            (got[c] - pred).abs() < 1e-9,
+            "axis {c}: {} vs OLS {pred}",
+            got[c]
+        );
+    }
+    // A linear function is reproduced exactly at any bandwidth.
+    let lin = |s: &[f64]| [0.3 + s[0] - 2.0 * s[1], -1.0 + 0.5 * s[2] + s[3]];
+    let exact: Vec<(&[f64], [f64; 2], f64)> = states
+        .iter()
+        .map(|s| (s.as_slice(), lin(s), d2(s)))
+        .collect();
+    for h2 in [0.5, 2.0, 50.0] {
+        let g = lwr(&q, &exact, h2, 0.0, &mut ata, &mut atb);
+        let w = lin(&q);
+        assert!(
+            (g[0] - w[0]).abs() < 1e-9 && (g[1] - w[1]).abs() < 1e-9,
+            "{g:?} {w:?}"
+        );
+    }
+}
+
+#[test]
+fn kd_tree_knn_equals_brute_force() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for dims in [3, 8, 10, 12] {
+        let pts: Vec<f64> = (0..5000 * dims)
+            .map(|i| rng.gen_range(-1.0..1.0) * (1.0 + (i % dims) as f64))
+            .collect();
+        let tree = StateTree::build(&pts, dims).unwrap();
+        let mut got = Vec::new();
+        for _ in 0..40 {
+            let q: Vec<f64> = (0..dims)
+                .map(|k| rng.gen_range(-2.0..2.0) * (1.0 + k as f64))
+                .collect();
+            tree.nearest(&q, 100, &mut got);
+            let want = brute_force(&pts, dims, &q, 100);
+            assert_eq!(got.len(), 100);
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(g.1, w.1, "dims {dims}");
+                assert!((g.0 - w.0).abs() <= 1e-9 * w.0.max(1.0));
+            }
+        }
+    }
+    assert!(StateTree::build(&[0.0; 26], 13).is_err());
+}
+
+#[test]
+fn kmeans_matches_linfa_on_separated_clusters() {
+    use linfa::traits::Fit;
+    use linfa::DatasetBase;
+    use linfa_clustering::KMeans;
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let centres = [[1.3, 0.0], [0.2, 0.6], [0.9, -0.8]];
+    let pts: Vec<[f64; 2]> = (0..99)
+        .map(|i| {
+            let c = centres[i % 3];
+            [
+                c[0] + rng.gen_range(-0.1..0.1),
+                c[1] + rng.gen_range(-0.1..0.1),
+            ]
+        })
+        .collect();
+    let mut assign = Vec::new();
+    let ours = kmeans(&pts, 3, 20, &mut rng, &mut assign);
+    assert_eq!(ours.len(), 3);
+    let data = ndarray016::Array2::from_shape_fn((pts.len(), 2), |(i, j)| pts[i][j]);
+    let model = KMeans::params_with_rng(3, ChaCha8Rng::seed_from_u64(1))
+        .fit(&DatasetBase::from(data.clone()))
+        .unwrap();
+    use linfa::traits::Predict;
+    let theirs = model.predict(&data);
+    // Same partition up to the cluster labels.
+    for i in 0..pts.len() {
+        for j in 0..pts.len() {
+            assert_eq!(assign[i] == assign[j], theirs[i] == theirs[j], "{i} {j}");
+        }
+    }
+}
+
+fn synth(dir: &Path, name: &str, seed: u64, secs: f64) -> PathBuf {
+    let p = dir.join(name);
+    ok(&[
+        "crowd",
+        "synth",
+        "--seed",
+        &seed.to_string(),
+        "--duration",
+        &secs.to_string(),
+        "--out",
+        s(&p),
+    ]);
+    p
+}
+
+#[test]
+fn simulation_bytes_depend_on_seed_not_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = synth(dir.path(), "corridor.csv", 3, 40.0);
+    let model = dir.path().join("model.json");
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "3000",
+        "--out",
+        s(&model),
+    ]);
+    let run = |name: &str, seed: &str, threads: &str| {
+        let out = dir.path().join(name);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_herdfit"))
+            .env("RAYON_NUM_THREADS", threads)
+            .args([
+                "crowd",
+                "simulate",
+                s(&model),
+                "--entries",
+                s(&src),
+                "--seed",
+                seed,
+                "--out",
+                s(&out),
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(&out).unwrap()
+    };
+    let a = run("a.csv", "5", "1");
+    let b = run("b.csv", "5", "2");
+    let c = run("c.csv", "6", "2");
+    assert!(a.len() > 10_000);
+    assert_eq!(a, b, "same seed, 1 vs 2 threads");
+    assert_ne!(a, c, "another seed draws other clusters");
+    // The model file round-trips to the same bytes.
+    let again = dir.path().join("again.json");
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "3000",
+        "--out",
+        s(&again),
+    ]);
+    assert_eq!(
+        std::fs::read(&model).unwrap(),
+        std::fs::read(&again).unwrap()
+    );
+}
+
+#[test]
+fn bad_input_gets_one_line_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let write = |name: &str, text: &str| {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let out = d.join("model.json");
+    let one = write(
+        "one.csv",
+        "frame,time,id,x,y\n0,0,1,0,0\n1,0.4,1,1,0\n2,0.8,1,2,0\n",
+    );
+    let e = fails(&["crowd", "learn", s(&one), "--out", s(&out)]);
+    assert!(e.contains("one.csv") && e.contains("1 individual"), "{e}");
+    let dup = write(
+        "dup.csv",
+        "frame,time,id,x,y\n0,0,1,0,0\n0,0,1,1,0\n1,0.4,2,2,0\n",
+    );
+    let e = fails(&["crowd", "learn", s(&dup), "--out", s(&out)]);
+    assert!(
+        e.contains("dup.csv") && e.contains("duplicate (frame, id)"),
+        "{e}"
+    );
+    let back = write(
+        "back.csv",
+        "frame,time,id,x,y\n0,0,1,0,0\n0,0,2,1,0\n1,0,1,2,0\n1,0,2,3,0\n",
+    );
+    let e = fails(&["crowd", "learn", s(&back), "--out", s(&out)]);
+    assert!(
+        e.contains("back.csv") && e.contains("does not increase"),
+        "{e}"
+    );
+    assert!(!out.exists());
+    // A layout polygon with two points.
+    let src = synth(d, "c.csv", 1, 30.0);
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "2000",
+        "--out",
+        s(&out),
+    ]);
+    let lay = write(
+        "layout.json",
+        r#"{"schema": "herdfit.crowd-layout/1", "obstacles": [[[0, 0], [1, 1]]],
+            "spawns": [{"position": [0, 1], "goal": [10, 1], "count": 3}]}"#,
+    );
+    let sim = d.join("sim.csv");
+    let e = fails(&[
+        "crowd",
+        "simulate",
+        s(&out),
+        "--layout",
+        s(&lay),
+        "--out",
+        s(&sim),
+    ]);
+    assert!(
+        e.contains("layout.json") && e.contains("obstacles[0]") && e.contains("at least 3 points"),
+        "{e}"
+    );
+    let e = fails(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--k",
+        "0",
+        "--out",
+        s(&d.join("m2.json")),
+    ]);
+    assert!(e.contains("action.k"), "{e}");
+    let names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        !names
+            .iter()
+            .any(|n| n.starts_with("sim") || n.starts_with("m2") || n.starts_with(".herdfit")),
+        "{names:?}"
+    );
+}
+
+#[test]
+fn layout_simulation_forms_a_line_and_writes_a_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = synth(d, "c.csv", 2, 60.0);
+    let model = d.join("m.json");
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--max-samples",
+        "5000",
+        "--out",
+        s(&model),
+    ]);
+    let lay = d.join("hall.json");
+    herdfit::crowd::demo_layout().save(&lay).unwrap();
+    let (out, png) = (d.join("hall.csv"), d.join("hall.png"));
+    let text = ok(&[
+        "crowd",
+        "simulate",
+        s(&model),
+        "--layout",
+        s(&lay),
+        "--png",
+        s(&png),
+        "--out",
+        s(&out),
+    ]);
+    assert!(text.contains("80 agents"), "{text}");
+    let t = herdfit::data::tracks::Tracks::load(&out).unwrap();
+    let roles: std::collections::BTreeSet<&str> =
+        t.rows.iter().filter_map(|r| r.role.as_deref()).collect();
+    assert!(
+        roles.contains("line") && roles.contains("locomotion"),
+        "{roles:?}"
+    );
+    // Nobody walks through the walls at y = 0 and y = 10 or into the pillar.
+    for r in &t.rows {
+        assert!(r.pos[1] > 0.0 && r.pos[1] < 10.0, "{r:?}");
+        assert!(
+            !(r.pos[0] > 14.0 && r.pos[0] < 16.0 && r.pos[1] > 4.0 && r.pos[1] < 6.0),
+            "{r:?}"
+        );
+    }
+    assert!(std::fs::metadata(&png).unwrap().len() > 10_000);
+}
+
+/// Leave-one-scene-out on HOTEL: the constant-velocity baseline reproduces the data README's
+/// figures (0.32/0.61) and the learnt model beats it.
+#[test]
+fn eth_ucy_hotel_fold_beats_constant_velocity() {
+    let data = shared_data().join("pedestrians/eth-ucy");
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("eval.json");
+    let text = ok(&[
+        "crowd",
+        "evaluate",
+        "--data",
+        s(&data),
+        "--scene",
+        "HOTEL",
+        "--json",
+        s(&json),
+    ]);
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(rep["schema"], "herdfit.crowd-eval/1");
+    let f = &rep["folds"][0];
+    let g = |a: &str, b: &str| f[a][b].as_f64().unwrap();
+    assert!(
+        (g("constant_velocity", "ade") - 0.32).abs() < 0.005,
+        "{text}"
+    );
+    assert!(
+        (g("constant_velocity", "fde") - 0.61).abs() < 0.005,
+        "{text}"
+    );
+    assert!(f["windows"].as_u64().unwrap() > 1000, "{text}");
+    assert!(g("model", "ade") < g("constant_velocity", "ade"), "{text}");
+    assert!(g("model", "fde") < g("constant_velocity", "fde"), "{text}");
+}
+
+#[test]
+fn crowd_help_lists_the_verbs() {
+    let o = herdfit(&["crowd", "--help"]);
+    let t = String::from_utf8_lossy(&o.stdout);
+    for v in ["learn", "simulate", "evaluate", "compare", "synth"] {
+        assert!(t.contains(v), "{t}");
+    }
+}
