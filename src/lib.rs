@@ -12,6 +12,7 @@ pub mod data;
 pub mod error;
 pub mod fields;
 pub mod io;
+pub mod lift;
 pub mod metrics;
 pub mod params;
 pub mod plot;

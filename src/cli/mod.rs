@@ -51,6 +51,17 @@ pub enum Command {
     /// The built-in walk-through: a synthetic herd rendered to video, extracted, fitted on the first
     /// half from a generic start, validated on the second half; prints a summary.
     Demo(DemoArgs),
+    /// 3D flocks from 2D tracks (Lin's thesis): run, synth, project, evaluate, camera.
+    #[command(subcommand)]
+    Lift(commands::lift::LiftCommand),
+    /// Any tracks file as an animated glTF 2.0 binary (.glb) for Blender and game engines.
+    ExportGltf(commands::export_gltf::ExportGltfArgs),
+}
+
+/// One file per verb of the newer systems.
+pub mod commands {
+    pub mod export_gltf;
+    pub mod lift;
 }
 
 #[derive(Args, Debug)]
@@ -543,6 +554,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::ImportReference(a) => import_cmd(a),
         Command::FieldsInfo(a) => fields_info(a),
         Command::Demo(a) => demo(a),
+        Command::Lift(c) => commands::lift::run(c),
+        Command::ExportGltf(a) => commands::export_gltf::run(a),
     }
 }
 
@@ -890,6 +903,8 @@ fn demo(a: DemoArgs) -> Result<()> {
         report_dir.join("report.md").display(),
         t0.elapsed().as_secs_f64()
     );
+    println!();
+    println!("{}", crate::lift::demo(&a.out, &mut Bars::default())?);
     Ok(())
 }
 
