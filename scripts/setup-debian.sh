@@ -2,10 +2,11 @@
 # Installs what herdfit needs on a fresh Debian machine that has Rust: the system OpenCV and the
 # clang it is bound with (cargo feature `video`), a font for plots, OpenCV's sample video
 # vtest.avi (opencv-doc) that the extraction tests read, and the Python packages the tests and
-# notebooks use. Idempotent: packages already present are not fetched again.
+# notebooks use, and the Khronos glTF validator (npm, into .ci/node_modules) that tests/lift.rs runs
+# on every exported .glb. Idempotent: packages already present are not fetched again.
 set -euo pipefail
 
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip nodejs npm)
 PIP_PACKAGES=(numpy matplotlib nbclient nbformat ipykernel)
 
 missing=()
@@ -24,5 +25,13 @@ if ! $PY -c "import numpy, matplotlib, nbclient, nbformat, ipykernel" >/dev/null
   echo "setup: installing ${PIP_PACKAGES[*]} (pip)"
   $PY -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}" \
     || $PY -m pip install --quiet --disable-pip-version-check --break-system-packages "${PIP_PACKAGES[@]}"
+fi
+
+# The Khronos glTF validator, pinned in .ci/package.json, installed into the project (not
+# globally); tests/lift.rs runs it through scripts/validate-gltf.js.
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+if [ ! -f "$ROOT/.ci/node_modules/gltf-validator/package.json" ]; then
+  echo "setup: installing gltf-validator (npm, .ci/node_modules)"
+  npm ci --prefix "$ROOT/.ci" --no-audit --no-fund --silent
 fi
 bash "$(dirname "$0")/fetch-testdata.sh"

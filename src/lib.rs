@@ -37,6 +37,7 @@ pub mod data;
 pub mod error;
 pub mod flock;
 pub mod herd;
+pub mod lift;
 pub mod measure;
 pub mod optim;
 pub mod plot;

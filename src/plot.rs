@@ -290,3 +290,143 @@ pub fn scene_plot(
 pub(crate) fn ensure_font() -> Result<()> {
     font_ready()
 }
+
+/// A group of polylines of one colour, with a legend entry, for [`paths_plot`].
+pub struct PathGroup<'a> {
+    pub name: &'a str,
+    pub lines: Vec<Vec<(f64, f64)>>,
+    pub colour: RGBColor,
+    pub width: u32,
+}
+
+/// Polylines (trajectories) and marked points on axes of equal scale, written atomically as PNG
+/// of `size` pixels.
+pub fn paths_plot(
+    path: &Path,
+    title: &str,
+    labels: (&str, &str),
+    groups: &[PathGroup],
+    marks: &[(&str, (f64, f64), RGBColor)],
+    size: (u32, u32),
+) -> Result<()> {
+    font_ready().map_err(|e| e.in_file(path))?;
+    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
+    let pts = groups
+        .iter()
+        .flat_map(|g| g.lines.iter().flatten().copied())
+        .chain(marks.iter().map(|m| m.1))
+        .filter(|p| p.0.is_finite() && p.1.is_finite());
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for (x, y) in pts {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if !x0.is_finite() {
+        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+    }
+    // Equal scale: widen the narrower range to the plot area's aspect ratio.
+    let (aw, ah) = (size.0 as f64 - 90.0, size.1 as f64 - 80.0);
+    let (w, h) = ((x1 - x0).max(1e-9) * 1.06, (y1 - y0).max(1e-9) * 1.06);
+    let per_px = (w / aw).max(h / ah);
+    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let (hx, hy) = (0.5 * per_px * aw, 0.5 * per_px * ah);
+    {
+        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(50)
+            .build_cartesian_2d((cx - hx)..(cx + hx), (cy - hy)..(cy + hy))
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .x_desc(labels.0)
+            .y_desc(labels.1)
+            .label_style(("sans-serif", 13))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        for g in groups {
+            let style = g.colour.stroke_width(g.width);
+            let mut first = true;
+            for l in &g.lines {
+                let s = chart
+                    .draw_series(LineSeries::new(l.iter().copied(), style))
+                    .map_err(|e| fail(e.to_string()))?;
+                if first {
+                    let c = g.colour;
+                    s.label(g.name).legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3))
+                    });
+                    first = false;
+                }
+            }
+        }
+        for (name, p, c) in marks {
+            let c = *c;
+            chart
+                .draw_series(std::iter::once(Cross::new(*p, 7, c.stroke_width(3))))
+                .map_err(|e| fail(e.to_string()))?
+                .label(*name)
+                .legend(move |(x, y)| Cross::new((x + 10, y), 5, c.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        root.present().map_err(|e| fail(e.to_string()))?;
+    }
+    crate::io::persist(tmp, path)
+}
+
+/// Filled, outlined polygons in pixel coordinates (drawn in the order given: painter's
+/// algorithm) over a vertical gradient from `sky.0` (top) to `sky.1`, written atomically as PNG.
+pub fn polygons_png(
+    path: &Path,
+    size: (u32, u32),
+    sky: (RGBColor, RGBColor),
+    polygons: &[(Vec<(i32, i32)>, RGBColor)],
+    caption: &str,
+) -> Result<()> {
+    font_ready().map_err(|e| e.in_file(path))?;
+    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
+    {
+        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+        let mix = |a: u8, b: u8, t: f64| (a as f64 + (b as f64 - a as f64) * t).round() as u8;
+        for y in 0..size.1 as i32 {
+            let t = y as f64 / size.1.max(1) as f64;
+            let c = RGBColor(
+                mix(sky.0 .0, sky.1 .0, t),
+                mix(sky.0 .1, sky.1 .1, t),
+                mix(sky.0 .2, sky.1 .2, t),
+            );
+            root.draw(&PathElement::new(vec![(0, y), (size.0 as i32, y)], c))
+                .map_err(|e| fail(e.to_string()))?;
+        }
+        for (pts, c) in polygons {
+            root.draw(&Polygon::new(pts.clone(), c.filled()))
+                .map_err(|e| fail(e.to_string()))?;
+        }
+        root.draw(&Text::new(
+            caption.to_string(),
+            (10, 10),
+            ("sans-serif", 18).into_font(),
+        ))
+        .map_err(|e| fail(e.to_string()))?;
+        root.present().map_err(|e| fail(e.to_string()))?;
+    }
+    crate::io::persist(tmp, path)
+}

@@ -52,6 +52,11 @@ pub enum Command {
     /// Crowds learnt from tracked trajectories (Lee et al. 2007): learn, simulate, evaluate, compare.
     #[command(subcommand)]
     Crowd(crowd::CrowdCommand),
+    /// 3D flocks from 2D tracks (Lin's thesis): run, synth, project, evaluate, camera.
+    #[command(subcommand)]
+    Lift(lift::LiftCommand),
+    /// Any tracks file as an animated glTF 2.0 binary (.glb) for Blender and game engines.
+    ExportGltf(export_gltf::ExportGltfArgs),
 }
 
 /// Runs the parsed command line.
@@ -70,5 +75,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Demo(a) => demo::exec(a),
         Command::Flock(c) => flock::run(c),
         Command::Crowd(c) => crowd::run(c),
+        Command::Lift(c) => lift::run(c),
+        Command::ExportGltf(a) => export_gltf::run(a),
     }
 }

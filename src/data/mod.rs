@@ -3,9 +3,12 @@
 
 pub mod agents;
 pub mod atomic;
+pub mod camera;
 pub mod cells;
 pub mod clip;
 pub mod csv;
+pub mod gltf;
+pub mod jackdaw;
 pub mod reference;
 pub mod tracks;
 

@@ -18,5 +18,7 @@ pub fn exec(a: DemoArgs) -> Result<()> {
     let summary = demo(&a.out, &mut Bars::default())?;
     print!("{summary}");
     println!("{}", crate::flock::demo(&a.out, &mut Bars::default())?);
+    println!();
+    println!("{}", crate::lift::demo(&a.out, &mut Bars::default())?);
     Ok(())
 }
