@@ -41,6 +41,9 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Convert the public Herds-From-Video extractor's text files into a clip folder.
     ImportReference(import_reference::ImportArgs),
+    /// Turn tracked trajectories (herdfit.tracks/1, ETH/UCY, idtracker.ai/trajectorytools .npy)
+    /// into a clip folder of fields that `fit` and `validate` read.
+    ImportTracks(import_tracks::ImportTracksArgs),
     /// Summarise a clip: grid, frames, agents, speed model, polarization, angular momentum.
     FieldsInfo(fields_info::FieldsInfoArgs),
     /// The built-in walk-through: a synthetic herd rendered to video, extracted, fitted on the first
@@ -71,6 +74,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Author(a) => author::exec(a),
         Command::Synth(a) => synth::exec(a),
         Command::ImportReference(a) => import_reference::exec(a),
+        Command::ImportTracks(a) => import_tracks::exec(a),
         Command::FieldsInfo(a) => fields_info::exec(a),
         Command::Demo(a) => demo::exec(a),
         Command::Flock(c) => flock::run(c),

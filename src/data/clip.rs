@@ -110,6 +110,8 @@ impl ClipMeta {
         let p = &self.provenance;
         if p["source"] == "extract" {
             p["settings"]["smooth"].as_u64().unwrap_or(9).max(1) as usize
+        } else if p["source"] == "import-tracks" {
+            p["settings"]["smooth"].as_u64().unwrap_or(1).max(1) as usize
         } else {
             1
         }

@@ -9,6 +9,7 @@ pub mod clip;
 pub mod csv;
 pub mod gltf;
 pub mod jackdaw;
+pub mod npy_tracks;
 pub mod reference;
 pub mod tracks;
 

@@ -14,6 +14,7 @@ pub mod eval;
 pub mod fit;
 pub mod gradcheck;
 pub mod guidance;
+pub mod import_tracks;
 pub mod params;
 pub mod scenario;
 pub mod sim;

@@ -12,6 +12,7 @@ pub mod fit;
 pub mod flock;
 pub mod gradcheck;
 pub mod import_reference;
+pub mod import_tracks;
 pub mod lift;
 pub mod simulate;
 pub mod synth;
