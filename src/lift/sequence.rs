@@ -165,16 +165,17 @@ impl Structure {
         let n = obs.len();
         let mut vel_of = vec![usize::MAX; n];
         let mut vel = Vec::new();
-        for i in 0..n {
+        for (i, slot) in vel_of.iter_mut().enumerate() {
             if let Some(p) = obs.prev[i] {
-                vel_of[i] = vel.len();
+                *slot = vel.len();
                 vel.push((p, i));
             }
         }
         let acc = vel
             .iter()
             .enumerate()
-            .filter_map(|(v, &(p, _))| (vel_of[p] != usize::MAX).then(|| (vel_of[p], v)))
+            .filter(|&(_, &(p, _))| vel_of[p] != usize::MAX)
+            .map(|(v, &(p, _))| (vel_of[p], v))
             .collect();
         let mut pairs = Vec::new();
         for (_, r) in &obs.frames {

@@ -92,7 +92,7 @@ type V3 = [f64; 3];
 mod orient;
 mod read;
 pub use orient::{bird_mesh, heading_quaternion, rotate, smoothed_headings, to_gltf};
-pub use read::{read_glb, Glb};
+pub use read::{read_glb, Glb, NodePose};
 
 /// The binary buffer and the JSON objects that describe it.
 #[derive(Default)]
@@ -157,6 +157,7 @@ impl Builder {
         })
     }
 
+    #[allow(clippy::too_many_arguments)] // one glTF sampler's fields, each a different kind
     fn sampler(
         &mut self,
         anim: &mut gj::Animation,
@@ -311,8 +312,7 @@ fn keys_of(tracks: &Tracks, cfg: &GltfConfig) -> Result<Vec<Keys>> {
                 .map(|s| s.0)
                 .collect::<Vec<_>>()
                 .windows(2)
-                .collect::<Vec<_>>()
-                .into_iter(),
+                .collect::<Vec<_>>(),
         ) {
             if (w[1] as f32) <= (w[0] as f32) {
                 return Err(Error::invalid(format!(

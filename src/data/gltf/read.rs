@@ -8,6 +8,9 @@ use std::path::Path;
 
 type V3 = [f64; 3];
 
+/// A node's name, translation, rotation (x, y, z, w) and scale at one time.
+pub type NodePose = (String, V3, [f64; 4], V3);
+
 /// A GLB read back: its JSON document and binary chunk.
 pub struct Glb {
     pub root: gj::Root,
@@ -74,8 +77,8 @@ impl Glb {
 
     /// Every node's (name, translation, rotation, scale) at time `t` of the first animation
     /// (linear translation, normalised-linear rotation, step scale).
-    pub fn sample(&self, t: f64) -> Result<Vec<(String, V3, [f64; 4], V3)>> {
-        let mut out: Vec<(String, V3, [f64; 4], V3)> = self
+    pub fn sample(&self, t: f64) -> Result<Vec<NodePose>> {
+        let mut out: Vec<NodePose> = self
             .root
             .nodes
             .iter()
