@@ -6,13 +6,17 @@
 # on every exported .glb. Idempotent: packages already present are not fetched again.
 set -euo pipefail
 
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip nodejs npm)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip)
 PIP_PACKAGES=(numpy matplotlib nbclient nbformat ipykernel)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
 done
+# Node.js and npm run the glTF validator (tests/lift.rs); Debian's packages only when no node or
+# npm is on PATH already (one installed otherwise, e.g. by nvm, is used as it is).
+command -v node >/dev/null 2>&1 || dpkg -s nodejs >/dev/null 2>&1 || missing+=(nodejs)
+command -v npm >/dev/null 2>&1 || dpkg -s npm >/dev/null 2>&1 || missing+=(npm)
 if ((${#missing[@]})); then
   SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
   echo "setup: installing ${missing[*]}"
@@ -30,8 +34,11 @@ fi
 # The Khronos glTF validator, pinned in .ci/package.json, installed into the project (not
 # globally); tests/lift.rs runs it through scripts/validate-gltf.js.
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
-if [ ! -f "$ROOT/.ci/node_modules/gltf-validator/package.json" ]; then
+if [ ! -f "$ROOT/.ci/node_modules/gltf-validator/package.json" ] \
+  || [ "$ROOT/.ci/package-lock.json" -nt "$ROOT/.ci/node_modules/gltf-validator/package.json" ]; then
   echo "setup: installing gltf-validator (npm, .ci/node_modules)"
   npm ci --prefix "$ROOT/.ci" --no-audit --no-fund --silent
 fi
+node "$ROOT/scripts/validate-gltf.js" >/dev/null \
+  || { echo "setup: the glTF validator does not load (node $(node --version))" >&2; exit 1; }
 bash "$(dirname "$0")/fetch-testdata.sh"

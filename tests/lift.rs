@@ -27,11 +27,12 @@ fn shared_data() -> PathBuf {
     PathBuf::from("/work/shared/data")
 }
 
-/// The small synthetic flock of these tests (birds leave and enter the view).
+/// The small synthetic flock of these tests (a 40° view: birds leave and enter it).
 fn small_flock() -> BoidsConfig {
     BoidsConfig {
         birds: 12,
         frames: 150,
+        hfov: 40.0,
         ..BoidsConfig::default()
     }
 }
@@ -456,4 +457,37 @@ fn bad_inputs_fail_with_one_line_and_leave_nothing_behind() {
         "5",
     ]);
     assert!(out.is_file());
+}
+
+#[test]
+fn the_demo_section_scores_the_four_estimates_and_writes_a_valid_glb() {
+    let dir = tempfile::tempdir().unwrap();
+    let t0 = std::time::Instant::now();
+    let summary = herdfit::lift::demo(dir.path(), &mut NoProgress).unwrap();
+    let secs = t0.elapsed().as_secs_f64();
+    let text = summary.to_string();
+    eprintln!("{text}\n(lift demo: {secs:.1} s)");
+    assert_eq!(summary.scores.len(), 4);
+    assert!(
+        text.contains("3D RMSE (m)") && text.contains("flock.glb"),
+        "{text}"
+    );
+    let lift = dir.path().join("lift");
+    for f in [
+        "tracks2d.csv",
+        "truth3d.csv",
+        "lifted3d.csv",
+        "eval.json",
+        "top.png",
+        "side.png",
+        "flock.glb",
+        "flock_render.png",
+    ] {
+        assert!(lift.join(f).is_file(), "{f} written");
+    }
+    let report = validate_gltf(&[&lift.join("flock.glb")]);
+    assert!(report.contains(": 0 errors"), "{report}");
+    // The whole-sequence lift is the demo's result: better than the constant baseline.
+    let s = &summary.scores;
+    assert!(s[3].position_rmse < s[1].position_rmse, "{text}");
 }

@@ -302,7 +302,8 @@ mod tests {
         assert_eq!(Camera::load(&p).unwrap(), c);
         let text = std::fs::read_to_string(&p).unwrap();
         assert!(text.contains("\"schema\": \"herdfit.camera/1\""));
-        let cases: Vec<(Box<dyn Fn(&mut Camera)>, &str)> = vec![
+        type Edit = Box<dyn Fn(&mut Camera)>;
+        let cases: Vec<(Edit, &str)> = vec![
             (Box::new(|c| c.fx = 0.0), "fx = 0 must be > 0"),
             (Box::new(|c| c.fy = f64::NAN), "fy = NaN"),
             (Box::new(|c| c.width = 0), "width × height"),

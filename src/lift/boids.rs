@@ -3,8 +3,8 @@
 //! 2D pixel tracks to lift, with the true 3D tracks and the camera beside them.
 //!
 //! One step of bird i (Δt = 1/fps), neighbours j within `r_neighbour`:
-//! `a = k_sep Σ_{d_ij < r_sep} (b_i − b_j)/d_ij² + k_align (v̄ − v_i) + k_cohesion (b̄ − b_i)
-//!   + k_home (cruise · unit(target − b_i) − v_i)`, |a| ≤ `a_max`, then
+//! `a = k_sep Σ_{d_ij < r_sep} (b_i − b_j)/d_ij² + k_align (v̄ − v_i) + k_cohesion (b̄ − b_i) +
+//! k_home (cruise · unit(target − b_i) − v_i)`, |a| ≤ `a_max`, then
 //! `v ← v + a Δt` with the speed kept in [0.6, 1.4] · cruise, `b ← b + v Δt`. The target circles
 //! the origin at `altitude` (radius `orbit_radius`, one turn per `orbit_period` s) and bobs up
 //! and down by a fifth of the radius, so the flock turns, climbs and dives.

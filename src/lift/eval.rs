@@ -104,6 +104,8 @@ pub struct MethodScore {
     pub depth_rmse_relative: f64,
     /// RMSE of 3D position (world units).
     pub position_rmse: f64,
+    /// The position RMSE over the flock's extent ([`TruthStats::extent`]).
+    pub position_rmse_per_extent: f64,
     pub checks: Checks,
     /// Per-frame speed changes (world units per frame).
     pub speed_change: Quantiles,
@@ -119,6 +121,37 @@ pub struct TruthStats {
     pub speed_change: Quantiles,
     /// Median speed (world units per frame).
     pub median_speed: f64,
+    /// The flock's extent: the median over frames with two or more birds of the largest distance
+    /// between two birds of the frame (world units).
+    pub extent: f64,
+    /// The same in depth alone: median over frames of the largest minus the smallest true depth.
+    pub depth_extent: f64,
+}
+
+/// Median over frames with two or more birds of the frame's diameter in 3D and in depth.
+fn extents(obs: &Observations, b: &[V3], depth: &[f64]) -> (f64, f64) {
+    let (mut diam, mut span) = (Vec::new(), Vec::new());
+    for (_, r) in &obs.frames {
+        if r.len() < 2 {
+            continue;
+        }
+        let mut m: f64 = 0.0;
+        for i in r.clone() {
+            for j in i + 1..r.end {
+                m = m.max(dist(b[i], b[j]));
+            }
+        }
+        diam.push(m);
+        let d = &depth[r.clone()];
+        let hi = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let lo = d.iter().copied().fold(f64::INFINITY, f64::min);
+        span.push(hi - lo);
+    }
+    let med = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    (med(diam), med(span))
 }
 
 /// An evaluation report (`herdfit.lift-eval/1`).
@@ -151,6 +184,7 @@ fn score(
     depth: &[f64],
     truth: &[f64],
     truth_changes: &Quantiles,
+    extent: f64,
     d_sep: f64,
 ) -> MethodScore {
     let n = depth.len() as f64;
@@ -175,6 +209,7 @@ fn score(
         depth_rmse: depth_mse.sqrt(),
         depth_rmse_relative: depth_mse.sqrt() / mean_true,
         position_rmse: pos_mse.sqrt(),
+        position_rmse_per_extent: pos_mse.sqrt() / extent,
         checks: Checks::new(obs, depth, d_sep),
         speed_change: sc,
         speed_change_ratio: sc.ratio(truth_changes),
@@ -201,6 +236,7 @@ pub fn evaluate(
         .collect();
     speeds.sort_by(f64::total_cmp);
     let n = obs.len();
+    let (extent, depth_extent) = extents(&obs, &bt, &truth_depth);
     let mean_depth = truth_depth.iter().sum::<f64>() / n as f64;
     // (a) the true mean depth of each frame.
     let mut frame_mean = vec![0.0; n];
@@ -221,7 +257,7 @@ pub fn evaluate(
     ];
     let methods = named
         .iter()
-        .map(|(k, d)| score(k, &obs, d, &truth_depth, &truth_changes, cfg.d_sep))
+        .map(|(k, d)| score(k, &obs, d, &truth_depth, &truth_changes, extent, cfg.d_sep))
         .collect();
     let (min_distance, _) = closest_pairs(&obs, &bt, 0.0);
     let report = EvalReport {
@@ -237,6 +273,8 @@ pub fn evaluate(
             min_distance,
             speed_change: truth_changes,
             median_speed: speeds.get(speeds.len() / 2).copied().unwrap_or(0.0),
+            extent,
+            depth_extent,
         },
         methods,
     };

@@ -137,12 +137,13 @@ pub fn render_glb(glb: &Path, t: f64, camera: &Camera, out: &Path) -> Result<usi
     let nodes = g.sample(t).map_err(|e| e.in_file(glb))?;
     let (pos, nor) = mesh_of(&g).map_err(|e| e.in_file(glb))?;
     let light = {
-        let l = [0.3, -0.4, 0.87];
-        let n = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2] as f64).sqrt();
+        let l: V3 = [0.3, -0.4, 0.87];
+        let n = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
         l.map(|c| c / n)
     };
     let to_world = |p: V3| [p[0], -p[2], p[1]];
-    let mut polys: Vec<(f64, Vec<(i32, i32)>, RGBColor)> = Vec::new();
+    type Poly = (f64, Vec<(i32, i32)>, RGBColor);
+    let mut polys: Vec<Poly> = Vec::new();
     let mut drawn = 0;
     for (_, tr, q, s) in &nodes {
         if s.iter().all(|x| *x == 0.0) {

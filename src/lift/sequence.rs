@@ -14,7 +14,9 @@
 //!   cannot see (a flock twice as far and twice as fast projects the same);
 //! - `align`: Σ ‖v̂_i − v̂_j‖² over image neighbours (v̂ = v/‖v‖, the heading) — Reynolds'
 //!   alignment, which the thesis drops in optimisation (§3.4); with known rays it ties
-//!   neighbours' depths through their image motion;
+//!   neighbours' depths through their image motion. Its default weight is 0.3, not 1: real birds
+//!   align less than boids (a mobbing flock's true headings cost more than a wrong lift's; the
+//!   figures are in RESULTS.md §5);
 //! - `cohesion`: Σ (u_i − u_j)² over image neighbours — neighbours at similar depths
 //!   (scale-free, so it does not pull the flock towards the camera);
 //! - `separation`: Σ max(0, 1 − ‖b_i − b_j‖ / d_sep)² over image neighbours (Algorithm 1's
@@ -80,7 +82,7 @@ impl Default for SequenceConfig {
             levels: vec![0, 64, 16, 4, 1],
             w_accel: 100.0,
             w_speed: 1.0,
-            w_align: 1.0,
+            w_align: 0.3,
             w_cohesion: 1.0,
             w_separation: 100.0,
             w_level: 1.0,
@@ -163,16 +165,17 @@ impl Structure {
         let n = obs.len();
         let mut vel_of = vec![usize::MAX; n];
         let mut vel = Vec::new();
-        for i in 0..n {
+        for (i, slot) in vel_of.iter_mut().enumerate() {
             if let Some(p) = obs.prev[i] {
-                vel_of[i] = vel.len();
+                *slot = vel.len();
                 vel.push((p, i));
             }
         }
         let acc = vel
             .iter()
             .enumerate()
-            .filter_map(|(v, &(p, _))| (vel_of[p] != usize::MAX).then(|| (vel_of[p], v)))
+            .filter(|&(_, &(p, _))| vel_of[p] != usize::MAX)
+            .map(|(v, &(p, _))| (vel_of[p], v))
             .collect();
         let mut pairs = Vec::new();
         for (_, r) in &obs.frames {

@@ -509,30 +509,34 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
 fn print_eval(r: &crate::lift::eval::EvalReport, out: &Path, secs: f64) {
     let u = r.camera.units.as_str();
     println!(
-        "lift evaluate: {} birds, {} frames, {} points; mean true depth {:.2} {u}; truth's closest pair {}",
+        "lift evaluate: {} birds, {} frames, {} points; mean true depth {:.2} {u}; flock extent {:.2} {u} (depth {:.2} {u}); truth's closest pair {}",
         r.birds,
         r.frames,
         r.observations,
         r.truth.mean_depth,
+        r.truth.extent,
+        r.truth.depth_extent,
         r.truth.min_distance.map_or("–".into(), |d| format!("{d:.3} {u}"))
     );
     println!(
-        "  {:<16} {:>10} {:>10} {:>10} {:>12} {:>9} {:>22}",
+        "  {:<16} {:>10} {:>10} {:>10} {:>9} {:>12} {:>9} {:>22}",
         "estimate",
         "depth RMSE",
         "(relative)",
         "3D RMSE",
+        "/ extent",
         "closest pair",
         "< d_sep/2",
         "speed change vs truth"
     );
     for m in &r.methods {
         println!(
-            "  {:<16} {:>10.3} {:>9.1}% {:>10.3} {:>12} {:>9} {:>6.2} {:>6.2} {:>6.2}",
+            "  {:<16} {:>10.3} {:>9.1}% {:>10.3} {:>9.2} {:>12} {:>9} {:>6.2} {:>6.2} {:>6.2}",
             m.name,
             m.depth_rmse,
             100.0 * m.depth_rmse_relative,
             m.position_rmse,
+            m.position_rmse_per_extent,
             m.checks
                 .min_distance
                 .map_or("–".into(), |d| format!("{d:.3}")),

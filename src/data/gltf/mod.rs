@@ -89,115 +89,10 @@ pub struct GltfSummary {
 
 type V3 = [f64; 3];
 
-/// A tracks position in glTF coordinates (see the module docs), before `scale`.
-pub fn to_gltf(units: Units, dimension: u8, p: V3) -> V3 {
-    match (dimension, units) {
-        (3, _) => [p[0], p[2], -p[1]],
-        (_, Units::Pixels) => [p[0], 0.0, p[1]],
-        _ => [p[0], 0.0, -p[1]],
-    }
-}
-
-fn unit(a: V3) -> Option<V3> {
-    let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    (n > 1e-12 && n.is_finite()).then(|| a.map(|c| c / n))
-}
-
-/// Headings of one track by §3.6's smoothing (`alpha` = turn rate). Frames before the first
-/// displacement take the first displacement's direction (the thesis's o² = b² − b¹); a track that
-/// never moves faces +Z.
-pub fn smoothed_headings(points: &[V3], alpha: f64) -> Vec<V3> {
-    let mut out: Vec<Option<V3>> = Vec::with_capacity(points.len());
-    let mut o: Option<V3> = None;
-    for (k, p) in points.iter().enumerate() {
-        if k > 0 {
-            let step = [0, 1, 2].map(|c| p[c] - points[k - 1][c]);
-            if let Some(s) = unit(step) {
-                o = match o {
-                    None => Some(s),
-                    Some(prev) => {
-                        unit([0, 1, 2].map(|c| (1.0 - alpha) * prev[c] + alpha * s[c])).or(Some(s))
-                    }
-                };
-            }
-        }
-        out.push(o);
-    }
-    let first = out
-        .iter()
-        .flatten()
-        .next()
-        .copied()
-        .unwrap_or([0.0, 0.0, 1.0]);
-    out.into_iter().map(|h| h.unwrap_or(first)).collect()
-}
-
-/// The unit quaternion `[x, y, z, w]` turning +Z to the unit vector `h` with no roll.
-pub fn heading_quaternion(h: V3) -> [f64; 4] {
-    let yaw = h[0].atan2(h[2]);
-    let pitch = -h[1].clamp(-1.0, 1.0).asin();
-    let (sy, cy) = (0.5 * yaw).sin_cos();
-    let (sx, cx) = (0.5 * pitch).sin_cos();
-    [cy * sx, sy * cx, -sy * sx, cy * cx]
-}
-
-/// Rotates `v` by the unit quaternion `q = [x, y, z, w]`.
-pub fn rotate(q: [f64; 4], v: V3) -> V3 {
-    let u = [q[0], q[1], q[2]];
-    let w = q[3];
-    let cross = |a: V3, b: V3| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
-    let t = cross(u, v).map(|c| 2.0 * c);
-    let ut = cross(u, t);
-    [0, 1, 2].map(|c| v[c] + w * t[c] + ut[c])
-}
-
-/// Triangles of the bird mesh for body length `l`: a body along z (nose at +z) and two swept
-/// wings along ±x (span 1.8 l), flat-shaded (three vertices per face, with its normal).
-pub fn bird_mesh(l: f64) -> (Vec<V3>, Vec<V3>) {
-    let nose = [0.0, 0.0, 0.55 * l];
-    let tail = [0.0, 0.0, -0.45 * l];
-    let (w, h) = (0.09 * l, 0.08 * l);
-    let ring = [[w, 0.0, 0.0], [0.0, h, 0.0], [-w, 0.0, 0.0], [0.0, -h, 0.0]];
-    let mut tris: Vec<[V3; 3]> = Vec::new();
-    for k in 0..4 {
-        let (a, b) = (ring[k], ring[(k + 1) % 4]);
-        tris.push([nose, b, a]);
-        tris.push([tail, a, b]);
-    }
-    for s in [1.0, -1.0] {
-        let root_front = [0.0, 0.0, 0.15 * l];
-        let root_back = [0.0, 0.0, -0.15 * l];
-        let tip = [s * 0.9 * l, 0.02 * l, -0.2 * l];
-        if s > 0.0 {
-            tris.push([root_front, root_back, tip]);
-        } else {
-            tris.push([root_front, tip, root_back]);
-        }
-    }
-    let mut pos = Vec::new();
-    let mut nor = Vec::new();
-    for t in &tris {
-        let e1 = [0, 1, 2].map(|c| t[1][c] - t[0][c]);
-        let e2 = [0, 1, 2].map(|c| t[2][c] - t[0][c]);
-        let n = unit([
-            e1[1] * e2[2] - e1[2] * e2[1],
-            e1[2] * e2[0] - e1[0] * e2[2],
-            e1[0] * e2[1] - e1[1] * e2[0],
-        ])
-        .unwrap_or([0.0, 1.0, 0.0]);
-        for v in t {
-            pos.push(*v);
-            nor.push(n);
-        }
-    }
-    (pos, nor)
-}
+mod orient;
+mod read;
+pub use orient::{bird_mesh, heading_quaternion, rotate, smoothed_headings, to_gltf};
+pub use read::{read_glb, Glb, NodePose};
 
 /// The binary buffer and the JSON objects that describe it.
 #[derive(Default)]
@@ -262,6 +157,7 @@ impl Builder {
         })
     }
 
+    #[allow(clippy::too_many_arguments)] // one glTF sampler's fields, each a different kind
     fn sampler(
         &mut self,
         anim: &mut gj::Animation,
@@ -416,8 +312,7 @@ fn keys_of(tracks: &Tracks, cfg: &GltfConfig) -> Result<Vec<Keys>> {
                 .map(|s| s.0)
                 .collect::<Vec<_>>()
                 .windows(2)
-                .collect::<Vec<_>>()
-                .into_iter(),
+                .collect::<Vec<_>>(),
         ) {
             if (w[1] as f32) <= (w[0] as f32) {
                 return Err(Error::invalid(format!(
@@ -579,167 +474,4 @@ pub fn export_glb(tracks: &Tracks, cfg: &GltfConfig, path: &Path) -> Result<Gltf
     let (bytes, summary) = to_glb(tracks, cfg)?;
     crate::data::atomic::write_atomic(path, &bytes)?;
     Ok(summary)
-}
-
-/// A GLB read back: its JSON document and binary chunk.
-pub struct Glb {
-    pub root: gj::Root,
-    pub bin: Vec<u8>,
-}
-
-/// Reads a GLB written by [`export_glb`] (or any GLB with one embedded buffer).
-pub fn read_glb(path: &Path) -> Result<Glb> {
-    let bytes = std::fs::read(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
-    let bad = |m: &str| Error::file(path, format!("not a GLB file: {m}"));
-    let u32_at = |o: usize| -> Result<u32> {
-        bytes
-            .get(o..o + 4)
-            .map(|s| u32::from_le_bytes(s.try_into().expect("four bytes")))
-            .ok_or_else(|| bad("truncated"))
-    };
-    if u32_at(0)? != 0x4654_6C67 || u32_at(4)? != 2 {
-        return Err(bad("no glTF 2 header"));
-    }
-    let jl = u32_at(12)? as usize;
-    let json = bytes
-        .get(20..20 + jl)
-        .ok_or_else(|| bad("truncated JSON chunk"))?;
-    let root = gj::Root::from_slice(json).map_err(|e| bad(&e.to_string()))?;
-    let bin = match u32_at(20 + jl) {
-        Ok(bl) => bytes
-            .get(28 + jl..28 + jl + bl as usize)
-            .ok_or_else(|| bad("truncated BIN chunk"))?
-            .to_vec(),
-        Err(_) => Vec::new(),
-    };
-    Ok(Glb { root, bin })
-}
-
-impl Glb {
-    /// The f32 values of accessor `a` (tightly packed float accessors only).
-    pub fn floats(&self, a: gj::Index<gj::Accessor>) -> Result<Vec<f32>> {
-        let acc = self
-            .root
-            .get(a)
-            .ok_or_else(|| Error::invalid("accessor index out of range"))?;
-        let view = acc
-            .buffer_view
-            .and_then(|v| self.root.get(v))
-            .ok_or_else(|| Error::invalid("accessor without a buffer view"))?;
-        let width = match acc.type_ {
-            Valid(gj::accessor::Type::Scalar) => 1,
-            Valid(gj::accessor::Type::Vec3) => 3,
-            Valid(gj::accessor::Type::Vec4) => 4,
-            _ => return Err(Error::invalid("unsupported accessor type")),
-        };
-        let start = view.byte_offset.map_or(0, |o| o.0 as usize)
-            + acc.byte_offset.map_or(0, |o| o.0 as usize);
-        let n = acc.count.0 as usize * width;
-        let raw = self
-            .bin
-            .get(start..start + 4 * n)
-            .ok_or_else(|| Error::invalid("accessor beyond the buffer"))?;
-        Ok(raw
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("four bytes")))
-            .collect())
-    }
-
-    /// Every node's (name, translation, rotation, scale) at time `t` of the first animation
-    /// (linear translation, normalised-linear rotation, step scale).
-    pub fn sample(&self, t: f64) -> Result<Vec<(String, V3, [f64; 4], V3)>> {
-        let mut out: Vec<(String, V3, [f64; 4], V3)> = self
-            .root
-            .nodes
-            .iter()
-            .map(|n| {
-                (
-                    n.name.clone().unwrap_or_default(),
-                    n.translation.map_or([0.0; 3], |v| v.map(f64::from)),
-                    n.rotation
-                        .map_or([0.0, 0.0, 0.0, 1.0], |q| q.0.map(f64::from)),
-                    n.scale.map_or([1.0; 3], |v| v.map(f64::from)),
-                )
-            })
-            .collect();
-        let Some(anim) = self.root.animations.first() else {
-            return Ok(out);
-        };
-        for ch in &anim.channels {
-            let s = &anim.samplers[ch.sampler.value()];
-            let times = self.floats(s.input)?;
-            let vals = self.floats(s.output)?;
-            let w = vals.len() / times.len().max(1);
-            let k = times.partition_point(|&x| f64::from(x) <= t);
-            let step = matches!(s.interpolation, Valid(gj::animation::Interpolation::Step));
-            let value: Vec<f64> = if k == 0 {
-                vals[..w].iter().map(|&v| v.into()).collect()
-            } else if k == times.len() || step {
-                vals[(k - 1) * w..k * w].iter().map(|&v| v.into()).collect()
-            } else {
-                let (t0, t1) = (f64::from(times[k - 1]), f64::from(times[k]));
-                let a = (t - t0) / (t1 - t0);
-                (0..w)
-                    .map(|c| {
-                        (1.0 - a) * f64::from(vals[(k - 1) * w + c])
-                            + a * f64::from(vals[k * w + c])
-                    })
-                    .collect()
-            };
-            let node = &mut out[ch.target.node.value()];
-            match ch.target.path {
-                Valid(gj::animation::Property::Translation) => {
-                    node.1 = [value[0], value[1], value[2]]
-                }
-                Valid(gj::animation::Property::Rotation) => {
-                    let n = value.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
-                    node.2 = [value[0] / n, value[1] / n, value[2] / n, value[3] / n];
-                }
-                Valid(gj::animation::Property::Scale) => node.3 = [value[0], value[1], value[2]],
-                _ => {}
-            }
-        }
-        Ok(out)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn heading_quaternion_turns_plus_z_onto_the_heading() {
-        for h in [
-            [1.0, 0.0, 0.0],
-            [0.0, 0.0, -1.0],
-            [0.6, 0.0, 0.8],
-            [0.3, 0.5, -0.81],
-            [0.0, 1.0, 0.0],
-        ] {
-            let h = unit(h).unwrap();
-            let q = heading_quaternion(h);
-            let r = rotate(q, [0.0, 0.0, 1.0]);
-            for c in 0..3 {
-                assert!((r[c] - h[c]).abs() < 1e-9, "{h:?} → {r:?}");
-            }
-            // No roll: the wing axis (+x) stays horizontal.
-            assert!(rotate(q, [1.0, 0.0, 0.0])[1].abs() < 1e-9);
-        }
-    }
-
-    #[test]
-    fn headings_follow_section_3_6() {
-        let pts: Vec<V3> = (0..5)
-            .map(|k| [0.0, 0.0, k as f64])
-            .chain([[1.0, 0.0, 4.0]])
-            .collect();
-        let h = smoothed_headings(&pts, 0.1);
-        assert_eq!(h[0], [0.0, 0.0, 1.0]);
-        assert_eq!(h[4], [0.0, 0.0, 1.0]);
-        // A sharp turn to +x moves the heading by about a tenth of the way.
-        let want = unit([0.1, 0.0, 0.9]).unwrap();
-        for c in 0..3 {
-            assert!((h[5][c] - want[c]).abs() < 1e-12);
-        }
-    }
 }
