@@ -153,7 +153,10 @@ impl Initiation {
                     };
                     // Eq. 5 and eq. 6.
                     let v = rb.v * (1.0 - delta.abs() / PI + k * (r - rb.v).abs().sqrt());
-                    (v, self.cfg.alpha * delta / r.max(1.0))
+                    (
+                        v,
+                        self.cfg.alpha * delta / r.clamp(1.0, self.cfg.turn_distance.max(1.0)),
+                    )
                 }
                 _ => (cruise, self.cfg.alpha * wrap(-b.theta)),
             };

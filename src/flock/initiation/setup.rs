@@ -26,6 +26,10 @@ pub struct InitiationConfig {
     pub alpha: f64,
     /// Separation threshold, wingspans (the paper: 10 b).
     pub separation_distance: f64,
+    /// Eq. 6's max(r, 1) is capped at this (wingspans): a bird farther from its target turns as
+    /// fast as one at this distance. Without the cap a bird that overshoots turns ever more
+    /// slowly as it recedes and never comes back (RESULTS.md §3).
+    pub turn_distance: f64,
     /// Cap on speed changes, wingspans/s².
     pub max_speed_change: f64,
     /// Cap on turns, degrees/s.
@@ -56,6 +60,7 @@ impl Default for InitiationConfig {
             k: 0.06,
             alpha: 0.2,
             separation_distance: 10.0,
+            turn_distance: 5.0,
             max_speed_change: 4.0,
             max_turn_deg: 90.0,
             min_speed: 0.6,
@@ -80,6 +85,7 @@ impl InitiationConfig {
             ("hpr_pad", self.hpr_pad),
             ("alpha", self.alpha),
             ("separation_distance", self.separation_distance),
+            ("turn_distance", self.turn_distance),
             ("max_speed_change", self.max_speed_change),
             ("max_turn_deg", self.max_turn_deg),
             ("min_speed", self.min_speed),
