@@ -140,8 +140,13 @@ impl Initiation {
                     let t = [pj[0] + d[0], pj[1] + d[1]];
                     let to = [t[0] - b.pos[0], t[1] - b.pos[1]];
                     let r = to[0].hypot(to[1]);
-                    let delta = if r > 0.0 {
-                        wrap(to[0].atan2(to[1]) - b.theta)
+                    // Steer at a point `look_ahead` beyond the target along the reference's
+                    // direction (the distance r and K's sign stay the target's).
+                    let rd = rb.dir();
+                    let la = self.cfg.look_ahead;
+                    let aim = [to[0] + la * rd[0], to[1] + la * rd[1]];
+                    let delta = if aim[0] != 0.0 || aim[1] != 0.0 {
+                        wrap(aim[0].atan2(aim[1]) - b.theta)
                     } else {
                         0.0
                     };

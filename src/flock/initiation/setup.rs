@@ -30,6 +30,10 @@ pub struct InitiationConfig {
     /// fast as one at this distance. Without the cap a bird that overshoots turns ever more
     /// slowly as it recedes and never comes back (RESULTS.md §3).
     pub turn_distance: f64,
+    /// Steering aims this far (wingspans) ahead of the target position along the reference's
+    /// direction (eq. 6's Δd only; eq. 5's r and the sign of K use the target itself): a bird
+    /// that overshoots its place slows down instead of turning back. 0: the paper's rule.
+    pub look_ahead: f64,
     /// Cap on speed changes, wingspans/s².
     pub max_speed_change: f64,
     /// Cap on turns, degrees/s.
@@ -61,6 +65,7 @@ impl Default for InitiationConfig {
             alpha: 0.2,
             separation_distance: 10.0,
             turn_distance: 5.0,
+            look_ahead: 3.0,
             max_speed_change: 4.0,
             max_turn_deg: 90.0,
             min_speed: 0.6,
@@ -100,6 +105,12 @@ impl InitiationConfig {
         }
         if !(self.k.is_finite() && self.k >= 0.0) {
             return Err(Error::invalid(format!("k = {} must be ≥ 0", self.k)));
+        }
+        if !(self.look_ahead.is_finite() && self.look_ahead >= 0.0) {
+            return Err(Error::invalid(format!(
+                "look_ahead = {} must be ≥ 0",
+                self.look_ahead
+            )));
         }
         if !(self.hold.is_finite() && self.hold >= 0.0) {
             return Err(Error::invalid(format!("hold = {} must be ≥ 0", self.hold)));
