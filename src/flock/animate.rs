@@ -145,6 +145,7 @@ pub struct AnimationReport {
 }
 
 /// Key shapes until the timeline covers `duration` seconds.
+#[allow(clippy::too_many_arguments)]
 fn build_keys(
     first: KeyShape,
     nl: usize,

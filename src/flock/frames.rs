@@ -25,6 +25,7 @@ fn hand_over(delta: f64, w: f64, t: f64, big_t: f64) -> (f64, f64) {
 
 /// Assigns each initiation bird a distinct slot: its own where the slots are a bijection, else
 /// the nearest free target position (greedy, in bird order).
+#[allow(clippy::needless_range_loop)]
 fn assign_slots(run: &InitiationRun, target: &Target) -> Vec<usize> {
     let n = target.pos.len();
     let last = run.frames.last().map(|f| f.as_slice()).unwrap_or(&[]);
@@ -226,6 +227,7 @@ pub(super) fn rows_and_savings(
 
 /// Largest acceleration (second differences, wingspans/s²) of any bird over frames
 /// `from..to`.
+#[allow(clippy::needless_range_loop)]
 pub(super) fn max_accel(frames: &[Vec<[f64; 2]>], fps: f64, from: usize, to: usize) -> f64 {
     let mut m: f64 = 0.0;
     for f in from.max(1)..to.min(frames.len().saturating_sub(1)) {

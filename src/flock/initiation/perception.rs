@@ -203,6 +203,7 @@ impl Initiation {
 
     /// Side balancing (module docs): starts and ends side switches; returns overridden
     /// references for switching birds.
+    #[allow(clippy::needless_range_loop)]
     pub(super) fn balance(&mut self, refs: &mut [Option<usize>], leader: usize) {
         let n = self.birds.len();
         let sides = self.sides(refs, leader);
