@@ -234,12 +234,15 @@ fn levenberg_marquardt_reproduces_every_key_shape() {
     let out: Vec<(usize, f64, f64)> = cases
         .par_iter()
         .map(|(ex, n)| {
-            let (w, r) = check_keys(ex, *n, 5, 11 + *n as u64);
+            // One key shape per N keeps the test within seconds (a key shape whose draw is out of
+            // reach costs many failed 400-iteration solves); the 5-key sweep is
+            // `cargo run --release --example flock_keys` (RESULTS.md §3).
+            let (w, r) = check_keys(ex, *n, 1, 11 + *n as u64);
             (*n, w, r)
         })
         .collect();
     for (n, worst, reached) in out {
-        println!("N = {n}: worst |ξ − ξ̂|/ξ̂ over 5 key shapes {worst:.2e}, mean continuation reached {reached:.2}");
+        println!("N = {n}: worst |ξ − ξ̂|/ξ̂ over 1 key shape {worst:.2e}, mean continuation reached {reached:.2}");
         assert!(worst <= 1e-6, "N = {n}: {worst}");
         // Honest floor, not the issue's goal: the continuation gets only part of the way to each
         // draw (RESULTS.md), but every key shape moves.
@@ -302,56 +305,71 @@ fn n_differs_from_the_example_and_every_xi_stays_in_its_range() {
     }
 }
 
-#[test]
-#[ignore = "issue #19 must-show NOT met: with the paper's per-step reference choice the chains keep re-forming and no run converged in the seeds inspected (see RESULTS.md); run with --ignored"]
-fn initiation_converges_from_random_starts() {
+/// Initiation runs from `runs` seeded random starts (seeds 1000 + k) towards the first initial
+/// shape for `n` birds of the shipped V; checks the issue's conditions on the converged runs and
+/// returns how many converged.
+fn initiation_runs(n: usize, runs: u64) -> usize {
     let p = extract::extract_file(
         &repo().join("examples/flocks/v.csv"),
         &ExtractConfig::default(),
     )
     .unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(n as u64);
+    let scfg = steady::SteadyConfig::default();
+    let init = steady::initial_shapes(&p, n, &scfg, &mut rng).unwrap();
+    let target = Target {
+        pos: init.shapes[0].clone(),
+        nl: init.nl,
+        nr: init.nr,
+    };
+    let cfg = InitiationConfig::default();
+    let runs_out: Vec<_> = (0..runs)
+        .into_par_iter()
+        .map(|seed| {
+            let mut rng = ChaCha8Rng::seed_from_u64(1000 + seed);
+            let start = initiation::random_start(n, &cfg, &mut rng);
+            initiation::run(Initiation::new(cfg.clone(), target.clone(), start).unwrap())
+        })
+        .collect();
+    let ok_runs: Vec<_> = runs_out
+        .iter()
+        .filter(|r| r.converged_after.is_some())
+        .collect();
+    let times: Vec<f64> = ok_runs.iter().filter_map(|r| r.converged_after).collect();
+    let worst_pair = ok_runs
+        .iter()
+        .map(|r| r.min_pair_distance)
+        .fold(f64::INFINITY, f64::min);
+    let most_followers = ok_runs.iter().map(|r| r.max_followers).max().unwrap_or(0);
+    println!(
+        "N = {n}: {} of {runs} converged within {} s; time median {:.1} s, max {:.1} s; closest \
+         pair after convergence {worst_pair:.2} b; most followers of a non-leader {most_followers}",
+        ok_runs.len(),
+        cfg.max_time,
+        median(&times),
+        times.iter().cloned().fold(0.0, f64::max)
+    );
+    assert!(worst_pair >= 1.0, "N = {n}: birds {worst_pair} b apart");
+    assert!(most_followers <= 1, "N = {n}: {most_followers}");
+    for r in &ok_runs {
+        assert!(r.final_mean_error.unwrap() <= cfg.converge_distance);
+    }
+    ok_runs.len()
+}
+
+#[test]
+#[ignore = "issue #19 must-show NOT met: 0 of 20 (and 0 of 100) N = 14 starts converge within 60 s (`cargo run --release --example flock_initiation -- 14 100`, RESULTS.md §3); run with --ignored"]
+fn initiation_converges_from_twenty_random_starts() {
+    let ok = initiation_runs(14, 20);
+    assert!(ok >= 19, "N = 14: {ok} of 20 converged");
+}
+
+#[test]
+#[ignore = "the issue's 100-start sweep for N = 14 and 41 (minutes); run with --ignored"]
+fn initiation_converges_from_random_starts() {
     for n in [14usize, 41] {
-        let mut rng = ChaCha8Rng::seed_from_u64(n as u64);
-        let scfg = steady::SteadyConfig::default();
-        let init = steady::initial_shapes(&p, n, &scfg, &mut rng).unwrap();
-        let target = Target {
-            pos: init.shapes[0].clone(),
-            nl: init.nl,
-            nr: init.nr,
-        };
-        let cfg = InitiationConfig::default();
-        let runs: Vec<_> = (0..100u64)
-            .into_par_iter()
-            .map(|seed| {
-                let mut rng = ChaCha8Rng::seed_from_u64(1000 + seed);
-                let start = initiation::random_start(n, &cfg, &mut rng);
-                initiation::run(Initiation::new(cfg.clone(), target.clone(), start).unwrap())
-            })
-            .collect();
-        let ok_runs: Vec<_> = runs
-            .iter()
-            .filter(|r| r.converged_after.is_some())
-            .collect();
-        let times: Vec<f64> = ok_runs.iter().filter_map(|r| r.converged_after).collect();
-        let worst_pair = ok_runs
-            .iter()
-            .map(|r| r.min_pair_distance)
-            .fold(f64::INFINITY, f64::min);
-        let most_followers = ok_runs.iter().map(|r| r.max_followers).max().unwrap_or(0);
-        println!(
-            "N = {n}: {} of 100 converged within {} s; time median {:.1} s, max {:.1} s; closest \
-             pair after convergence {worst_pair:.2} b; most followers of a non-leader {most_followers}",
-            ok_runs.len(),
-            cfg.max_time,
-            median(&times),
-            times.iter().cloned().fold(0.0, f64::max)
-        );
-        assert!(ok_runs.len() >= 95, "N = {n}: {} converged", ok_runs.len());
-        assert!(worst_pair >= 1.0, "N = {n}: birds {worst_pair} b apart");
-        assert!(most_followers <= 1, "N = {n}: {most_followers}");
-        for r in &ok_runs {
-            assert!(r.final_mean_error.unwrap() <= cfg.converge_distance);
-        }
+        let ok = initiation_runs(n, 100);
+        assert!(ok >= 95, "N = {n}: {ok} of 100 converged");
     }
 }
 

@@ -4,10 +4,10 @@
 //! shapes and checks in `report.json`, two PNG plots and (feature `video`) an AVI from above.
 
 use super::extract::ShapeParams;
+use super::frames::{initiation_frames, max_accel, rows_and_savings, steady_frames, Frames};
 use super::initiation::{self, Initiation, InitiationConfig, InitiationRun, Target};
-use super::power;
 use super::steady::{self, KeyShape, SteadyConfig, Timeline};
-use crate::data::tracks::{TrackRow, Tracks, TracksMeta, Units};
+use crate::data::tracks::{Tracks, TracksMeta, Units};
 use crate::error::{Error, Result};
 use crate::progress::Progress;
 use rand::SeedableRng;
@@ -144,22 +144,8 @@ pub struct AnimationReport {
     pub config: AnimateConfig,
 }
 
-/// Offsets of the hand-over: quintic with h(0) = δ, h'(0) = w, h''(0) = 0 and h = h' = h'' = 0
-/// at T. Returns (h, h') at τ ∈ [0, T].
-fn hand_over(delta: f64, w: f64, t: f64, big_t: f64) -> (f64, f64) {
-    if t >= big_t {
-        return (0.0, 0.0);
-    }
-    let s = t / big_t;
-    // Hermite quintic basis: H0 for the value, H1 for the slope (times T).
-    let h0 = 1.0 - 10.0 * s.powi(3) + 15.0 * s.powi(4) - 6.0 * s.powi(5);
-    let h1 = s - 6.0 * s.powi(3) + 8.0 * s.powi(4) - 3.0 * s.powi(5);
-    let d0 = (-30.0 * s.powi(2) + 60.0 * s.powi(3) - 30.0 * s.powi(4)) / big_t;
-    let d1 = (1.0 - 18.0 * s.powi(2) + 32.0 * s.powi(3) - 15.0 * s.powi(4)) / big_t;
-    (delta * h0 + w * big_t * h1, delta * d0 + w * big_t * d1)
-}
-
 /// Key shapes until the timeline covers `duration` seconds.
+#[allow(clippy::too_many_arguments)]
 fn build_keys(
     first: KeyShape,
     nl: usize,
@@ -234,43 +220,6 @@ fn initiate(
     Ok(Some(run))
 }
 
-/// Assigns each initiation bird a distinct slot: its own where the slots are a bijection, else
-/// the nearest free target position (greedy, in bird order).
-fn assign_slots(run: &InitiationRun, target: &Target) -> Vec<usize> {
-    let n = target.pos.len();
-    let last = run.frames.last().map(|f| f.as_slice()).unwrap_or(&[]);
-    let mut taken = vec![false; n];
-    let mut slot = vec![usize::MAX; n];
-    for (i, s) in run.slots.iter().enumerate() {
-        if let Some(t) = s {
-            if !taken[*t] {
-                taken[*t] = true;
-                slot[i] = *t;
-            }
-        }
-    }
-    let leader = run.slots.iter().position(|s| *s == Some(0)).unwrap_or(0);
-    let l = last.get(leader).map_or([0.0, 0.0], |b| b.pos);
-    for i in 0..n {
-        if slot[i] != usize::MAX {
-            continue;
-        }
-        let p = last.get(i).map_or([0.0, 0.0], |b| b.pos);
-        let best = (0..n).filter(|&t| !taken[t]).min_by(|&a, &b| {
-            let d = |t: usize| {
-                (p[0] - l[0] - target.pos[t][0] + target.pos[0][0])
-                    .hypot(p[1] - l[1] - target.pos[t][1] + target.pos[0][1])
-            };
-            d(a).total_cmp(&d(b))
-        });
-        if let Some(t) = best {
-            taken[t] = true;
-            slot[i] = t;
-        }
-    }
-    slot
-}
-
 /// Computes the animation (no files).
 pub fn animate(
     params: &ShapeParams,
@@ -320,51 +269,15 @@ pub fn animate(
     let z: Vec<f64> = (0..n)
         .map(|_| cfg.altitude_m + wingspan_m * jitter.sample(&mut rng))
         .collect();
-    let mut frames: Vec<Vec<[f64; 2]>> = Vec::new();
-    let mut headings: Vec<Vec<[f64; 2]>> = Vec::new();
-    let mut vels: Vec<Vec<[f64; 2]>> = Vec::new();
-    // Initiation frames, birds renumbered by their final slot.
-    let (origin, delta, w, init_frames) = match &run {
-        Some(r) => {
-            let slot = assign_slots(r, &target);
-            for f in &r.frames[..r.frames.len() - 1] {
-                let mut p = vec![[0.0; 2]; n];
-                let mut h = vec![[0.0; 2]; n];
-                let mut vv = vec![[0.0; 2]; n];
-                for (i, b) in f.iter().enumerate() {
-                    p[slot[i]] = b.pos;
-                    h[slot[i]] = b.dir();
-                    vv[slot[i]] = [b.dir()[0] * b.v * fps, b.dir()[1] * b.v * fps];
-                }
-                frames.push(p);
-                headings.push(h);
-                vels.push(vv);
-            }
-            let last = r.frames.last().unwrap();
-            let mut pl = [0.0; 2];
-            for (i, b) in last.iter().enumerate() {
-                if slot[i] == 0 {
-                    pl = b.pos;
-                }
-            }
-            let origin = [pl[0] - target.pos[0][0], pl[1] - target.pos[0][1]];
-            let mut delta = vec![[0.0; 2]; n];
-            let mut w = vec![[0.0; 2]; n];
-            for (i, b) in last.iter().enumerate() {
-                let t = slot[i];
-                delta[t] = [
-                    b.pos[0] - origin[0] - target.pos[t][0],
-                    b.pos[1] - origin[1] - target.pos[t][1],
-                ];
-                let d = b.dir();
-                w[t] = [d[0] * b.v * fps, d[1] * b.v * fps - v];
-            }
-            (origin, delta, w, r.frames.len() - 1)
-        }
-        None => ([0.0, 0.0], vec![[0.0; 2]; n], vec![[0.0; 2]; n], 0),
-    };
-    let dmax = delta.iter().map(|d| d[0].hypot(d[1])).fold(0.0, f64::max);
-    let wmax = w.iter().map(|d| d[0].hypot(d[1])).fold(0.0, f64::max);
+    let mut fr = Frames::default();
+    let ho = initiation_frames(run.as_ref(), &target, n, fps, v, &mut fr);
+    let init_frames = ho.frames;
+    let dmax = ho
+        .delta
+        .iter()
+        .map(|d| d[0].hypot(d[1]))
+        .fold(0.0, f64::max);
+    let wmax = ho.w.iter().map(|d| d[0].hypot(d[1])).fold(0.0, f64::max);
     let a = cfg.steady.max_accel;
     let hand_s = if run.is_some() {
         (steady::MIN_JERK_PEAK * dmax / a)
@@ -374,83 +287,15 @@ pub fn animate(
     } else {
         0.0
     };
-    progress.start("frames", cfg.frames as u64);
-    for k in 0..cfg.frames {
-        let t = k as f64 / fps;
-        let (rel, relv) = timeline.at(t);
-        let mut p = vec![[0.0; 2]; n];
-        let mut vv = vec![[0.0; 2]; n];
-        for i in 0..n {
-            let (hx, dhx) = hand_over(delta[i][0], w[i][0], t, hand_s);
-            let (hy, dhy) = hand_over(delta[i][1], w[i][1], t, hand_s);
-            p[i] = [
-                origin[0] + rel[i][0] + hx,
-                origin[1] + v * t + rel[i][1] + hy,
-            ];
-            vv[i] = [relv[i][0] + dhx, v + relv[i][1] + dhy];
-        }
-        headings.push(
-            vv.iter()
-                .map(|u| {
-                    let l = u[0].hypot(u[1]).max(1e-12);
-                    [u[0] / l, u[1] / l]
-                })
-                .collect(),
-        );
-        frames.push(p);
-        vels.push(vv);
-        progress.inc(1);
-    }
-    progress.finish();
-    // Tracks (metres), savings per steady frame.
-    let mut rows = Vec::with_capacity(frames.len() * n);
-    let mut savings = Vec::with_capacity(cfg.frames * n);
-    let mut sums = vec![0.0; n];
-    let mut counted = 0usize;
-    for (f, (p, vv)) in frames.iter().zip(&vels).enumerate() {
-        let time = f as f64 / fps;
-        let leader = (0..n)
-            .max_by(|&a, &b| p[a][1].total_cmp(&p[b][1]))
-            .unwrap_or(0);
-        for i in 0..n {
-            rows.push(TrackRow {
-                frame: f as u64,
-                time,
-                id: i as u64,
-                pos: [p[i][0] * wingspan_m, p[i][1] * wingspan_m, z[i]],
-                vel: Some([vv[i][0] * wingspan_m, vv[i][1] * wingspan_m, 0.0]),
-                role: Some(if i == leader { "leader" } else { "follower" }.into()),
-            });
-        }
-        if f >= init_frames && power::check_lateral(p).is_ok() {
-            let e = power::savings_unchecked(p);
-            let xi = power::relative(&e);
-            for i in 0..n {
-                savings.push((f as u64, time, i as u64, e[i], xi[i]));
-                sums[i] += e[i];
-            }
-            counted += 1;
-        }
-    }
-    let mean_saving: Vec<f64> = sums.iter().map(|s| s / counted.max(1) as f64).collect();
+    steady_frames(
+        &timeline, &ho, hand_s, n, cfg.frames, fps, v, &mut fr, progress,
+    );
+    let (rows, savings, mean_saving) = rows_and_savings(&fr, &z, wingspan_m, fps, init_frames);
     let flock_mean_saving = mean_saving.iter().sum::<f64>() / n as f64;
-    let accel = |from: usize, to: usize| -> f64 {
-        let mut m: f64 = 0.0;
-        for f in from.max(1)..to.min(frames.len().saturating_sub(1)) {
-            for i in 0..n {
-                let ax =
-                    (frames[f + 1][i][0] - 2.0 * frames[f][i][0] + frames[f - 1][i][0]) * fps * fps;
-                let ay =
-                    (frames[f + 1][i][1] - 2.0 * frames[f][i][1] + frames[f - 1][i][1]) * fps * fps;
-                m = m.max(ax.hypot(ay));
-            }
-        }
-        m
-    };
     let hand_frames = init_frames + (hand_s * fps).ceil() as usize;
-    let max_accel_steady = accel(hand_frames + 1, frames.len());
+    let max_accel_steady = max_accel(&fr.pos, fps, hand_frames + 1, fr.pos.len());
     let max_accel_hand_over = if run.is_some() {
-        accel(init_frames + 1, hand_frames + 1)
+        max_accel(&fr.pos, fps, init_frames + 1, hand_frames + 1)
     } else {
         0.0
     };
@@ -492,8 +337,8 @@ pub fn animate(
         tracks,
         savings,
         report,
-        frames,
-        headings,
+        frames: fr.pos,
+        headings: fr.headings,
     })
 }
 

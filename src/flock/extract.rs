@@ -16,6 +16,8 @@ use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// One example frame in the flock frame: (frame, time, [(id, position in wingspans)]).
+type FramePositions = (u64, f64, Vec<(u64, [f64; 2])>);
 /// Schema tag of extracted shape parameters.
 pub const SHAPE_SCHEMA: &str = "herdfit.flock-shape/1";
 
@@ -345,7 +347,7 @@ pub fn extract(tracks: &Tracks, source: &str, cfg: &ExtractConfig) -> Result<Sha
     let right = [fwd[1] * mirror, -fwd[0] * mirror];
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
     // Positions in the flock frame, wingspans, per frame.
-    let mut per_frame: Vec<(u64, f64, Vec<(u64, [f64; 2])>)> = Vec::new();
+    let mut per_frame: Vec<FramePositions> = Vec::new();
     for (f, r) in &frames {
         let pts: Vec<(u64, [f64; 2])> = tracks.rows[r.clone()]
             .iter()
@@ -556,7 +558,7 @@ fn frame_shape(
 /// one-sided, straight or curved (a parabola with at least as many inliers and under 60 % of the
 /// line's inlier RMS, or 5 % more inliers).
 fn classify(
-    per_frame: &[(u64, f64, Vec<(u64, [f64; 2])>)],
+    per_frame: &[FramePositions],
     cfg: &ExtractConfig,
     rng: &mut rand_chacha::ChaCha8Rng,
 ) -> ShapeKind {

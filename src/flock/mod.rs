@@ -12,6 +12,7 @@
 pub mod animate;
 pub mod extract;
 pub mod figures;
+mod frames;
 pub mod hpr;
 pub mod initiation;
 pub mod power;

@@ -78,6 +78,7 @@ pub fn least_squares(model: Model, pts: &[(f64, f64)], idx: &[usize]) -> Option<
 }
 
 /// Gaussian elimination with partial pivoting on a k×k system (k ≤ 3).
+#[allow(clippy::needless_range_loop)]
 fn solve_small(a: &mut [[f64; 3]; 3], b: &mut [f64; 3], k: usize) -> Option<[f64; 3]> {
     let norm = (0..k)
         .flat_map(|r| (0..k).map(move |c| (r, c)))

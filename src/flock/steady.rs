@@ -231,8 +231,11 @@ pub fn initial_shapes(
     })
 }
 
+/// ξ of each shape, and each bird's [p_i, P_i] (Algorithm 1 Step 2).
+pub type Ranges = (Vec<Vec<f64>>, Vec<[f64; 2]>);
+
 /// Step 2: ξ of each shape and the per-bird range [p_i, P_i] over the shapes.
-pub fn ranges(shapes: &[Vec<[f64; 2]>]) -> Result<(Vec<Vec<f64>>, Vec<[f64; 2]>)> {
+pub fn ranges(shapes: &[Vec<[f64; 2]>]) -> Result<Ranges> {
     let mut xis = Vec::with_capacity(shapes.len());
     for s in shapes {
         xis.push(power::relative(&power::savings(s)?));
