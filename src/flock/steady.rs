@@ -464,7 +464,7 @@ pub const MIN_JERK_PEAK: f64 = 5.773_502_691_896_258;
 pub struct Timeline {
     /// Key shapes, centred on the first one's centroid.
     pub keys: Vec<Vec<[f64; 2]>>,
-    /// Start time of each key shape, seconds (keys[0] at 0).
+    /// Start time of each key shape, seconds (`keys[0]` at 0).
     pub times: Vec<f64>,
 }
 
