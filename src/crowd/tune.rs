@@ -33,8 +33,8 @@ impl Default for TuningConfig {
         TuningConfig {
             smoothing: vec![1.0, 3.0],
             bandwidth_scale: vec![1.0, 3.0],
-            formation: vec![0.0, 1.0],
-            frame_stride: 4,
+            formation: vec![],
+            frame_stride: 8,
         }
     }
 }
