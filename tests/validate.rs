@@ -206,9 +206,14 @@ fn demo_runs_the_whole_chain() {
         "fit.log.csv",
         "report/report.md",
         "report/report.json",
+        "crowd/model.json",
+        "crowd/hall.csv",
+        "crowd/hall.png",
+        "crowd/compare.json",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
+    assert!(text.contains("crowd: picture"), "{text}");
     #[cfg(feature = "video")]
     {
         assert!(out.join("herd.avi").is_file());

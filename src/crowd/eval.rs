@@ -10,7 +10,10 @@
 
 use super::features::{formation, headings, Scene, V2};
 use super::model::{learn, read_tracks, CrowdModel, LearnConfig};
-use super::step::{advance, plan, Agent};
+use super::sim::SEPARATION_PASSES;
+use super::step::{advance, plan, separate, Agent};
+use super::tune::{inner_scores, training, with, Candidate, TuningConfig};
+use crate::data::tracks::Tracks;
 use crate::error::{Error, Result};
 use crate::progress::Progress;
 use rayon::prelude::*;
@@ -47,6 +50,11 @@ pub struct EvalConfig {
     /// Pairs closer than this (m) at a predicted frame collide.
     pub collision_distance: f64,
     pub seed: u64,
+    /// Hard minimum distance (m) between rolled-out pedestrians after each predicted step
+    /// (`crowd::step::separate`); 0: off. Fixed a priori (the simulation's 0.3 m), not tuned.
+    pub min_distance: f64,
+    /// Hyper-parameters chosen per test scene inside its training scenes.
+    pub tuning: TuningConfig,
 }
 
 impl Default for EvalConfig {
@@ -72,6 +80,8 @@ impl Default for EvalConfig {
             predict: 12,
             collision_distance: 0.2,
             seed: 0,
+            min_distance: 0.3,
+            tuning: TuningConfig::default(),
         }
     }
 }
@@ -80,8 +90,12 @@ impl EvalConfig {
     /// Checks every value; errors name the key.
     pub fn check(&self) -> Result<()> {
         self.learn.check()?;
+        self.tuning.check()?;
         if self.observe < 2 || self.predict == 0 {
             return Err(Error::invalid("observe must be ≥ 2 and predict ≥ 1"));
+        }
+        if !(self.min_distance.is_finite() && self.min_distance >= 0.0) {
+            return Err(Error::invalid("min_distance must be ≥ 0"));
         }
         if !(self.collision_distance.is_finite() && self.collision_distance >= 0.0) {
             return Err(Error::invalid("collision_distance must be ≥ 0"));
@@ -109,6 +123,16 @@ pub struct Scores {
     pub collision_rate: f64,
 }
 
+/// The model's collisions split by cause, as fractions of all scored pairs (they sum to the
+/// model's collision rate).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CollisionCauses {
+    /// Pairs within [`NEAR`] at the observation's end (walking together or passing close).
+    pub near_at_start: f64,
+    /// Pairs farther apart whose predicted paths met.
+    pub converging: f64,
+}
+
 /// One test scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Fold {
@@ -120,6 +144,11 @@ pub struct Fold {
     pub constant_velocity: Scores,
     /// The ground truth's own collision rate over the same pairs.
     pub data_collision_rate: f64,
+    pub model_collision_causes: CollisionCauses,
+    /// Every candidate's inner score, and the one chosen ([`TuningConfig`]; empty for the
+    /// average).
+    pub candidates: Vec<Candidate>,
+    pub chosen: Option<usize>,
 }
 
 /// The report of `crowd evaluate`.
@@ -133,16 +162,23 @@ pub struct EvalReport {
 }
 
 #[derive(Default, Clone)]
-struct Acc {
-    windows: usize,
-    pairs: usize,
-    ade: [f64; 2],
-    fde: [f64; 2],
-    coll: [usize; 3],
+pub(crate) struct Acc {
+    pub(crate) windows: usize,
+    pub(crate) pairs: usize,
+    pub(crate) ade: [f64; 2],
+    pub(crate) fde: [f64; 2],
+    pub(crate) coll: [usize; 3],
+    /// Model collisions of pairs within [`NEAR`] of each other at the observation's end, and
+    /// of the others.
+    pub(crate) cause: [usize; 2],
 }
 
+/// Pairs closer than this (m) at the end of their observation count as walking together
+/// (the training data's mean interpersonal distance in groups is 0.82 m, RESULTS.md §4).
+pub const NEAR: f64 = 1.0;
+
 impl Acc {
-    fn add(&mut self, o: &Acc) {
+    pub(crate) fn add(&mut self, o: &Acc) {
         self.windows += o.windows;
         self.pairs += o.pairs;
         for i in 0..2 {
@@ -151,6 +187,9 @@ impl Acc {
         }
         for i in 0..3 {
             self.coll[i] += o.coll[i];
+        }
+        for i in 0..2 {
+            self.cause[i] += o.cause[i];
         }
     }
 }
@@ -198,6 +237,7 @@ fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig)
     for _ in 0..pred {
         let plans = plan(model, &mut agents);
         advance(model, &mut agents, &plans, None, keep);
+        separate(&mut agents, cfg.min_distance, SEPARATION_PASSES, None);
         for (p, a) in paths.iter_mut().zip(&agents) {
             p.push(a.pos);
         }
@@ -211,8 +251,8 @@ fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig)
     let truth = |k: usize, t: usize| scene.segments[k].pos[f + 1 + t - scene.segments[k].start];
     for &(i, k) in &scored {
         acc.windows += 1;
-        for t in 0..pred {
-            acc.ade[0] += dist(paths[i][t], truth(k, t)) / pred as f64;
+        for (t, &p) in paths[i].iter().enumerate() {
+            acc.ade[0] += dist(p, truth(k, t)) / pred as f64;
             acc.ade[1] += dist(cv(k, t), truth(k, t)) / pred as f64;
         }
         acc.fde[0] += dist(paths[i][pred - 1], truth(k, pred - 1));
@@ -228,7 +268,12 @@ fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig)
                     dist(a, b) < r
                 })
             };
-            acc.coll[0] += usize::from(hit(&|t| (paths[i][t], paths[j][t])));
+            let m = hit(&|t| (paths[i][t], paths[j][t]));
+            acc.coll[0] += usize::from(m);
+            if m {
+                let now = |k: usize| scene.segments[k].pos[f - scene.segments[k].start];
+                acc.cause[usize::from(dist(now(k), now(l)) >= NEAR)] += 1;
+            }
             acc.coll[1] += usize::from(hit(&|t| (cv(k, t), cv(l, t))));
             acc.coll[2] += usize::from(hit(&|t| (truth(k, t), truth(l, t))));
         }
@@ -237,8 +282,14 @@ fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig)
 }
 
 /// Scores `model` on one scene's frames (parallel over observation ends, summed in frame order).
-fn score_scene(model: &CrowdModel, scene: &Scene, cfg: &EvalConfig) -> Acc {
-    let per: Vec<Acc> = (1..scene.frames())
+pub(crate) fn score_scene(
+    model: &CrowdModel,
+    scene: &Scene,
+    cfg: &EvalConfig,
+    stride: usize,
+) -> Acc {
+    let ends: Vec<usize> = (1..scene.frames()).step_by(stride).collect();
+    let per: Vec<Acc> = ends
         .into_par_iter()
         .map(|f| forecast_frame(model, scene, f, cfg))
         .collect();
@@ -247,38 +298,67 @@ fn score_scene(model: &CrowdModel, scene: &Scene, cfg: &EvalConfig) -> Acc {
     acc
 }
 
-fn read(dir: &Path, name: &str, fps: f64) -> Result<crate::data::tracks::Tracks> {
+fn read(dir: &Path, name: &str, fps: f64) -> Result<Tracks> {
     read_tracks(&dir.join(name), fps)
 }
 
-/// Runs the leave-one-scene-out evaluation.
+/// Runs the leave-one-scene-out evaluation, hyper-parameters chosen per test scene inside its
+/// training scenes ([`TuningConfig`]).
 pub fn evaluate(cfg: &EvalConfig, progress: &mut dyn Progress) -> Result<EvalReport> {
     cfg.check()?;
     let fps = cfg.learn.eth_fps;
-    let mut folds = Vec::new();
-    let tests: Vec<&(&str, &[&str])> = SCENES
+    let mut files = Vec::new();
+    for (name, fs) in SCENES.iter() {
+        let mut v = Vec::new();
+        for f in fs.iter() {
+            v.push(read(&cfg.data, f, fps)?);
+        }
+        files.push((*name, v));
+    }
+    let extra = TRAIN_ONLY
         .iter()
-        .filter(|(n, _)| cfg.scenes.is_empty() || cfg.scenes.iter().any(|s| s == n))
+        .map(|f| read(&cfg.data, f, fps))
+        .collect::<Result<Vec<_>>>()?;
+    let tests: Vec<&str> = SCENES
+        .iter()
+        .map(|(n, _)| *n)
+        .filter(|n| cfg.scenes.is_empty() || cfg.scenes.iter().any(|s| s == n))
         .collect();
-    for (name, files) in tests {
-        let mut train = Vec::new();
-        for (other, ofiles) in SCENES.iter() {
-            if other != name {
-                for f in ofiles.iter() {
-                    train.push(read(&cfg.data, f, fps)?);
-                }
+    let tuned = cfg.tuning.lists(&cfg.learn).iter().any(|l| l.len() > 1);
+    let inner = if tuned {
+        inner_scores(&files, &extra, &tests, cfg, progress)?
+    } else {
+        vec![vec![]; tests.len()]
+    };
+    let mut folds = Vec::new();
+    for (ti, name) in tests.iter().enumerate() {
+        let chosen = (!inner[ti].is_empty()).then(|| {
+            let cost = |c: &Candidate| c.inner_ade + c.inner_fde;
+            (0..inner[ti].len())
+                .min_by(|&a, &b| cost(&inner[ti][a]).total_cmp(&cost(&inner[ti][b])))
+                .expect("candidates")
+        });
+        let lcfg = match chosen {
+            Some(c) => {
+                let c = &inner[ti][c];
+                with(&cfg.learn, [c.smoothing, c.formation, c.bandwidth_scale])
             }
-        }
-        for f in TRAIN_ONLY {
-            train.push(read(&cfg.data, f, fps)?);
-        }
-        let model = learn(&train, &cfg.learn, progress)?;
-        progress.start(&format!("evaluate {name}"), files.len() as u64);
+            None => cfg.learn.clone(),
+        };
+        let model = learn(&training(&files, &extra, &[name]), &lcfg, progress)?;
+        let fs = &files.iter().find(|(n, _)| n == name).expect("scene").1;
+        progress.start(&format!("evaluate {name}"), fs.len() as u64);
         let mut acc = Acc::default();
-        for f in files.iter() {
-            let t = read(&cfg.data, f, fps)?;
-            let scene = Scene::from_tracks(&t, 0.0).map_err(|e| e.in_file(cfg.data.join(f)))?;
-            acc.add(&score_scene(&model, &scene, cfg));
+        for (t, f) in fs.iter().zip(
+            SCENES
+                .iter()
+                .find(|(n, _)| n == name)
+                .expect("scene")
+                .1
+                .iter(),
+        ) {
+            let scene = Scene::from_tracks(t, 0.0).map_err(|e| e.in_file(cfg.data.join(f)))?;
+            acc.add(&score_scene(&model, &scene, cfg, 1));
             progress.inc(1);
         }
         progress.finish();
@@ -300,6 +380,12 @@ pub fn evaluate(cfg: &EvalConfig, progress: &mut dyn Progress) -> Result<EvalRep
                 collision_rate: acc.coll[1] as f64 / np,
             },
             data_collision_rate: acc.coll[2] as f64 / np,
+            model_collision_causes: CollisionCauses {
+                near_at_start: acc.cause[0] as f64 / np,
+                converging: acc.cause[1] as f64 / np,
+            },
+            candidates: inner[ti].clone(),
+            chosen,
         });
     }
     let average = average(&folds);
@@ -333,6 +419,12 @@ fn average(folds: &[Fold]) -> Option<Fold> {
             collision_rate: m(&|f| f.constant_velocity.collision_rate),
         },
         data_collision_rate: m(&|f| f.data_collision_rate),
+        model_collision_causes: CollisionCauses {
+            near_at_start: m(&|f| f.model_collision_causes.near_at_start),
+            converging: m(&|f| f.model_collision_causes.converging),
+        },
+        candidates: vec![],
+        chosen: None,
     })
 }
 
@@ -340,13 +432,20 @@ impl std::fmt::Display for EvalReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(
             f,
-            "{:<8} {:>7} {:>11} {:>11} {:>9} {:>9} {:>9}",
-            "scene", "windows", "model ADE/FDE", "CV ADE/FDE", "coll", "CV coll", "data coll"
+            "{:<8} {:>7} {:>13} {:>11} {:>9} {:>9} {:>9} {:>15}",
+            "scene",
+            "windows",
+            "model ADE/FDE",
+            "CV ADE/FDE",
+            "coll",
+            "CV coll",
+            "data coll",
+            "coll near/far"
         )?;
         for x in self.folds.iter().chain(self.average.as_ref()) {
             writeln!(
                 f,
-                "{:<8} {:>7} {:>6.3}/{:<6.3} {:>5.3}/{:<6.3} {:>9.4} {:>9.4} {:>9.4}",
+                "{:<8} {:>7} {:>6.3}/{:<6.3} {:>5.3}/{:<5.3} {:>9.4} {:>9.4} {:>9.4} {:>7.4}/{:<7.4}",
                 x.scene,
                 x.windows,
                 x.model.ade,
@@ -355,8 +454,26 @@ impl std::fmt::Display for EvalReport {
                 x.constant_velocity.fde,
                 x.model.collision_rate,
                 x.constant_velocity.collision_rate,
-                x.data_collision_rate
+                x.data_collision_rate,
+                x.model_collision_causes.near_at_start,
+                x.model_collision_causes.converging
             )?;
+        }
+        for x in &self.folds {
+            if let Some(c) = x.chosen.map(|i| &x.candidates[i]) {
+                writeln!(
+                    f,
+                    "{}: chosen in its training scenes: smoothing {}, formation weight {}, \
+                     bandwidth × {} (inner ADE/FDE {:.3}/{:.3} of {} candidates)",
+                    x.scene,
+                    c.smoothing,
+                    c.formation,
+                    c.bandwidth_scale,
+                    c.inner_ade,
+                    c.inner_fde,
+                    x.candidates.len()
+                )?;
+            }
         }
         Ok(())
     }

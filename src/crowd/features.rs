@@ -279,8 +279,8 @@ impl Scene {
         }
         let mut at_frame = vec![Vec::new(); n_frames];
         for (k, s) in segments.iter().enumerate() {
-            for f in s.start..s.end() {
-                at_frame[f].push(k);
+            for at in &mut at_frame[s.start..s.end()] {
+                at.push(k);
             }
         }
         Ok(Scene {

@@ -29,6 +29,7 @@ pub mod render;
 pub mod sim;
 pub mod step;
 pub mod synth;
+pub mod tune;
 
 use crate::error::{Error, Result};
 use crate::progress::Progress;

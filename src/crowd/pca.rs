@@ -220,9 +220,19 @@ mod tests {
         let p = Pca::fit(&data, 3, 1).unwrap();
         assert!((p.components[0] - c).abs() < 0.01 && (p.components[1] - s).abs() < 0.01);
         assert!((p.variances[0] - 3.0).abs() < 0.2, "{}", p.variances[0]);
+        // The projection is centred on the *sample* mean, which sits at a = ā along the long
+        // axis (ā ≈ N(0, 3/2000), not 0): the point at a = 2 projects to 2 − ā.
+        let a_bar = c * (p.mean[0] - 1.0) + s * (p.mean[1] + 2.0);
+        assert!(a_bar.abs() < 0.2, "sample mean along the axis {a_bar}");
         let mut z = [0.0];
         p.project(&[1.0 + 2.0 * c, -2.0 + 2.0 * s, 0.5], &mut z);
-        assert!((z[0] - 2.0 - (p.mean[0] - 1.0) * 0.0).abs() < 0.05, "{z:?}");
+        assert!(
+            (z[0] - (2.0 - a_bar)).abs() < 0.01,
+            "{z:?} vs {}",
+            2.0 - a_bar
+        );
+        p.project(&p.mean.clone(), &mut z);
+        assert!(z[0].abs() < 1e-12, "{z:?}");
         assert!(Pca::fit(&data, 3, 4).is_err());
     }
 }

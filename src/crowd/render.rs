@@ -27,9 +27,9 @@ pub fn extent(tracks: &[&Tracks], layout: Option<&Layout>) -> [V2; 2] {
     }
     let mut b = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
     for r in tracks.iter().flat_map(|t| &t.rows) {
-        for a in 0..2 {
-            b[0][a] = b[0][a].min(r.pos[a]);
-            b[1][a] = b[1][a].max(r.pos[a]);
+        for (a, &v) in r.pos.iter().take(2).enumerate() {
+            b[0][a] = b[0][a].min(v);
+            b[1][a] = b[1][a].max(v);
         }
     }
     if !b[0][0].is_finite() {

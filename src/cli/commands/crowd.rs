@@ -173,6 +173,13 @@ pub struct EvaluateArgs {
     pub attraction: Option<f64>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Hyper-parameter candidates chosen inside each test scene's training scenes (TuningConfig
+    /// JSON file: smoothing, bandwidth_scale, formation lists, frame_stride).
+    #[arg(long, value_name = "TUNING.json")]
+    pub tuning: Option<PathBuf>,
+    /// Hard minimum distance (m) between rolled-out pedestrians (0: off).
+    #[arg(long, value_name = "M")]
+    pub min_distance: Option<f64>,
     /// Report (herdfit.crowd-eval/1 JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: Option<PathBuf>,
@@ -367,6 +374,12 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
     }
     if let Some(c) = a.attraction {
         cfg.learn.action.attraction = c;
+    }
+    if let Some(p) = &a.tuning {
+        cfg.tuning = read_json(p)?;
+    }
+    if let Some(m) = a.min_distance {
+        cfg.min_distance = m;
     }
     if let Some(p) = &a.json {
         crate::data::atomic::check_writable(p)?;

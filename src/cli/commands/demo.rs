@@ -20,5 +20,10 @@ pub fn exec(a: DemoArgs) -> Result<()> {
     println!("{}", crate::flock::demo(&a.out, &mut Bars::default())?);
     println!();
     println!("{}", crate::lift::demo(&a.out, &mut Bars::default())?);
+    println!();
+    println!(
+        "{}",
+        crate::crowd::demo(&a.out.join("crowd"), &mut Bars::default())?
+    );
     Ok(())
 }
