@@ -173,8 +173,11 @@ impl std::fmt::Display for ImportSummary {
     }
 }
 
+/// Tracks with the body length in pixels and the arena border the file may record.
+type Loaded = (Tracks, Option<f64>, Option<Vec<[f64; 2]>>);
+
 /// The file read by the chosen reader, with the border and body length it may record.
-fn load(job: &ImportTracksJob) -> Result<(Tracks, Option<f64>, Option<Vec<[f64; 2]>>)> {
+fn load(job: &ImportTracksJob) -> Result<Loaded> {
     let cfg = &job.config;
     let p = &job.input;
     let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("");
