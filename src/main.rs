@@ -8,6 +8,9 @@ fn main() {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    // Temporary siblings go with the process on SIGINT/SIGTERM; outputs never replace inputs.
+    herdfit::data::atomic::install_signal_cleanup();
+    herdfit::data::atomic::guard_inputs();
     // A panic is a bug; still, the user sees one line and a non-zero exit, not a backtrace.
     std::panic::set_hook(Box::new(|info| {
         let msg = info

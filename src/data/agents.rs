@@ -18,6 +18,7 @@ pub struct AgentRow {
 
 /// Reads `id,x,y,vx,vy` rows (header required, columns in any order, extra columns ignored).
 pub fn read_init_csv(path: &Path) -> Result<Vec<AgentRow>> {
+    crate::data::atomic::note_input(path);
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let table = Table::parse(path, &text, "id,x,y,vx,vy")?;

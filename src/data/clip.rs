@@ -269,6 +269,7 @@ impl ClipFields {
 
     /// Reads and validates a clip folder.
     pub fn load(dir: &Path) -> Result<ClipFields> {
+        crate::data::atomic::note_input(dir);
         if !dir.is_dir() {
             return Err(Error::file(
                 dir,

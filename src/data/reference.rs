@@ -54,6 +54,7 @@ fn finite(path: &Path, line: usize, v: f64, what: &str) -> Result<f64> {
 }
 
 fn read(path: &Path) -> Result<String> {
+    crate::data::atomic::note_input(path);
     std::fs::read_to_string(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))
 }
 

@@ -368,6 +368,7 @@ impl Params {
 
     /// Reads and validates a parameter file.
     pub fn load(path: &Path) -> Result<Params> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let p: Params = serde_json::from_str(&text)

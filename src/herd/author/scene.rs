@@ -180,6 +180,7 @@ pub fn in_polygon(p: P2, poly: &[P2]) -> bool {
 impl Scene {
     /// Reads and validates a scene file.
     pub fn load(path: &Path) -> Result<Scene> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let file: SceneFile = serde_json::from_str(&text)
