@@ -148,6 +148,7 @@ fn parse_meta(path: &Path) -> Result<Meta> {
     if resolution == 0 || ground <= 0.0 {
         return Err(Error::file(path, "Resolution and GroundSize must be > 0"));
     }
+    crate::limits::check_grid("Resolution", resolution, resolution).map_err(|e| e.in_file(path))?;
     if ft.is_some_and(|f| f <= 0.0) {
         return Err(Error::file(path, "FrameTime must be > 0"));
     }

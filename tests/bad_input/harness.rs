@@ -143,3 +143,28 @@ pub fn case(args: &[&str], names: &str) {
     let t = workdir();
     case_in(t.path(), args, names);
 }
+
+/// [`case_in`] with the child's file-size limit set to `bytes` (`RLIMIT_FSIZE`, as `ulimit -f`)
+/// and SIGXFSZ ignored, so that a write past it fails with EFBIG: a full disk, reproducibly.
+pub fn case_full_disk(dir: &Path, args: &[&str], names: &str, bytes: u64) {
+    use std::os::unix::process::CommandExt;
+    let before = snapshot(dir);
+    let mut cmd = bin();
+    cmd.args(args).current_dir(dir);
+    // SAFETY: only async-signal-safe calls (setrlimit, signal) between fork and exec.
+    unsafe {
+        cmd.pre_exec(move || {
+            let r = libc::rlimit {
+                rlim_cur: bytes,
+                rlim_max: bytes,
+            };
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &r) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let o = cmd.output().expect("runs");
+    check(args, &o, names, dir, &before);
+}
