@@ -38,6 +38,7 @@ pub mod error;
 pub mod flock;
 pub mod herd;
 pub mod lift;
+pub mod limits;
 pub mod measure;
 pub mod optim;
 pub mod plot;

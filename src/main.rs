@@ -7,7 +7,13 @@ fn main() {
     // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+        // A file-size limit (`ulimit -f`) makes a write fail (EFBIG) and the run report it and
+        // leave nothing behind, instead of killing the process mid-file.
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
     }
+    // Temporary siblings go with the process on SIGINT/SIGTERM; outputs never replace inputs.
+    herdfit::data::atomic::install_signal_cleanup();
+    herdfit::data::atomic::guard_inputs();
     // A panic is a bug; still, the user sees one line and a non-zero exit, not a backtrace.
     std::panic::set_hook(Box::new(|info| {
         let msg = info

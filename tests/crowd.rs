@@ -376,7 +376,7 @@ fn layout_simulation_forms_a_line_and_writes_a_picture() {
         "--out",
         s(&model),
     ]);
-    let lay = d.join("hall.json");
+    let lay = d.join("hall-layout.json");
     herdfit::crowd::demo_layout().save(&lay).unwrap();
     let (out, png) = (d.join("hall.csv"), d.join("hall.png"));
     let text = ok(&[

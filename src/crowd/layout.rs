@@ -179,6 +179,7 @@ impl Layout {
 
     /// Reads and checks a layout file.
     pub fn load(path: &Path) -> Result<Layout> {
+        crate::data::atomic::note_input(path);
         let s = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let l: Layout = serde_json::from_str(&s)

@@ -281,6 +281,7 @@ impl CrowdModel {
 
     /// Reads and checks a model file.
     pub fn load(path: &Path) -> Result<CrowdModel> {
+        crate::data::atomic::note_input(path);
         let s = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let f: ModelFile = serde_json::from_str(&s)

@@ -18,6 +18,7 @@ pub struct AgentRow {
 
 /// Reads `id,x,y,vx,vy` rows (header required, columns in any order, extra columns ignored).
 pub fn read_init_csv(path: &Path) -> Result<Vec<AgentRow>> {
+    crate::data::atomic::note_input(path);
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let table = Table::parse(path, &text, "id,x,y,vx,vy")?;
@@ -39,13 +40,30 @@ pub fn read_init_csv(path: &Path) -> Result<Vec<AgentRow>> {
                 format!("line {line_no}: duplicate id {id}"),
             ));
         }
-        rows.push(AgentRow {
+        let row = AgentRow {
             id,
             x: r.num(idx[1], "x")?,
             y: r.num(idx[2], "y")?,
             vx: r.num(idx[3], "vx")?,
             vy: r.num(idx[4], "vy")?,
-        });
+        };
+        use crate::limits::{MAX_COORD, MAX_SPEED};
+        for (key, v, max) in [
+            ("x", row.x, MAX_COORD),
+            ("y", row.y, MAX_COORD),
+            ("vx", row.vx, MAX_SPEED),
+            ("vy", row.vy, MAX_SPEED),
+        ] {
+            if !(v.is_finite() && v.abs() <= max) {
+                return Err(Error::file(
+                    path,
+                    format!("line {line_no}: {key} = {v} is beyond ±{max}"),
+                ));
+            }
+        }
+        crate::limits::check_count("agents", rows.len() + 1, crate::limits::MAX_AGENTS)
+            .map_err(|e| e.in_file(path))?;
+        rows.push(row);
     }
     if rows.is_empty() {
         return Err(Error::file(path, "no agents (empty herd)"));

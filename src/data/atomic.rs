@@ -1,29 +1,62 @@
-//! Atomic writes shared by every command: a file or a folder appears whole or not at all.
+//! Atomic writes shared by every command: a file or a folder appears whole or not at all, through
+//! a temporary sibling renamed into place, under one output-path policy ([`check_target`]: no
+//! devices, FIFOs or symlinks replaced, no input overwritten) and with temporary siblings removed on
+//! SIGINT/SIGTERM and after a SIGKILL by the next run ([`cleanup`]).
+
+pub mod cleanup;
+mod policy;
+
+pub use cleanup::install_signal_cleanup;
+pub use policy::{check_target, guard_inputs, note_input};
 
 use crate::error::{Error, Result};
 use std::io::Write;
 use std::path::Path;
 
+fn parent_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
+/// The policy check and the removal of stale siblings, before any temporary sibling of `path`
+/// is made.
+fn prepare(path: &Path) -> Result<&Path> {
+    check_target(path)?;
+    let dir = parent_of(path);
+    cleanup::remove_stale(dir, path);
+    Ok(dir)
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a reader
 /// never sees a half-written file and a failed write leaves nothing behind.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
+    if path.is_dir() {
+        return Err(Error::file(path, "cannot write: is a directory"));
+    }
+    let dir = prepare(path)?;
     let fail = |e: std::io::Error| Error::file(path, format!("cannot write: {e}"));
-    let mut tmp = temp_builder().tempfile_in(dir).map_err(fail)?;
-    tmp.write_all(bytes).map_err(fail)?;
-    tmp.as_file().sync_all().map_err(fail)?;
-    tmp.persist(path).map_err(|e| fail(e.error))?;
-    Ok(())
+    let mut tmp = temp_builder(&cleanup::temp_prefix(path))
+        .tempfile_in(dir)
+        .map_err(fail)?;
+    let name = tmp.path().to_path_buf();
+    cleanup::register(&name);
+    let done = (|| {
+        tmp.write_all(bytes)?;
+        tmp.as_file().sync_all()?;
+        tmp.persist(path).map(|_| ()).map_err(|e| e.error)
+    })();
+    cleanup::unregister(&name);
+    done.map_err(fail)
 }
 
-/// Temporary siblings of output files: hidden names, and the permissions of an ordinary file
-/// (rw-r--r--) rather than the private 0600 of a temporary file, since they are renamed into place.
-fn temp_builder() -> tempfile::Builder<'static, 'static> {
+/// Temporary siblings of output files: hidden names that say whose they are
+/// ([`cleanup::temp_prefix`]), and the permissions of an ordinary file (rw-r--r--) rather than the
+/// private 0600 of a temporary file, since they are renamed into place.
+fn temp_builder(prefix: &str) -> tempfile::Builder<'_, 'static> {
     let mut b = tempfile::Builder::new();
-    b.prefix(".herdfit-").suffix(".tmp");
+    b.prefix(prefix).suffix(".tmp");
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
@@ -35,35 +68,35 @@ fn temp_builder() -> tempfile::Builder<'static, 'static> {
 /// A temporary sibling of `path` (same folder, ordinary permissions) for writers that need a file
 /// name of their own (PNG, AVI); [`persist`] renames it into place.
 pub fn temp_sibling(path: &Path, suffix: &str) -> Result<tempfile::NamedTempFile> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    temp_builder()
+    let dir = prepare(path)?;
+    let t = temp_builder(&cleanup::temp_prefix(path))
         .suffix(suffix)
         .tempfile_in(dir)
-        .map_err(|e| Error::file(path, format!("cannot write: {e}")))
+        .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    cleanup::register(t.path());
+    Ok(t)
 }
 
 /// Renames a finished [`temp_sibling`] into place.
 pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
-    tmp.persist(path)
+    check_target(path)?;
+    let name = tmp.path().to_path_buf();
+    let r = tmp
+        .persist(path)
         .map(|_| ())
-        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)))
+        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)));
+    cleanup::unregister(&name);
+    r
 }
 
-/// Checks early that `path` can be created (its folder exists and is writable), so long runs fail
-/// before they start rather than at the end.
+/// Checks early that `path` can be created (its folder exists and is writable, and the output-path
+/// policy allows it), so long runs fail before they start rather than at the end.
 pub fn check_writable(path: &Path) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
     if path.is_dir() {
         return Err(Error::file(path, "cannot write: is a directory"));
     }
-    tempfile::Builder::new()
-        .prefix(".herdfit-probe-")
+    let dir = prepare(path)?;
+    temp_builder(&cleanup::temp_prefix(path))
         .tempfile_in(dir)
         .map(|_| ())
         .map_err(|e| Error::file(path, format!("cannot write: {e}")))
@@ -79,16 +112,14 @@ pub struct AtomicFile {
 impl AtomicFile {
     /// Starts writing `path`.
     pub fn create(path: &Path) -> Result<Self> {
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
         if path.is_dir() {
             return Err(Error::file(path, "cannot write: is a directory"));
         }
-        let tmp = temp_builder()
+        let dir = prepare(path)?;
+        let tmp = temp_builder(&cleanup::temp_prefix(path))
             .tempfile_in(dir)
             .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+        cleanup::register(tmp.path());
         Ok(AtomicFile {
             path: path.to_path_buf(),
             out: std::io::BufWriter::with_capacity(1 << 20, tmp),
@@ -107,9 +138,14 @@ impl AtomicFile {
         let path = self.path;
         let fail = |e: std::io::Error| Error::file(&path, format!("cannot write: {e}"));
         let tmp = self.out.into_inner().map_err(|e| fail(e.into_error()))?;
-        tmp.as_file().sync_all().map_err(fail)?;
-        tmp.persist(&path).map_err(|e| fail(e.error))?;
-        Ok(())
+        let name = tmp.path().to_path_buf();
+        let done = (|| {
+            tmp.as_file().sync_all().map_err(fail)?;
+            check_target(&path)?;
+            tmp.persist(&path).map(|_| ()).map_err(|e| fail(e.error))
+        })();
+        cleanup::unregister(&name);
+        done
     }
 }
 
@@ -125,6 +161,7 @@ pub struct AtomicDir {
 const OUTPUT_MARKERS: [&str; 3] = ["clip.json", "report.json", "params.json"];
 
 fn replaceable(dir: &Path) -> Result<bool> {
+    check_target(dir)?;
     if !dir.exists() {
         return Ok(false);
     }
@@ -149,14 +186,13 @@ impl AtomicDir {
     /// Starts writing the folder `target` (its parent must exist).
     pub fn create(target: &Path) -> Result<Self> {
         replaceable(target)?;
-        let parent = match target.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
+        let parent = parent_of(target);
+        cleanup::remove_stale(parent, target);
         let tmp = tempfile::Builder::new()
-            .prefix(".herdfit-")
+            .prefix(&cleanup::temp_prefix(target))
             .tempdir_in(parent)
             .map_err(|e| Error::file(target, format!("cannot write: {e}")))?;
+        cleanup::register(tmp.path());
         Ok(AtomicDir {
             target: target.to_path_buf(),
             tmp,
@@ -180,80 +216,39 @@ impl AtomicDir {
         let fail = |e: std::io::Error| Error::file(&target, format!("cannot write: {e}"));
         let replace = replaceable(&target)?;
         let tmp = self.tmp.keep();
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            std::fs::set_permissions(&tmp, std::fs::Permissions::from_mode(0o755)).map_err(fail)?;
-        }
-        if replace {
-            let old = tmp.with_extension("old");
-            std::fs::rename(&target, &old).map_err(fail)?;
-            if let Err(e) = std::fs::rename(&tmp, &target) {
-                let _ = std::fs::rename(&old, &target);
-                let _ = std::fs::remove_dir_all(&tmp);
-                return Err(fail(e));
-            }
-            let _ = std::fs::remove_dir_all(&old);
-        } else if let Err(e) = std::fs::rename(&tmp, &target) {
-            let _ = std::fs::remove_dir_all(&tmp);
-            return Err(fail(e));
-        }
-        Ok(())
+        let done = commit_dir(&tmp, &target, replace).map_err(fail);
+        cleanup::unregister(&tmp);
+        done
     }
+}
+
+fn commit_dir(tmp: &Path, target: &Path, replace: bool) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        if let Err(e) = std::fs::set_permissions(tmp, std::fs::Permissions::from_mode(0o755)) {
+            let _ = std::fs::remove_dir_all(tmp);
+            return Err(e);
+        }
+    }
+    if replace {
+        let old = tmp.with_extension("old");
+        if let Err(e) = std::fs::rename(target, &old) {
+            let _ = std::fs::remove_dir_all(tmp);
+            return Err(e);
+        }
+        if let Err(e) = std::fs::rename(tmp, target) {
+            let _ = std::fs::rename(&old, target);
+            let _ = std::fs::remove_dir_all(tmp);
+            return Err(e);
+        }
+        let _ = std::fs::remove_dir_all(&old);
+    } else if let Err(e) = std::fs::rename(tmp, target) {
+        let _ = std::fs::remove_dir_all(tmp);
+        return Err(e);
+    }
+    Ok(())
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn atomic_dir_replaces_outputs_only() {
-        let dir = tempfile::tempdir().unwrap();
-        let t = dir.path().join("clip");
-        let d = AtomicDir::create(&t).unwrap();
-        d.write("clip.json", b"{}").unwrap();
-        assert!(!t.exists(), "nothing visible before commit");
-        d.commit().unwrap();
-        assert!(t.join("clip.json").is_file());
-        // A previous output is replaced whole.
-        let d = AtomicDir::create(&t).unwrap();
-        d.write("clip.json", b"{\"v\": 2}").unwrap();
-        d.write("other.txt", b"x").unwrap();
-        d.commit().unwrap();
-        assert_eq!(
-            std::fs::read_to_string(t.join("clip.json")).unwrap(),
-            "{\"v\": 2}"
-        );
-        // A folder of someone else's files is refused.
-        let home = dir.path().join("home");
-        std::fs::create_dir(&home).unwrap();
-        std::fs::write(home.join("thesis.tex"), "…").unwrap();
-        let e = AtomicDir::create(&home).err().unwrap().to_string();
-        assert!(e.contains("refusing"), "{e}");
-        // A dropped, uncommitted folder leaves nothing.
-        drop(AtomicDir::create(&dir.path().join("never")).unwrap());
-        let names: Vec<_> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        assert_eq!(names.len(), 2, "{names:?}");
-    }
-
-    #[test]
-    fn atomic_write_replaces_and_reports_unwritable() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("a.txt");
-        write_atomic(&p, b"one").unwrap();
-        write_atomic(&p, b"two").unwrap();
-        assert_eq!(std::fs::read_to_string(&p).unwrap(), "two");
-        let bad = dir.path().join("missing-dir").join("a.txt");
-        let e = write_atomic(&bad, b"x").unwrap_err().to_string();
-        assert!(
-            e.contains("missing-dir") && e.contains("cannot write"),
-            "{e}"
-        );
-        assert!(check_writable(&bad).is_err());
-        // Nothing but the file itself is left in the folder.
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
-    }
-}
+mod tests;

@@ -179,6 +179,7 @@ impl Camera {
 
     /// Reads and checks a camera file.
     pub fn load(path: &Path) -> Result<Camera> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let cam: Camera = serde_json::from_str(&text)

@@ -15,6 +15,7 @@ struct CellsFile {
 
 /// Reads an obstacle-cells file for an `nx × ny` grid.
 pub fn read_cells(path: &Path, nx: usize, ny: usize) -> Result<Array2<u8>> {
+    crate::data::atomic::note_input(path);
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let f: CellsFile = serde_json::from_str(&text)

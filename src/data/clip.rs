@@ -164,10 +164,23 @@ impl ClipFields {
         let m = &self.meta;
         super::check_schema(&m.schema, CLIP_SCHEMA)
             .map_err(|e| Error::invalid(format!("clip.json: {e}")))?;
-        if !(m.fps.is_finite() && m.fps > 0.0) {
+        use crate::limits::{FPS_RANGE, MAX_COORD, MAX_DENSITY, MAX_SPEED};
+        if !(m.fps.is_finite() && (FPS_RANGE.0..=FPS_RANGE.1).contains(&m.fps)) {
             return Err(Error::invalid(format!(
-                "clip.json: fps = {} must be > 0",
-                m.fps
+                "clip.json: fps = {} is outside {}..={}",
+                m.fps, FPS_RANGE.0, FPS_RANGE.1
+            )));
+        }
+        crate::limits::check_grid("nx, ny", m.nx, m.ny)
+            .map_err(|e| Error::invalid(format!("clip.json: {e}")))?;
+        let extent = m.cell_size * m.nx.max(m.ny) as f64;
+        if !(extent <= MAX_COORD
+            && m.origin[0].abs() <= MAX_COORD
+            && m.origin[1].abs() <= MAX_COORD)
+        {
+            return Err(Error::invalid(format!(
+                "clip.json: origin {:?} and cell_size {} put the grid beyond ±{MAX_COORD} BL",
+                m.origin, m.cell_size
             )));
         }
         if !(m.cell_size.is_finite() && m.cell_size > 0.0) {
@@ -186,8 +199,10 @@ impl ClipFields {
             return Err(Error::invalid("clip.json: origin must be finite"));
         }
         for (k, v) in [("speed.mean", m.speed.mean), ("speed.std", m.speed.std)] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(Error::invalid(format!("clip.json: {k} = {v} must be ≥ 0")));
+            if !(v.is_finite() && (0.0..=MAX_SPEED).contains(&v)) {
+                return Err(Error::invalid(format!(
+                    "clip.json: {k} = {v} must be in [0, {MAX_SPEED}]"
+                )));
             }
         }
         for (r, row) in m.speed.density_table.iter().enumerate() {
@@ -219,17 +234,23 @@ impl ClipFields {
             ("density", &self.density),
             ("dir_variance", &self.dir_variance),
         ] {
-            if let Some((i, &v)) = a.indexed_iter().find(|(_, v)| !v.is_finite() || **v < 0.0) {
-                return Err(bad(name, vec![i.0, i.1, i.2], v, "(must be finite, ≥ 0)"));
+            let insane = |v: f32| !(v.is_finite() && (0.0..=MAX_DENSITY as f32).contains(&v));
+            if let Some((i, &v)) = a.indexed_iter().find(|(_, v)| insane(**v)) {
+                return Err(bad(
+                    name,
+                    vec![i.0, i.1, i.2],
+                    v,
+                    &format!("(must be finite, in [0, {MAX_DENSITY}])"),
+                ));
             }
         }
         for (i, &v) in self.velocity.indexed_iter() {
-            if !v.is_finite() {
+            if !(v.is_finite() && f64::from(v).abs() <= MAX_SPEED) {
                 return Err(bad(
                     "velocity",
                     vec![i.0, i.1, i.2, i.3],
                     v,
-                    "(must be finite)",
+                    &format!("(must be finite, within ±{MAX_SPEED})"),
                 ));
             }
         }
@@ -271,6 +292,7 @@ impl ClipFields {
 
     /// Reads and validates a clip folder.
     pub fn load(dir: &Path) -> Result<ClipFields> {
+        crate::data::atomic::note_input(dir);
         if !dir.is_dir() {
             return Err(Error::file(
                 dir,

@@ -21,6 +21,7 @@ pub fn is_jackdaw_csv(path: &Path) -> bool {
 
 /// Reads a jackdaw flight as 3D tracks in metres; the frame rate is read off the `t` column.
 pub fn read_jackdaw(path: &Path) -> Result<Tracks> {
+    crate::data::atomic::note_input(path);
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let mut lines = text.lines().enumerate();

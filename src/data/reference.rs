@@ -54,6 +54,7 @@ fn finite(path: &Path, line: usize, v: f64, what: &str) -> Result<f64> {
 }
 
 fn read(path: &Path) -> Result<String> {
+    crate::data::atomic::note_input(path);
     std::fs::read_to_string(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))
 }
 
@@ -147,6 +148,7 @@ fn parse_meta(path: &Path) -> Result<Meta> {
     if resolution == 0 || ground <= 0.0 {
         return Err(Error::file(path, "Resolution and GroundSize must be > 0"));
     }
+    crate::limits::check_grid("Resolution", resolution, resolution).map_err(|e| e.in_file(path))?;
     if ft.is_some_and(|f| f <= 0.0) {
         return Err(Error::file(path, "FrameTime must be > 0"));
     }

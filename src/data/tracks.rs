@@ -287,6 +287,7 @@ impl Tracks {
     /// Reads a tracks CSV and its sidecar (when present; see the module docs for the defaults
     /// without one).
     pub fn load(path: &Path) -> Result<Tracks> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let side = sidecar_path(path);
@@ -440,6 +441,7 @@ fn parse_csv(path: &Path, text: &str) -> Result<(Vec<TrackRow>, bool)> {
 /// files, one row every 0.4 s); they become consecutive frames `frame / frame_step` at
 /// `fps` (2.5 in the standard files). Rows may come in any order.
 pub fn read_eth_ucy(path: &Path, fps: f64) -> Result<Tracks> {
+    crate::data::atomic::note_input(path);
     if !(fps.is_finite() && fps > 0.0) {
         return Err(Error::invalid(format!("fps = {fps} must be positive")));
     }

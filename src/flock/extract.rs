@@ -230,6 +230,7 @@ impl ShapeParams {
 
     /// Reads and checks a shape-parameter file.
     pub fn load(path: &Path) -> Result<Self> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let p: ShapeParams = serde_json::from_str(&text)

@@ -296,8 +296,11 @@ impl Params {
             ("capsule_radius", c.capsule_radius),
         ];
         for (k, v) in positive {
-            if !v.is_finite() || v <= 0.0 {
-                return Err(Error::invalid(format!("constants.{k} = {v} must be > 0")));
+            if !v.is_finite() || v <= 0.0 || v > crate::limits::MAX_COORD {
+                return Err(Error::invalid(format!(
+                    "constants.{k} = {v} must be in (0, {}]",
+                    crate::limits::MAX_COORD
+                )));
             }
         }
         if !c.capsule_half_length.is_finite() || c.capsule_half_length < 0.0 {
@@ -324,8 +327,11 @@ impl Params {
             ("max", s.max),
             ("reversion", s.reversion),
         ] {
-            if !v.is_finite() || v < 0.0 {
-                return Err(Error::invalid(format!("speed.{k} = {v} must be ≥ 0")));
+            if !v.is_finite() || v < 0.0 || v > crate::limits::MAX_SPEED {
+                return Err(Error::invalid(format!(
+                    "speed.{k} = {v} must be in [0, {}]",
+                    crate::limits::MAX_SPEED
+                )));
             }
         }
         if s.max <= 0.0 {
@@ -333,7 +339,8 @@ impl Params {
         }
         if let Some(t) = &s.density_table {
             for (r, row) in t.iter().enumerate() {
-                if !row[0].is_finite() || !row[1].is_finite() || row[0] < 0.0 || row[1] < 0.0 {
+                let sane = |v: f64| v.is_finite() && (0.0..=crate::limits::MAX_SPEED).contains(&v);
+                if !sane(row[0]) || !sane(row[1]) {
                     return Err(Error::invalid(format!(
                         "speed.density_table[{r}] = {row:?} must be finite and ≥ 0"
                     )));
@@ -368,6 +375,7 @@ impl Params {
 
     /// Reads and validates a parameter file.
     pub fn load(path: &Path) -> Result<Params> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let p: Params = serde_json::from_str(&text)

@@ -49,7 +49,8 @@ impl SimulateConfig {
     /// Checks the steps, frame rate, speed noise and guidance; errors name the key.
     pub fn check(&self) -> Result<()> {
         crate::error::check_counts(&[("steps", self.steps)])?;
-        crate::error::check_positive(&[("fps", self.fps)])?;
+        crate::limits::check_fps("fps", self.fps)?;
+        crate::limits::check_count("steps", self.steps, crate::limits::MAX_STEPS)?;
         if let Some(s) = self.speed_noise {
             if !(s.is_finite() && s >= 0.0) {
                 return Err(Error::config("speed_noise", format!("{s} must be ≥ 0")));
@@ -114,6 +115,9 @@ impl SimulateJob {
     /// Checks the settings and that there is a herd; errors name the key.
     pub fn check(&self) -> Result<()> {
         self.config.check()?;
+        if let Some(HerdSource::Agents(n)) = &self.run.herd {
+            crate::limits::check_count("agents", *n, crate::limits::MAX_AGENTS)?;
+        }
         if self.run.herd.is_none() {
             return Err(Error::config(
                 "herd",
@@ -136,7 +140,7 @@ pub fn load_params(path: Option<&Path>) -> Result<Params> {
 /// agents.
 pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize> {
     let cfg = &job.config;
-    cfg.check()?;
+    job.check()?;
     let mut params = load_params(job.run.params.as_deref())?;
     if let Some(s) = cfg.speed_noise {
         params.speed.std = s;
@@ -155,6 +159,10 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
         }
     };
     let replay = job.run.replay.as_deref().map(Recording::load).transpose()?;
+    crate::limits::check_count("agents", rows.len(), crate::limits::MAX_AGENTS)?;
+    // A trajectory row is about 100 bytes of text.
+    let rows_out = rows.len() as f64 * (cfg.steps as f64 + 1.0);
+    crate::limits::check_disk("steps", &job.out, rows_out * 100.0)?;
     check_writable(&job.out)?;
     if let Some(r) = &job.run.record {
         check_writable(r)?;
@@ -189,6 +197,8 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
         out.write_str(&text)?;
         text.clear();
         prev = next.rows(&ids)?;
+        let pts = prev.iter().map(|r| (r.x, r.y));
+        crate::limits::check_state(t + 1, pts, "fps, the parameter set's speeds and the herd")?;
         progress.inc(1);
         Ok(())
     })?;

@@ -42,8 +42,15 @@ impl SynthConfig {
             return Err(Error::config("agents", "the herd is empty: must be ≥ 1"));
         }
         crate::error::check_counts(&[("frame_count", self.frame_count)])?;
-        crate::error::check_positive(&[("fps", self.fps)])?;
+        crate::limits::check_fps("fps", self.fps)?;
+        crate::limits::check_count("agents", self.agents, crate::limits::MAX_AGENTS)?;
         let g = &self.grid;
+        crate::limits::check_grid("grid", g.nx, g.ny)?;
+        // Fields (density, 2 velocity, direction variance: 4 f32 per cell and frame) and the
+        // trajectories (5 f64 and a role per agent and frame).
+        let cells = (g.nx * g.ny) as f64 * self.frame_count as f64;
+        let rows = self.agents as f64 * self.frame_count as f64;
+        crate::limits::check_memory("frame_count", "the clip", cells * 16.0 + rows * 48.0)?;
         if g.nx == 0 || g.ny == 0 || !(g.cell_size.is_finite() && g.cell_size > 0.0) {
             return Err(Error::config(
                 "grid",
@@ -230,7 +237,11 @@ impl Default for SynthVideo {
 impl SynthJob {
     /// Checks the cell size (the rest is [`SynthConfig::check`]'s and the video's).
     pub fn check(&self) -> Result<()> {
-        crate::error::check_positive(&[("cell_size", self.cell_size)])
+        crate::error::check_positive(&[("cell_size", self.cell_size)])?;
+        crate::limits::check_grid("grid_size", self.grid_size.0, self.grid_size.1)?;
+        crate::limits::check_count("agents", self.agents, crate::limits::MAX_AGENTS)?;
+        let extent = self.cell_size * self.grid_size.0.max(self.grid_size.1) as f64;
+        crate::limits::check_magnitude("cell_size", extent, crate::limits::MAX_COORD)
     }
 }
 

@@ -139,6 +139,7 @@ impl LiftConfig {
 
     /// Reads a config JSON (every key optional, unknown keys rejected) and checks it.
     pub fn load(path: &std::path::Path) -> Result<Self> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let c: LiftConfig = serde_json::from_str(&text)

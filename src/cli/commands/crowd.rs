@@ -97,6 +97,7 @@ impl LearnFlags {
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
+    crate::data::atomic::note_input(p);
     let s = std::fs::read_to_string(p).map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
     serde_json::from_str(&s).map_err(|e| Error::file(p, format!("bad configuration: {e}")))
 }

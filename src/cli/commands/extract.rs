@@ -89,6 +89,7 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
     // The settings file, parsed twice: into the config, and as JSON to know which keys it sets.
     let (mut cfg, settings) = match &a.config {
         Some(p) => {
+            crate::data::atomic::note_input(p);
             let text = std::fs::read_to_string(p)
                 .map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
             let cfg = serde_json::from_str::<ExtractConfig>(&text)

@@ -366,6 +366,7 @@ fn run_cmd(a: RunArgs) -> Result<()> {
 fn synth_cmd(a: SynthArgs) -> Result<()> {
     let mut cfg = match &a.config {
         Some(p) => {
+            crate::data::atomic::note_input(p);
             let text = std::fs::read_to_string(p)
                 .map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
             let c: BoidsConfig = serde_json::from_str(&text)

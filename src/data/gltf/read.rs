@@ -19,6 +19,7 @@ pub struct Glb {
 
 /// Reads a GLB written by [`super::export_glb`] (or any GLB with one embedded buffer).
 pub fn read_glb(path: &Path) -> Result<Glb> {
+    crate::data::atomic::note_input(path);
     let bytes = std::fs::read(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let bad = |m: &str| Error::file(path, format!("not a GLB file: {m}"));
     let u32_at = |o: usize| -> Result<u32> {

@@ -180,6 +180,7 @@ pub fn in_polygon(p: P2, poly: &[P2]) -> bool {
 impl Scene {
     /// Reads and validates a scene file.
     pub fn load(path: &Path) -> Result<Scene> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let file: SceneFile = serde_json::from_str(&text)
@@ -480,6 +481,14 @@ fn check_spawn_and_run(file: &SceneFile, ground: &Ground) -> Result<()> {
     if s.count == 0 {
         return Err(bad("spawn.count", "the herd is empty"));
     }
+    if s.count > crate::limits::MAX_AGENTS {
+        let m = format!(
+            "{} is above the limit of {}",
+            s.count,
+            crate::limits::MAX_AGENTS
+        );
+        return Err(bad("spawn.count", &m));
+    }
     ground.free_point(file, "spawn.centre", s.centre)?;
     if !(s.size[0] > 0.0 && s.size[1] > 0.0 && s.size[0].is_finite() && s.size[1].is_finite()) {
         return Err(bad("spawn.size", "must be > 0"));
@@ -487,8 +496,22 @@ fn check_spawn_and_run(file: &SceneFile, ground: &Ground) -> Result<()> {
     if !(file.duration.is_finite() && file.duration > 0.0) {
         return Err(bad("duration", "must be > 0"));
     }
-    if !(file.fps.is_finite() && file.fps > 0.0) {
-        return Err(bad("fps", "must be > 0"));
+    if let Err(e) = crate::limits::check_fps("fps", file.fps) {
+        return Err(Error::file(ground.path, e.to_string()));
+    }
+    // The run keeps every frame's agents (5 f64 and a role each).
+    let frames = file.duration * file.fps;
+    if frames > crate::limits::MAX_STEPS as f64 {
+        let m = format!(
+            "duration × fps = {frames} frames is above the limit of {}",
+            crate::limits::MAX_STEPS
+        );
+        return Err(bad("duration", &m));
+    }
+    if let Err(e) =
+        crate::limits::check_memory("duration", "the run", frames * s.count as f64 * 48.0)
+    {
+        return Err(Error::file(ground.path, e.to_string()));
     }
     if let Some(p) = &file.predator {
         if p.path.len() < 2 {

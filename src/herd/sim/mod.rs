@@ -188,6 +188,7 @@ impl Recording {
 
     /// Reads a recording and checks its shape.
     pub fn load(path: &Path) -> Result<Self> {
+        crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let r: Recording = serde_json::from_str(&text)

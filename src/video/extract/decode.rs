@@ -56,6 +56,7 @@ pub(super) fn open(path: &Path) -> Result<Video> {
     if !path.is_file() {
         return Err(Error::file(path, "cannot read: no such file"));
     }
+    crate::data::atomic::note_input(path);
     std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let _ = opencv::core::set_log_level(opencv::core::LogLevel::LOG_LEVEL_SILENT);
     let cap = quietly(|| videoio::VideoCapture::from_file(path.as_os_str(), videoio::CAP_FFMPEG))

@@ -84,6 +84,7 @@ impl ExtractConfig {
     /// when it is opened); errors name the key.
     pub fn check(&self) -> Result<()> {
         crate::error::check_counts(&[("grid", self.grid), ("smooth", self.smooth)])?;
+        crate::limits::check_grid("grid", self.grid, self.grid)?;
         crate::error::check_positive(&[("body_length_px", self.body_length_px)])?;
         if let Some([a, b]) = self.frames {
             if a >= b {

@@ -1,0 +1,832 @@
+//! The bad-input suite of issue #14 through the binary. Each case asserts (see `harness`):
+//! non-zero exit, one `error: …` line naming the file or key, no panic text, the folder listing
+//! (hidden files included) and every input's bytes unchanged.
+
+#[path = "bad_input/harness.rs"]
+mod harness;
+
+use harness::{case, case_in, workdir};
+
+// ---- Data loss and damage: outputs onto devices, symlinks, FIFOs and inputs ----
+
+#[test]
+fn simulate_onto_a_device_is_refused() {
+    case(
+        &[
+            "simulate",
+            "--agents",
+            "5",
+            "--steps",
+            "2",
+            "--out",
+            "/dev/null",
+        ],
+        "/dev/null",
+    );
+    use std::os::unix::fs::FileTypeExt;
+    let m = std::fs::symlink_metadata("/dev/null").unwrap();
+    assert!(
+        m.file_type().is_char_device(),
+        "/dev/null is still a device"
+    );
+}
+
+#[test]
+fn simulate_onto_dev_stdout_is_refused() {
+    case(
+        &[
+            "simulate",
+            "--agents",
+            "5",
+            "--steps",
+            "2",
+            "--out",
+            "/dev/stdout",
+        ],
+        "/dev/stdout",
+    );
+    assert!(std::fs::symlink_metadata("/dev/stdout")
+        .unwrap()
+        .file_type()
+        .is_symlink());
+}
+
+#[test]
+fn simulate_onto_a_symlink_is_refused() {
+    let t = workdir();
+    std::fs::write(t.path().join("real.csv"), "keep me").unwrap();
+    std::os::unix::fs::symlink("real.csv", t.path().join("link.csv")).unwrap();
+    case_in(
+        t.path(),
+        &[
+            "simulate", "--agents", "5", "--steps", "2", "--out", "link.csv",
+        ],
+        "link.csv",
+    );
+}
+
+#[test]
+fn simulate_onto_a_dangling_symlink_is_refused() {
+    let t = workdir();
+    std::os::unix::fs::symlink("nowhere.csv", t.path().join("link.csv")).unwrap();
+    case_in(
+        t.path(),
+        &[
+            "simulate", "--agents", "5", "--steps", "2", "--out", "link.csv",
+        ],
+        "link.csv",
+    );
+}
+
+#[test]
+fn simulate_onto_a_fifo_is_refused_without_blocking() {
+    let t = workdir();
+    let st = std::process::Command::new("mkfifo")
+        .arg(t.path().join("out.csv"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    case_in(
+        t.path(),
+        &[
+            "simulate", "--agents", "5", "--steps", "2", "--out", "out.csv",
+        ],
+        "out.csv",
+    );
+}
+
+#[test]
+fn fit_log_onto_a_device_is_refused() {
+    case(
+        &[
+            "fit",
+            "clip",
+            "--out",
+            "q.json",
+            "--epochs",
+            "1",
+            "--log",
+            "/dev/null",
+        ],
+        "/dev/null",
+    );
+}
+
+#[test]
+fn fit_plot_onto_a_device_is_refused() {
+    case(
+        &[
+            "fit",
+            "clip",
+            "--out",
+            "q.json",
+            "--epochs",
+            "1",
+            "--plot",
+            "/dev/zero",
+        ],
+        "/dev/zero",
+    );
+}
+
+#[test]
+fn fields_info_json_onto_a_device_is_refused() {
+    case(&["fields-info", "clip", "--json", "/dev/full"], "/dev/full");
+}
+
+#[test]
+fn fit_out_onto_the_clips_metadata_is_refused() {
+    case(
+        &["fit", "clip", "--out", "clip/clip.json", "--epochs", "1"],
+        "clip/clip.json",
+    );
+}
+
+#[test]
+fn fit_out_onto_its_start_is_refused() {
+    case(
+        &[
+            "fit", "clip", "--start", "p.json", "--out", "p.json", "--epochs", "1",
+        ],
+        "p.json",
+    );
+}
+
+#[test]
+fn fit_log_onto_its_start_is_refused() {
+    case(
+        &[
+            "fit", "clip", "--start", "p.json", "--out", "q.json", "--log", "p.json",
+        ],
+        "p.json",
+    );
+}
+
+#[test]
+fn fit_out_into_the_clip_folder_is_refused() {
+    case(
+        &["fit", "clip", "--out", "clip/new.json", "--epochs", "1"],
+        "clip/new.json",
+    );
+}
+
+#[test]
+fn validate_out_onto_its_clip_keeps_the_clip() {
+    case(
+        &["validate", "clip", "--params", "p.json", "--out", "clip"],
+        "clip",
+    );
+}
+
+#[test]
+fn validate_out_onto_a_folder_holding_its_inputs_is_refused() {
+    case(
+        &["validate", "clip", "--params", "p.json", "--out", "."],
+        ".: contains an input",
+    );
+}
+
+#[test]
+fn validate_out_through_a_symlink_to_the_clip_is_refused() {
+    let t = workdir();
+    std::os::unix::fs::symlink("clip", t.path().join("report")).unwrap();
+    case_in(
+        t.path(),
+        &["validate", "clip", "--params", "p.json", "--out", "report"],
+        "report",
+    );
+}
+
+#[test]
+fn validate_out_onto_its_params_is_refused() {
+    case(
+        &["validate", "clip", "--params", "p.json", "--out", "p.json"],
+        "p.json",
+    );
+}
+
+#[test]
+fn fields_info_json_onto_the_clips_metadata_is_refused() {
+    case(
+        &["fields-info", "clip", "--json", "clip/clip.json"],
+        "clip/clip.json",
+    );
+}
+
+#[test]
+fn fields_info_json_through_dotdot_onto_the_clip_is_refused() {
+    case(
+        &["fields-info", "clip", "--json", "clip/../clip/fields.npz"],
+        "fields.npz",
+    );
+}
+
+#[test]
+fn simulate_out_onto_its_init_is_refused() {
+    case(
+        &[
+            "simulate", "--init", "init.csv", "--steps", "2", "--out", "init.csv",
+        ],
+        "init.csv",
+    );
+}
+
+#[test]
+fn simulate_out_onto_its_params_is_refused() {
+    case(
+        &[
+            "simulate", "--params", "p.json", "--agents", "3", "--steps", "1", "--out", "p.json",
+        ],
+        "p.json",
+    );
+}
+
+#[test]
+fn simulate_record_onto_its_init_is_refused() {
+    case(
+        &[
+            "simulate", "--init", "init.csv", "--steps", "2", "--out", "t.csv", "--record",
+            "init.csv",
+        ],
+        "init.csv",
+    );
+}
+
+#[test]
+fn simulate_out_onto_a_folder_is_refused() {
+    case(
+        &["simulate", "--agents", "3", "--steps", "1", "--out", "clip"],
+        "clip",
+    );
+}
+
+#[test]
+fn synth_out_onto_a_users_folder_is_refused() {
+    let t = workdir();
+    std::fs::create_dir(t.path().join("thesis")).unwrap();
+    std::fs::write(t.path().join("thesis/main.tex"), "…").unwrap();
+    case_in(
+        t.path(),
+        &[
+            "synth",
+            "--agents",
+            "5",
+            "--frame-count",
+            "3",
+            "--grid-size",
+            "4x4",
+            "--cell-size",
+            "2",
+            "--out",
+            "thesis",
+        ],
+        "thesis",
+    );
+}
+
+#[test]
+fn synth_out_onto_its_params_is_refused() {
+    case(
+        &[
+            "synth",
+            "--params",
+            "p.json",
+            "--agents",
+            "5",
+            "--frame-count",
+            "3",
+            "--grid-size",
+            "4x4",
+            "--cell-size",
+            "2",
+            "--out",
+            "p.json",
+        ],
+        "p.json",
+    );
+}
+
+// ---- Aborts instead of errors: sizes checked before anything is allocated ----
+
+#[test]
+fn simulate_a_billion_agents_is_refused() {
+    case(
+        &[
+            "simulate",
+            "--agents",
+            "1000000000",
+            "--steps",
+            "2",
+            "--out",
+            "a.csv",
+        ],
+        "--agents",
+    );
+}
+
+#[test]
+fn synth_a_huge_grid_is_refused() {
+    case(
+        &[
+            "synth",
+            "--agents",
+            "10",
+            "--frame-count",
+            "3",
+            "--grid-size",
+            "100000x100000",
+            "--cell-size",
+            "1",
+            "--out",
+            "s",
+        ],
+        "--grid-size",
+    );
+}
+
+#[test]
+fn synth_a_billion_agents_is_refused() {
+    case(
+        &[
+            "synth",
+            "--agents",
+            "1000000000",
+            "--frame-count",
+            "3",
+            "--grid-size",
+            "4x4",
+            "--cell-size",
+            "1",
+            "--out",
+            "s",
+        ],
+        "--agents",
+    );
+}
+
+#[test]
+fn synth_more_frames_than_memory_is_refused() {
+    case(
+        &[
+            "synth",
+            "--agents",
+            "10",
+            "--frame-count",
+            "100000000",
+            "--grid-size",
+            "4000x4000",
+            "--cell-size",
+            "1",
+            "--out",
+            "s",
+        ],
+        "--frame-count",
+    );
+}
+
+#[test]
+fn simulate_a_trillion_steps_is_refused() {
+    case(
+        &[
+            "simulate",
+            "--agents",
+            "5",
+            "--steps",
+            "1000000000000",
+            "--out",
+            "a.csv",
+        ],
+        "--steps",
+    );
+}
+
+#[test]
+fn simulate_an_output_larger_than_the_disk_is_refused_up_front() {
+    case(
+        &[
+            "simulate", "--agents", "100000", "--steps", "90000000", "--out", "a.csv",
+        ],
+        "free there",
+    );
+}
+
+#[test]
+fn import_reference_a_million_cells_per_side_is_refused() {
+    let t = workdir();
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference");
+    for e in std::fs::read_dir(&src).unwrap() {
+        let e = e.unwrap();
+        let text = std::fs::read_to_string(e.path()).unwrap();
+        let text = if e.file_name().to_string_lossy().ends_with("_meta.txt") {
+            text.lines()
+                .map(|l| {
+                    if l.starts_with("Resolution") {
+                        "Resolution 1000000".to_string()
+                    } else {
+                        l.to_string()
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join("\n")
+        } else {
+            text
+        };
+        std::fs::write(t.path().join(e.file_name()), text).unwrap();
+    }
+    let meta = std::fs::read_dir(t.path())
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .find(|n| n.ends_with("_data_meta.txt"))
+        .expect("a reference meta file");
+    let prefix = meta.trim_end_matches("_data_meta.txt").to_string();
+    case_in(
+        t.path(),
+        &["import-reference", &prefix, "--out", "r"],
+        "Resolution",
+    );
+}
+
+// ---- NaN out, exit 0: huge finite values refused, derived values guarded ----
+
+#[test]
+fn simulate_with_a_tiny_fps_is_refused() {
+    case(
+        &[
+            "simulate", "--agents", "5", "--steps", "2", "--fps", "1e-300", "--out", "a.csv",
+        ],
+        "--fps",
+    );
+}
+
+#[test]
+fn simulate_with_a_huge_fps_is_refused() {
+    case(
+        &[
+            "simulate", "--agents", "5", "--steps", "2", "--fps", "1e300", "--out", "a.csv",
+        ],
+        "--fps",
+    );
+}
+
+#[test]
+fn synth_with_a_nan_heading_is_refused() {
+    case(
+        &[
+            "synth",
+            "--agents",
+            "10",
+            "--frame-count",
+            "3",
+            "--grid-size",
+            "4x4",
+            "--cell-size",
+            "2",
+            "--heading",
+            "NaN",
+            "--out",
+            "s",
+        ],
+        "--heading",
+    );
+}
+
+#[test]
+fn synth_with_a_tiny_fps_is_refused() {
+    case(
+        &[
+            "synth",
+            "--agents",
+            "10",
+            "--frame-count",
+            "3",
+            "--grid-size",
+            "4x4",
+            "--cell-size",
+            "2",
+            "--fps",
+            "1e-300",
+            "--out",
+            "s",
+        ],
+        "--fps",
+    );
+}
+
+fn edit_json(path: &std::path::Path, f: impl FnOnce(&mut serde_json::Value)) {
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    f(&mut v);
+    std::fs::write(path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+}
+
+#[test]
+fn params_with_huge_speeds_are_refused() {
+    let t = workdir();
+    edit_json(&t.path().join("p.json"), |v| {
+        v["speed"]["mean"] = 1e300.into();
+        v["speed"]["max"] = 1e300.into();
+    });
+    case_in(
+        t.path(),
+        &[
+            "simulate", "--params", "p.json", "--agents", "5", "--steps", "2", "--out", "a.csv",
+        ],
+        "p.json",
+    );
+}
+
+#[test]
+fn params_with_a_huge_perception_radius_are_refused() {
+    let t = workdir();
+    edit_json(&t.path().join("p.json"), |v| {
+        v["constants"]["perception_radius"] = 1e300.into()
+    });
+    case_in(
+        t.path(),
+        &[
+            "simulate", "--params", "p.json", "--agents", "5", "--steps", "2", "--out", "a.csv",
+        ],
+        "perception_radius",
+    );
+}
+
+#[test]
+fn init_with_a_huge_position_is_refused() {
+    let t = workdir();
+    let p = t.path().join("init.csv");
+    let text = std::fs::read_to_string(&p).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let f: Vec<String> = lines[1].split(',').map(String::from).collect();
+    lines[1] = format!("{},1e300,{},{},{}", f[0], f[2], f[3], f[4]);
+    std::fs::write(&p, lines.join("\n") + "\n").unwrap();
+    case_in(
+        t.path(),
+        &[
+            "simulate", "--init", "init.csv", "--steps", "2", "--out", "a.csv",
+        ],
+        "init.csv",
+    );
+}
+
+#[test]
+fn init_with_a_huge_speed_is_refused() {
+    let t = workdir();
+    let p = t.path().join("init.csv");
+    let text = std::fs::read_to_string(&p).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let f: Vec<String> = lines[1].split(',').map(String::from).collect();
+    lines[1] = format!("{},{},{},1e300,{}", f[0], f[1], f[2], f[4]);
+    std::fs::write(&p, lines.join("\n") + "\n").unwrap();
+    case_in(
+        t.path(),
+        &[
+            "simulate", "--init", "init.csv", "--steps", "2", "--out", "a.csv",
+        ],
+        "vx",
+    );
+}
+
+#[test]
+fn clip_with_a_tiny_fps_is_refused_by_fit() {
+    let t = workdir();
+    edit_json(&t.path().join("clip/clip.json"), |v| {
+        v["fps"] = 1e-300.into()
+    });
+    case_in(
+        t.path(),
+        &["fit", "clip", "--out", "q.json", "--epochs", "1"],
+        "fps",
+    );
+}
+
+#[test]
+fn clip_with_a_huge_origin_is_refused_by_fit() {
+    let t = workdir();
+    edit_json(&t.path().join("clip/clip.json"), |v| {
+        v["origin"] = serde_json::json!([1e308, 0.0])
+    });
+    case_in(
+        t.path(),
+        &["fit", "clip", "--out", "q.json", "--epochs", "1"],
+        "origin",
+    );
+}
+
+#[test]
+fn clip_with_a_huge_cell_size_is_refused_by_fields_info() {
+    let t = workdir();
+    edit_json(&t.path().join("clip/clip.json"), |v| {
+        v["cell_size"] = 1e300.into()
+    });
+    case_in(t.path(), &["fields-info", "clip"], "cell_size");
+}
+
+#[test]
+fn clip_with_a_huge_speed_is_refused_by_validate() {
+    let t = workdir();
+    edit_json(&t.path().join("clip/clip.json"), |v| {
+        v["speed"]["mean"] = 1e300.into()
+    });
+    case_in(
+        t.path(),
+        &["validate", "clip", "--params", "p.json", "--out", "r"],
+        "speed.mean",
+    );
+}
+
+#[test]
+fn clip_with_a_huge_density_is_refused() {
+    use ndarray::{Array2, Array3, Array4};
+    let t = workdir();
+    let c = t.path().join("clip");
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(c.join("clip.json")).unwrap()).unwrap();
+    let (f, ny, nx) = (
+        meta["frames"].as_u64().unwrap() as usize,
+        meta["ny"].as_u64().unwrap() as usize,
+        meta["nx"].as_u64().unwrap() as usize,
+    );
+    let mut d = Array3::<f32>::zeros((f, ny, nx));
+    d[[0, 1, 1]] = 1e38;
+    let mut w = ndarray_npy::NpzWriter::new(std::fs::File::create(c.join("fields.npz")).unwrap());
+    w.add_array("density", &d).unwrap();
+    w.add_array("velocity", &Array4::<f32>::zeros((f, ny, nx, 2)))
+        .unwrap();
+    w.add_array("dir_variance", &Array3::<f32>::zeros((f, ny, nx)))
+        .unwrap();
+    w.add_array("obstacles", &Array2::<u8>::zeros((ny, nx)))
+        .unwrap();
+    w.finish().unwrap();
+    case_in(t.path(), &["fields-info", "clip"], "density");
+    case_in(
+        t.path(),
+        &["fit", "clip", "--out", "q.json", "--epochs", "1"],
+        "density",
+    );
+}
+
+// ---- Full disk: a file-size limit in the child ----
+
+#[test]
+fn simulate_on_a_full_disk_leaves_nothing() {
+    let t = workdir();
+    harness::case_full_disk(
+        t.path(),
+        &[
+            "simulate", "--agents", "200", "--steps", "200", "--out", "a.csv",
+        ],
+        "a.csv",
+        50_000,
+    );
+}
+
+#[test]
+fn synth_video_on_a_full_disk_leaves_nothing() {
+    let t = workdir();
+    harness::case_full_disk(
+        t.path(),
+        &[
+            "synth",
+            "--agents",
+            "10",
+            "--frame-count",
+            "30",
+            "--grid-size",
+            "8x8",
+            "--cell-size",
+            "2",
+            "--video-file",
+            "v.avi",
+            "--out",
+            "s",
+        ],
+        "v.avi",
+        61_440,
+    );
+}
+
+#[test]
+fn synth_clip_on_a_full_disk_leaves_nothing() {
+    let t = workdir();
+    harness::case_full_disk(
+        t.path(),
+        &[
+            "synth",
+            "--agents",
+            "10",
+            "--frame-count",
+            "300",
+            "--grid-size",
+            "8x8",
+            "--cell-size",
+            "2",
+            "--out",
+            "s",
+        ],
+        "s/",
+        20_000,
+    );
+}
+
+#[test]
+fn fields_info_json_on_a_full_disk_leaves_nothing() {
+    let t = workdir();
+    harness::case_full_disk(
+        t.path(),
+        &["fields-info", "clip", "--json", "i.json"],
+        "i.json",
+        100,
+    );
+}
+
+// ---- Signals and leftovers ----
+
+fn temp_leftovers(dir: &std::path::Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with(".herdfit-"))
+        .collect()
+}
+
+fn start_long_run(dir: &std::path::Path) -> std::process::Child {
+    let c = harness::bin()
+        .args([
+            "simulate", "--agents", "50", "--steps", "2000000", "--out", "long.csv",
+        ])
+        .current_dir(dir)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until its temporary sibling exists.
+    for _ in 0..200 {
+        if !temp_leftovers(dir).is_empty() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(25));
+    }
+    assert!(
+        !temp_leftovers(dir).is_empty(),
+        "the run writes a temporary sibling"
+    );
+    c
+}
+
+#[test]
+fn sigint_and_sigterm_remove_temporary_siblings() {
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        let t = tempfile::tempdir().unwrap();
+        let c = start_long_run(t.path());
+        // SAFETY: signalling our own child.
+        unsafe { libc::kill(c.id() as i32, sig) };
+        let o = c.wait_with_output().unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(128 + sig),
+            "exit code after signal {sig}"
+        );
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            temp_leftovers(t.path()).is_empty(),
+            "{:?}",
+            temp_leftovers(t.path())
+        );
+        assert!(!t.path().join("long.csv").exists());
+    }
+}
+
+#[test]
+fn sigkill_leftovers_are_removed_by_the_next_run_on_the_same_output() {
+    let t = tempfile::tempdir().unwrap();
+    let mut c = start_long_run(t.path());
+    c.kill().unwrap();
+    c.wait().unwrap();
+    let left = temp_leftovers(t.path());
+    assert_eq!(left.len(), 1, "{left:?}");
+    // A run on another output leaves it alone; a run on the same output removes it.
+    harness::bin()
+        .args([
+            "simulate",
+            "--agents",
+            "3",
+            "--steps",
+            "1",
+            "--out",
+            "other.csv",
+        ])
+        .current_dir(t.path())
+        .status()
+        .unwrap();
+    assert_eq!(temp_leftovers(t.path()), left);
+    let st = harness::bin()
+        .args([
+            "simulate", "--agents", "3", "--steps", "1", "--out", "long.csv",
+        ])
+        .current_dir(t.path())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    assert!(temp_leftovers(t.path()).is_empty());
+    assert!(t.path().join("long.csv").is_file());
+}
