@@ -47,18 +47,3 @@ pub mod progress;
 pub mod video;
 
 pub use error::{Error, Result};
-
-/// The pre-restructure path of the atomic writes and the agent-row CSVs (now [`data::atomic`] and
-/// [`data::agents`]), kept so branches written against it merge; new code uses `data`.
-#[doc(hidden)]
-pub mod io {
-    pub use crate::data::agents::*;
-    pub use crate::data::atomic::*;
-}
-
-/// The pre-restructure path of the emergent measures (now [`measure::emergent`]), kept so
-/// branches written against it merge; new code uses `measure`.
-#[doc(hidden)]
-pub mod metrics {
-    pub use crate::measure::emergent::*;
-}

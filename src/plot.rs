@@ -7,6 +7,16 @@ use plotters::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
 
+/// The series colours of every chart (matplotlib's tab10, first six).
+pub const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
 const FONT_PATHS: [&str; 2] = [
     "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
     "/usr/share/fonts/dejavu/DejaVuSans.ttf",
@@ -310,7 +320,7 @@ pub fn paths_plot(
     size: (u32, u32),
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let pts = groups
         .iter()
@@ -388,7 +398,7 @@ pub fn paths_plot(
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }
 
 /// Filled, outlined polygons in pixel coordinates (drawn in the order given: painter's
@@ -401,7 +411,7 @@ pub fn polygons_png(
     caption: &str,
 ) -> Result<()> {
     font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::io::temp_sibling(path, ".png")?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
     let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     {
         let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
@@ -428,5 +438,5 @@ pub fn polygons_png(
         .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    crate::io::persist(tmp, path)
+    crate::data::atomic::persist(tmp, path)
 }

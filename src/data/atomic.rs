@@ -7,7 +7,7 @@ pub mod cleanup;
 mod policy;
 
 pub use cleanup::install_signal_cleanup;
-pub use policy::{check_target, guard_inputs, note_input};
+pub use policy::{check_target, guard_inputs, note_input, read_input_text};
 
 use crate::error::{Error, Result};
 use std::io::Write;

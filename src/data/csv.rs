@@ -116,3 +116,42 @@ impl<'a> Table<'a> {
             .map(|&(line, text)| Record::new(self.path, line, text))
     }
 }
+
+/// The numbers of one text row (`fields`, named `names`; line `ln`, 0-based): each finite, and the
+/// first two (`frame`, `id`) non-negative integers. Errors name the file, line and field.
+pub fn frame_id_row<const N: usize>(
+    path: &Path,
+    ln: usize,
+    fields: &[&str],
+    names: [&str; N],
+) -> Result<[f64; N]> {
+    let mut v = [0.0f64; N];
+    for (k, name) in names.iter().enumerate() {
+        v[k] = fields[k].parse().map_err(|_| {
+            Error::file(
+                path,
+                format!("line {}: {name} = '{}' is not a number", ln + 1, fields[k]),
+            )
+        })?;
+        if !v[k].is_finite() {
+            return Err(Error::file(
+                path,
+                format!("line {}: {name} is {}", ln + 1, v[k]),
+            ));
+        }
+    }
+    for k in 0..N.min(2) {
+        if v[k] < 0.0 || v[k].fract() != 0.0 || v[k] > 1e15 {
+            return Err(Error::file(
+                path,
+                format!(
+                    "line {}: {} = {} is not a non-negative integer",
+                    ln + 1,
+                    names[k],
+                    v[k]
+                ),
+            ));
+        }
+    }
+    Ok(v)
+}

@@ -46,36 +46,12 @@ pub fn read_jackdaw(path: &Path) -> Result<Tracks> {
                 format!("line {}: expected 9 fields, found {}", ln + 1, f.len()),
             ));
         }
-        let mut v = [0.0f64; 9];
-        for (k, name) in ["frame", "id", "t", "x", "y", "z", "vx", "vy", "vz"]
-            .iter()
-            .enumerate()
-        {
-            v[k] = f[k].parse().map_err(|_| {
-                Error::file(
-                    path,
-                    format!("line {}: {name} = '{}' is not a number", ln + 1, f[k]),
-                )
-            })?;
-            if !v[k].is_finite() {
-                return Err(Error::file(
-                    path,
-                    format!("line {}: {name} is {}", ln + 1, v[k]),
-                ));
-            }
-        }
-        for (k, name) in [(0, "frame"), (1, "id")] {
-            if v[k] < 0.0 || v[k].fract() != 0.0 || v[k] > 1e15 {
-                return Err(Error::file(
-                    path,
-                    format!(
-                        "line {}: {name} = {} is not a non-negative integer",
-                        ln + 1,
-                        v[k]
-                    ),
-                ));
-            }
-        }
+        let v = crate::data::csv::frame_id_row(
+            path,
+            ln,
+            &f,
+            ["frame", "id", "t", "x", "y", "z", "vx", "vy", "vz"],
+        )?;
         rows.push(TrackRow {
             frame: v[0] as u64,
             time: v[2],

@@ -134,6 +134,7 @@ fn header(bytes: &[u8], path: &Path) -> Result<(usize, String)> {
 /// Reads a trajectories `.npy` (either layout, see the module docs). `fps` overrides the file's
 /// `frames_per_second` and is required for plain arrays.
 pub fn read_npy_trajectories(path: &Path, fps: Option<f64>) -> Result<NpyTrajectories> {
+    crate::data::atomic::note_input(path);
     let bytes = std::fs::read(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let (end, head) = header(&bytes, path)?;
     let (traj, file_fps, body, border) = if head.contains("'|O'") {

@@ -463,33 +463,7 @@ pub fn read_eth_ucy(path: &Path, fps: f64) -> Result<Tracks> {
                 ),
             ));
         }
-        let mut v = [0.0f64; 4];
-        for (k, name) in ["frame", "id", "x", "y"].iter().enumerate() {
-            v[k] = f[k].parse().map_err(|_| {
-                Error::file(
-                    path,
-                    format!("line {}: {name} = '{}' is not a number", ln + 1, f[k]),
-                )
-            })?;
-            if !v[k].is_finite() {
-                return Err(Error::file(
-                    path,
-                    format!("line {}: {name} is {}", ln + 1, v[k]),
-                ));
-            }
-        }
-        for (k, name) in [(0, "frame"), (1, "id")] {
-            if v[k] < 0.0 || v[k].fract() != 0.0 || v[k] > 1e15 {
-                return Err(Error::file(
-                    path,
-                    format!(
-                        "line {}: {name} = {} is not a non-negative integer",
-                        ln + 1,
-                        v[k]
-                    ),
-                ));
-            }
-        }
+        let v = crate::data::csv::frame_id_row(path, ln, &f, ["frame", "id", "x", "y"])?;
         raw.push((v[0], v[1], v[2], v[3]));
     }
     if raw.is_empty() {

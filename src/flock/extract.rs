@@ -230,9 +230,7 @@ impl ShapeParams {
 
     /// Reads and checks a shape-parameter file.
     pub fn load(path: &Path) -> Result<Self> {
-        crate::data::atomic::note_input(path);
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+        let text = crate::data::atomic::read_input_text(path)?;
         let p: ShapeParams = serde_json::from_str(&text)
             .map_err(|e| Error::file(path, format!("not a flock shape file: {e}")))?;
         p.check().map_err(|e| e.in_file(path))?;

@@ -327,7 +327,7 @@ impl Params {
             ("max", s.max),
             ("reversion", s.reversion),
         ] {
-            if !v.is_finite() || v < 0.0 || v > crate::limits::MAX_SPEED {
+            if !(0.0..=crate::limits::MAX_SPEED).contains(&v) {
                 return Err(Error::invalid(format!(
                     "speed.{k} = {v} must be in [0, {}]",
                     crate::limits::MAX_SPEED

@@ -422,6 +422,37 @@ pub fn render_comparison(
     .commit()
 }
 
+/// OpenCV's writer reports no failed write (a full disk, a file-size limit): the finished
+/// temporary AVI is read back and must hold every frame, else the video is refused and its
+/// temporary sibling removed (issue #14).
+fn verify_avi(tmp: &Path, path: &Path, frames: usize) -> Result<()> {
+    let short = || Error::file(path, "cannot write: the video is incomplete (disk full?)");
+    let len =
+        std::fs::metadata(tmp).map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
+    // The RIFF header's size (written last, by a seek back) must be covered by the file: a write
+    // that failed at the end (the index) leaves the file shorter than its header says.
+    let mut head = [0u8; 8];
+    let read = std::fs::File::open(tmp).and_then(|mut f| {
+        use std::io::Read;
+        f.read_exact(&mut head)
+    });
+    let riff = u32::from_le_bytes([head[4], head[5], head[6], head[7]]) as u64;
+    if read.is_err() || &head[..4] != b"RIFF" || riff + 8 > len.len() {
+        return Err(short());
+    }
+    let cap =
+        videoio::VideoCapture::from_file(tmp.as_os_str().to_str().unwrap_or(""), videoio::CAP_ANY)
+            .map_err(cv(path))?;
+    if !cap.is_opened().map_err(cv(path))? {
+        return Err(short());
+    }
+    let n = cap.get(videoio::CAP_PROP_FRAME_COUNT).map_err(cv(path))?;
+    if n.round() as usize != frames {
+        return Err(short());
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -458,35 +489,4 @@ mod tests {
         };
         assert_eq!(frame_size(&g, 5.0), (88, 38));
     }
-}
-
-/// OpenCV's writer reports no failed write (a full disk, a file-size limit): the finished
-/// temporary AVI is read back and must hold every frame, else the video is refused and its
-/// temporary sibling removed (issue #14).
-fn verify_avi(tmp: &Path, path: &Path, frames: usize) -> Result<()> {
-    let short = || Error::file(path, "cannot write: the video is incomplete (disk full?)");
-    let len =
-        std::fs::metadata(tmp).map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
-    // The RIFF header's size (written last, by a seek back) must be covered by the file: a write
-    // that failed at the end (the index) leaves the file shorter than its header says.
-    let mut head = [0u8; 8];
-    let read = std::fs::File::open(tmp).and_then(|mut f| {
-        use std::io::Read;
-        f.read_exact(&mut head)
-    });
-    let riff = u32::from_le_bytes([head[4], head[5], head[6], head[7]]) as u64;
-    if read.is_err() || &head[..4] != b"RIFF" || riff + 8 > len.len() {
-        return Err(short());
-    }
-    let cap =
-        videoio::VideoCapture::from_file(tmp.as_os_str().to_str().unwrap_or(""), videoio::CAP_ANY)
-            .map_err(cv(path))?;
-    if !cap.is_opened().map_err(cv(path))? {
-        return Err(short());
-    }
-    let n = cap.get(videoio::CAP_PROP_FRAME_COUNT).map_err(cv(path))?;
-    if n.round() as usize != frames {
-        return Err(short());
-    }
-    Ok(())
 }

@@ -36,6 +36,13 @@ pub fn note_input(path: &Path) {
     }
 }
 
+/// Reads a text input, recording it with [`note_input`]; errors name the file.
+pub fn read_input_text(path: &Path) -> crate::error::Result<String> {
+    note_input(path);
+    std::fs::read_to_string(path)
+        .map_err(|e| crate::error::Error::file(path, format!("cannot read: {e}")))
+}
+
 /// The canonical form of an output path that may not exist yet: its folder resolved, its name
 /// kept.
 fn canonical_target(path: &Path) -> Option<PathBuf> {

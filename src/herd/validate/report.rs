@@ -161,14 +161,7 @@ pub fn run(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Report, St
     Ok((report, md))
 }
 
-const COLOURS: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
+use crate::plot::PALETTE as COLOURS;
 
 /// `metrics.png` (the video's and each set's polarization and angular momentum over the
 /// held-out frames), `errors.png` (each set's density and velocity errors) and one error map
