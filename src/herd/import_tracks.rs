@@ -312,6 +312,7 @@ pub fn import_tracks(job: &ImportTracksJob) -> Result<ImportSummary> {
     let (tracks, recorded_bl, border) = load(job)?;
     let (scale, ysign, bl_px) = to_body_lengths(tracks.meta.units, cfg, recorded_bl)?;
     let fps = cfg.fps.unwrap_or(tracks.meta.fps);
+    crate::limits::check_fps("fps", fps)?;
     let first = tracks.rows.iter().map(|r| r.frame).min().unwrap_or(0);
     let last = tracks.rows.iter().map(|r| r.frame).max().unwrap_or(0);
     let span = (last - first) as usize + 1;
@@ -357,14 +358,24 @@ pub fn import_tracks(job: &ImportTracksJob) -> Result<ImportSummary> {
     let cell = cfg
         .cell_size
         .unwrap_or(extent / cfg.grid as f64 * (1.0 + 1e-9));
-    let nx = (((hi[0] - lo[0]) / cell).floor() as usize + 1).max(1);
-    let ny = (((hi[1] - lo[1]) / cell).floor() as usize + 1).max(1);
-    if nx * ny > 1 << 24 {
+    // Counted in f64: a tiny cell would overflow an integer count.
+    let (fx, fy) = (
+        ((hi[0] - lo[0]) / cell).floor() + 1.0,
+        ((hi[1] - lo[1]) / cell).floor() + 1.0,
+    );
+    let max = crate::limits::MAX_GRID_CELLS;
+    if fx * fy > max as f64 {
+        let key = if cfg.cell_size.is_some() {
+            "cell_size"
+        } else {
+            "grid"
+        };
         return Err(Error::config(
-            "cell_size",
-            format!("{nx}×{ny} cells is too many"),
+            key,
+            format!("{:.3e} cells is above the limit of {max} cells", fx * fy),
         ));
     }
+    let (nx, ny) = (fx as usize, fy as usize);
     let grid = Grid {
         origin: lo,
         cell_size: cell,
