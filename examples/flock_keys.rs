@@ -5,7 +5,7 @@
 //!
 //! `cargo run --release --example flock_keys -- [KEYS]` (default 5).
 
-use herdfit::flock::extract::{self, ExtractConfig, ShapeKind};
+use herdfit::flock::extract::{self, ExtractConfig};
 use herdfit::flock::{steady, synth};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -15,23 +15,7 @@ fn main() {
     let keys: usize = std::env::args()
         .nth(1)
         .map_or(5, |a| a.parse().expect("KEYS"));
-    let v9 = synth::SynthConfig {
-        seed: 1,
-        ..synth::SynthConfig::default()
-    };
-    let u16 = synth::SynthConfig {
-        shape: ShapeKind::U,
-        birds: 16,
-        curvature: 0.12,
-        seed: 2,
-        ..synth::SynthConfig::default()
-    };
-    let v41 = synth::SynthConfig {
-        birds: 41,
-        seed: 3,
-        ..synth::SynthConfig::default()
-    };
-    let cases = [(&v9, 9usize), (&v9, 14), (&u16, 16), (&u16, 28), (&v41, 41)];
+    let cases = synth::key_shape_cases();
     let out: Vec<(usize, f64, f64)> = cases
         .par_iter()
         .map(|(ex, n)| {

@@ -214,23 +214,7 @@ fn check_keys(example: &synth::SynthConfig, n: usize, keys: usize, seed: u64) ->
 
 #[test]
 fn levenberg_marquardt_reproduces_every_key_shape() {
-    let v9 = synth::SynthConfig {
-        seed: 1,
-        ..synth::SynthConfig::default()
-    };
-    let u16 = synth::SynthConfig {
-        shape: ShapeKind::U,
-        birds: 16,
-        curvature: 0.12,
-        seed: 2,
-        ..synth::SynthConfig::default()
-    };
-    let v41 = synth::SynthConfig {
-        birds: 41,
-        seed: 3,
-        ..synth::SynthConfig::default()
-    };
-    let cases = [(&v9, 9), (&v9, 14), (&u16, 16), (&u16, 28), (&v41, 41)];
+    let cases = synth::key_shape_cases();
     let out: Vec<(usize, f64, f64)> = cases
         .par_iter()
         .map(|(ex, n)| {

@@ -244,6 +244,34 @@ pub fn synth(cfg: &SynthConfig) -> Result<Tracks> {
 
 /// The examples shipped in `examples/flocks/` (file stem, settings). `herdfit flock synth
 /// --examples DIR` writes exactly these.
+/// The examples and flock sizes of the key-shape checks (eq. 4 solved by Levenberg–Marquardt):
+/// a 9-bird V at N = 9 and 14, a 16-bird U at N = 16 and 28, a 41-bird V at N = 41.
+pub fn key_shape_cases() -> Vec<(SynthConfig, usize)> {
+    let v9 = SynthConfig {
+        seed: 1,
+        ..SynthConfig::default()
+    };
+    let u16 = SynthConfig {
+        shape: ShapeKind::U,
+        birds: 16,
+        curvature: 0.12,
+        seed: 2,
+        ..SynthConfig::default()
+    };
+    let v41 = SynthConfig {
+        birds: 41,
+        seed: 3,
+        ..SynthConfig::default()
+    };
+    vec![
+        (v9.clone(), 9),
+        (v9, 14),
+        (u16.clone(), 16),
+        (u16, 28),
+        (v41, 41),
+    ]
+}
+
 pub fn shipped_examples() -> Vec<(&'static str, SynthConfig)> {
     let base = SynthConfig::default();
     vec![
