@@ -758,17 +758,21 @@ fn start_long_run(dir: &std::path::Path) -> std::process::Child {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Wait until its temporary sibling exists.
-    for _ in 0..200 {
-        if !temp_leftovers(dir).is_empty() {
+    // Wait until its temporary sibling holds data: the writability probe that comes first is an
+    // empty temporary sibling too, removed at once, and on a slow machine the run can be caught
+    // between the two.
+    let writing = || {
+        temp_leftovers(dir)
+            .iter()
+            .any(|n| std::fs::metadata(dir.join(n)).is_ok_and(|m| m.len() > 0))
+    };
+    for _ in 0..2400 {
+        if writing() {
             break;
         }
         std::thread::sleep(std::time::Duration::from_millis(25));
     }
-    assert!(
-        !temp_leftovers(dir).is_empty(),
-        "the run writes a temporary sibling"
-    );
+    assert!(writing(), "the run writes a temporary sibling");
     c
 }
 
