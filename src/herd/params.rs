@@ -200,6 +200,11 @@ pub struct Params {
     /// Where the set came from (clip, frames, command, losses …); free-form.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub provenance: Option<serde_json::Value>,
+    /// What the fitting clip determines at these values (issue #15 item 2, written by `fit`):
+    /// standard errors, eigen-directions and the objective's noise
+    /// ([`crate::herd::fit::identify`]). Absent in older files, and not written when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<crate::herd::fit::identify::Uncertainty>,
 }
 
 impl Default for Params {
@@ -222,6 +227,7 @@ impl Default for Params {
             speed: SpeedModel::default(),
             physical: None,
             provenance: None,
+            uncertainty: None,
         }
     }
 }
@@ -248,7 +254,8 @@ impl Params {
         v
     }
 
-    /// A copy with the 12 normalised values replaced (in [`param_names`] order).
+    /// A copy with the 12 normalised values replaced (in [`param_names`] order), without an
+    /// `uncertainty` (it belonged to the old values).
     pub fn with_vec(&self, v: &[f64; N_PARAMS]) -> Params {
         let fp = |g: usize| ForceParams {
             weight: v[3 * g],
@@ -262,6 +269,8 @@ impl Params {
                 alignment: fp(2),
                 obstacle: fp(3),
             },
+            // An uncertainty describes the values it was estimated at.
+            uncertainty: None,
             ..self.clone()
         }
     }

@@ -5,7 +5,7 @@ use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PREC
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::job::{run, FitJob};
-use crate::herd::fit::{FitConfig, LossKind, Optimizer, Settle, GUIDANCE_SCALE};
+use crate::herd::fit::{FitConfig, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -89,6 +89,16 @@ pub struct FitArgs {
     /// Loss-curve PNG (default: next to --out, .loss.png).
     #[arg(long, value_name = "LOSS.png")]
     pub plot: Option<PathBuf>,
+    /// Skip the identifiability estimate at the fitted point (standard errors and determined
+    /// directions, written as the set's `uncertainty`).
+    #[arg(long)]
+    pub no_uncertainty: bool,
+    /// Seeds of the identifiability estimate (each probes the objective at 1 + 2×12 points).
+    #[arg(long, value_name = "K", default_value_t = UncertaintyConfig::default().seeds)]
+    pub uncertainty_seeds: usize,
+    /// Finite-difference step of the identifiability estimate.
+    #[arg(long, value_name = "H", default_value_t = UncertaintyConfig::default().step)]
+    pub uncertainty_step: f64,
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
@@ -123,9 +133,23 @@ pub fn exec(a: FitArgs) -> Result<()> {
         out: a.out,
         log: a.log,
         plot: a.plot,
+        uncertainty: UncertaintyConfig {
+            enabled: !a.no_uncertainty,
+            seeds: a.uncertainty_seeds,
+            step: a.uncertainty_step,
+            ..UncertaintyConfig::default()
+        },
     };
-    let summary = run(&job, &mut Bars::default())
-        .map_err(|e| with_flags(e, &[("split_gradients", "--joint-gradients")]))?;
+    let summary = run(&job, &mut Bars::default()).map_err(|e| {
+        with_flags(
+            e,
+            &[
+                ("split_gradients", "--joint-gradients"),
+                ("uncertainty.seeds", "--uncertainty-seeds"),
+                ("uncertainty.step", "--uncertainty-step"),
+            ],
+        )
+    })?;
     if let Some(w) = &summary.plot_warning {
         eprintln!("warning: no loss curve: {w}");
     }

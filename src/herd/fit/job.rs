@@ -4,6 +4,7 @@
 
 use super::checkpoint::{Checkpoint, CheckpointDir};
 use super::config::FitConfig;
+use super::identify::{identify, Uncertainty, UncertaintyConfig};
 use super::log::{write_log, LogRow};
 use super::run::{fit_clips, loss_of, FitResult};
 use crate::data::atomic::check_writable;
@@ -41,6 +42,8 @@ pub struct FitJob {
     pub log: Option<PathBuf>,
     /// The loss curve PNG; next to `out` (`.loss.png`) when absent.
     pub plot: Option<PathBuf>,
+    /// The identifiability estimate at the fitted point, written as the set's `uncertainty`.
+    pub uncertainty: UncertaintyConfig,
 }
 
 impl Default for FitJob {
@@ -56,6 +59,7 @@ impl Default for FitJob {
             out: PathBuf::from("params.json"),
             log: None,
             plot: None,
+            uncertainty: UncertaintyConfig::default(),
         }
     }
 }
@@ -98,6 +102,9 @@ impl FitJob {
         if self.clips.is_empty() {
             return Err(Error::config("clips", "give at least one clip"));
         }
+        if self.uncertainty.enabled {
+            self.uncertainty.check()?;
+        }
         Ok(())
     }
 }
@@ -121,6 +128,8 @@ pub struct FitSummary {
     pub plot: PathBuf,
     /// Why the loss curve could not be drawn, if it could not (the fit is written anyway).
     pub plot_warning: Option<String>,
+    /// The identifiability estimate and its wall time in seconds (None when switched off).
+    pub uncertainty: Option<(Uncertainty, f64)>,
 }
 
 /// Runs a fit job: loads the clips and the start, fits, evaluates the start and the fitted set,
@@ -195,6 +204,17 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     let names: Vec<String> = job.clips.iter().map(|p| p.display().to_string()).collect();
     let mut out = res.params.clone();
     out.provenance = Some(provenance(&names, &cfg, &res, loss, errors, job.eval_seeds));
+    // Issue #15 item 2: what the clip determines at the fitted point.
+    let uncertainty = match job.uncertainty.enabled {
+        true => {
+            let t0 = std::time::Instant::now();
+            let at = init.with_vec(&res.params.to_vec());
+            let u = identify(&clips, &at, &cfg, &job.uncertainty, progress)?;
+            Some((u, t0.elapsed().as_secs_f64()))
+        }
+        false => None,
+    };
+    out.uncertainty = uncertainty.as_ref().map(|(u, _)| u.clone());
     write_log(&log_path, &res.log)?;
     let plot_warning = loss_plot(&plot_path, &res.log, cfg.epochs)
         .err()
@@ -213,6 +233,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         log: log_path,
         plot: plot_path,
         plot_warning,
+        uncertainty,
     })
 }
 
@@ -358,6 +379,11 @@ impl std::fmt::Display for FitSummary {
             .zip(self.result.start.iter().zip(self.result.params.to_vec()))
         {
             writeln!(f, "{n:<20} {s0:>8.4} {s1:>8.4}")?;
+        }
+        if let Some((u, secs)) = &self.uncertainty {
+            let v = self.result.params.to_vec();
+            write!(f, "{}", super::identify::summary(u, &v))?;
+            writeln!(f, "  (estimated in {secs:.1} s)")?;
         }
         let ([lb, la], [b, a]) = (self.loss, self.errors);
         writeln!(

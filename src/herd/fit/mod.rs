@@ -12,6 +12,7 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod identify;
 pub mod job;
 pub mod log;
 pub mod loss;
@@ -27,6 +28,7 @@ pub use crate::herd::start::{init_herd, population_control, settle, start_herd, 
 pub use crate::optim::{OptState, Optimizer};
 pub use checkpoint::{Checkpoint, CheckpointDir};
 pub use config::{FitConfig, LossKind, ALIGNMENT};
+pub use identify::{identify, Uncertainty, UncertaintyConfig};
 pub use job::{FitJob, FitSummary};
 pub use log::{log_csv, write_log, LogRow};
 pub use loss::{ensemble_loss, fields_loss};

@@ -96,6 +96,33 @@ pub fn loss_of(clips: &[&ClipFields], params: &Params, cfg: &FitConfig) -> Resul
     ))
 }
 
+/// Each window's (back-propagated loss, gradient as the fit uses it) over one epoch of the fit's
+/// schedule at `params`, without updates: the probe of [`crate::herd::fit::identify`]. The same
+/// `cfg.seed` gives the same herds and noise (common random numbers).
+pub fn window_gradients(
+    clips: &[&ClipFields],
+    params: &Params,
+    cfg: &FitConfig,
+) -> Result<Vec<(f64, [f64; N_PARAMS])>> {
+    let one = FitConfig {
+        epochs: 1,
+        ..cfg.clone()
+    };
+    let mut run = FitRun::new(clips, params, &one, false)?;
+    run.probe = true;
+    let mut learnt = Learnt {
+        theta: params.to_vec(),
+        opt: OptState::new(N_PARAMS),
+        log: Vec::new(),
+        probes: Vec::new(),
+    };
+    let mut rng = epoch_rng(one.seed, 0);
+    for ci in 0..clips.len() {
+        run.epoch_on_clip(0, ci, &mut learnt, &mut rng, &mut |_, _, _, _| {})?;
+    }
+    Ok(learnt.probes)
+}
+
 /// What one fit shares across its stages: the clips, the settings, the devices, the parameter
 /// set whose speed model is exported, and each clip's guidance and stencil.
 struct FitRun<'a> {
@@ -109,6 +136,8 @@ struct FitRun<'a> {
     per_clip: Vec<(Vec<Guidance>, Stencil)>,
     /// false: evaluate the schedule without updates ([`loss_of`]).
     learn: bool,
+    /// Record every window's loss and gradient ([`window_gradients`]).
+    probe: bool,
 }
 
 /// What a fit learns and a checkpoint keeps: θ, the optimiser's state and the log.
@@ -116,6 +145,8 @@ struct Learnt {
     theta: [f64; N_PARAMS],
     opt: OptState,
     log: Vec<LogRow>,
+    /// Each window's (loss, gradient) when the run probes ([`window_gradients`]).
+    probes: Vec<(f64, [f64; N_PARAMS])>,
 }
 
 /// The K replica herds of one clip in one epoch, with the next free id of each.
@@ -189,6 +220,7 @@ fn resume(
                 theta: k.theta,
                 opt: k.opt,
                 log: k.log,
+                probes: Vec::new(),
             };
             Ok((learnt, k.epochs_done))
         }
@@ -197,6 +229,7 @@ fn resume(
                 theta: start,
                 opt: OptState::new(N_PARAMS),
                 log: Vec::new(),
+                probes: Vec::new(),
             },
             0,
         )),
@@ -281,6 +314,7 @@ impl<'a> FitRun<'a> {
             params,
             per_clip,
             learn,
+            probe: false,
         })
     }
 
@@ -312,7 +346,14 @@ impl<'a> FitRun<'a> {
             }
             let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &learnt.theta, rng)?;
             let (em, ev, ef) = (fwd.e_mean, fwd.e_var, fwd.e_fields);
+            let value = match self.probe {
+                true => read_vec(&loss.clone().detach())?[0],
+                false => 0.0,
+            };
             let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
+            if self.probe {
+                learnt.probes.push((value, g));
+            }
             if self.learn {
                 // Learning rate decays linearly to 10 % over the epochs.
                 let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);

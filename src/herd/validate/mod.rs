@@ -127,6 +127,9 @@ pub struct SetReport {
     /// Mean |ρ' − ρ| (agents) per coarse cell over frames and seeds (of the seeds' mean
     /// prediction with `ensemble_mean`), row 0 at the bottom.
     pub error_map: Vec<Vec<f64>>,
+    /// The set's identifiability estimate from its fit (issue #15 item 2), when it has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<crate::herd::fit::identify::Uncertainty>,
 }
 
 impl SetReport {
@@ -328,6 +331,7 @@ pub fn validate(
             rows,
             per_frame,
             error_map: map,
+            uncertainty: params.uncertainty.clone(),
         });
         runs_all.push(runs);
     }

@@ -6,6 +6,7 @@ use super::{validate, Report, SetReport, Stat, ValidateConfig, MEASURES};
 use crate::data::atomic::AtomicDir;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
+use crate::herd::fit::identify::Uncertainty;
 use crate::herd::params::Params;
 use crate::plot::Series;
 use crate::progress::Progress;
@@ -81,7 +82,51 @@ pub fn markdown(r: &Report) -> String {
         }
         s.push('\n');
     }
+    for set in &r.sets {
+        if let Some(u) = &set.uncertainty {
+            s.push_str(&identifiability_md(&set.name, u, &set.params));
+        }
+    }
     s.push_str("\nPlots: `metrics.png` (measures over time), `errors.png` (density and velocity errors over time), `error-map-*.png` (mean |ρ' − ρ| per coarse cell).\n");
+    s
+}
+
+/// The identifiability section of a set fitted with an uncertainty estimate: per parameter the
+/// value ± std (or its one-sided interval at a bound) and whether the clip determines it, then
+/// the eigen-directions.
+fn identifiability_md(name: &str, u: &Uncertainty, values: &[f64; 12]) -> String {
+    let mut s = format!(
+        "\n## What the fitting clip determines ({name})\n\nFrom the fit: {}. Determined: 2 std ≤ {}. Objective {:.4} ± {:.4} over {} windows × {} seeds.\n\n| parameter | value | ± std | determined |\n|---|---:|---:|---|\n",
+        u.method, u.accuracy, u.noise.objective, u.noise.objective_std, u.noise.windows, u.noise.seeds
+    );
+    for (i, (n, sd)) in u.std.0.iter().enumerate() {
+        let spread = match (sd, u.bounds.get(n)) {
+            (_, Some(b)) => format!(
+                "at the {} bound: {:.4}..{:.4} (one-sided)",
+                b.side, b.within[0], b.within[1]
+            ),
+            (Some(x), None) => format!("{x:.4}"),
+            (None, None) => "—".into(),
+        };
+        let det = if u.determined.contains(n) {
+            "yes"
+        } else {
+            "no"
+        };
+        s.push_str(&format!("| {n} | {:.4} | {spread} | {det} |\n", values[i]));
+    }
+    s.push_str("\n| direction | eigenvalue | std along it | determined | largest components |\n|---:|---:|---:|---|---|\n");
+    for (k, d) in u.directions.iter().enumerate() {
+        let sd = d.std.map_or("—".into(), |x| format!("{x:.4}"));
+        s.push_str(&format!(
+            "| {} | {:.4} ± {:.4} | {sd} | {} | {} |\n",
+            k + 1,
+            d.eigenvalue,
+            d.eigenvalue_std,
+            if d.determined { "yes" } else { "no" },
+            crate::herd::fit::identify::components(d, 4)
+        ));
+    }
     s
 }
 
