@@ -107,6 +107,10 @@ fn a_quadratic_with_known_curvature_and_noise_is_recovered() {
         let dot = (d.vector[0] * v[0] + d.vector[1] * v[1]).abs();
         assert!(dot > 1.0 - 1e-9, "direction {k}: {:?} vs {v}", d.vector);
         assert!(d.determined);
+        // The minimum along the direction: vᵀ(m − x) up to the noise (≤ 3 std).
+        let to = (0.5 - 0.52) * d.vector[0] + (0.4 - 0.37) * d.vector[1];
+        let got = d.to_minimum.unwrap();
+        assert!((got - to).abs() < 3.0 * d.std.unwrap(), "{got} vs {to}");
     }
     let ai = a.clone().try_inverse().unwrap();
     let cov = &ai * (&l * l.transpose()) * &ai / (2.0 * 2000.0);

@@ -75,6 +75,9 @@ pub struct Direction {
     pub vector: Vec<f64>,
     /// s_k, the estimate's standard deviation along the direction; None when not informative.
     pub std: Option<f64>,
+    /// The quadratic model's minimum along the direction, −v_kᵀḡ / λ_k from the point (None when
+    /// not informative): a point short of its minimum by more than 2 s_k has not converged.
+    pub to_minimum: Option<f64>,
     pub determined: bool,
 }
 
@@ -285,7 +288,11 @@ fn assemble(
         .fold(DMatrix::<f64>::zeros(n, n), |a, b| a + b)
         / per_seed.len() as f64;
     let free: Vec<usize> = (0..n).filter(|&j| bound[j].is_none()).collect();
-    let (directions, cov) = directions(&h, &sigma, per_seed, &free, n, s);
+    let (mut directions, cov) = directions(&h, &sigma, per_seed, &free, n, s);
+    for d in &mut directions {
+        let along: f64 = d.vector.iter().zip(&gradient).map(|(v, g)| v * g).sum();
+        d.to_minimum = d.std.map(|_| -along / d.eigenvalue);
+    }
     let mut std = vec![None; n];
     let mut determined = vec![false; n];
     for &i in &free {
@@ -381,6 +388,7 @@ fn directions(
             eigenvalue_std: lstd,
             vector: full,
             std: informative.then_some(sk),
+            to_minimum: None,
             determined: informative && 2.0 * sk <= s.accuracy,
         });
         vecs.push((v, informative, lambda));

@@ -129,6 +129,9 @@ pub struct DirectionReport {
     pub eigenvalue_std: f64,
     /// The estimate's standard deviation along the direction; null when it is not informative.
     pub std: Option<f64>,
+    /// Where the quadratic model's minimum lies along the direction from the fitted point
+    /// (−vᵀḡ/λ; null when not informative): more than 2 std means the fit stopped short.
+    pub to_minimum: Option<f64>,
     pub determined: bool,
     /// Unit vector by parameter name (0 for parameters at a bound).
     pub vector: Named<f64>,
@@ -247,6 +250,7 @@ pub fn report(est: &Estimate, ucfg: &UncertaintyConfig) -> Uncertainty {
                 eigenvalue: d.eigenvalue,
                 eigenvalue_std: d.eigenvalue_std,
                 std: d.std,
+                to_minimum: d.to_minimum,
                 determined: d.determined,
                 vector: named(&d.vector),
             })
@@ -308,10 +312,11 @@ pub fn summary(u: &Uncertainty, values: &[f64; N_PARAMS]) -> String {
     s.push_str(if det.is_empty() { "\n" } else { ":\n" });
     for d in det {
         s.push_str(&format!(
-            "    λ {:.4} ± {:.4}, std {:.4}: {}\n",
+            "    λ {:.4} ± {:.4}, std {:.4}, minimum at {:+.4} along it: {}\n",
             d.eigenvalue,
             d.eigenvalue_std,
             d.std.unwrap_or(f64::NAN),
+            d.to_minimum.unwrap_or(f64::NAN),
             components(d, 4)
         ));
     }

@@ -115,11 +115,12 @@ fn identifiability_md(name: &str, u: &Uncertainty, values: &[f64; 12]) -> String
         };
         s.push_str(&format!("| {n} | {:.4} | {spread} | {det} |\n", values[i]));
     }
-    s.push_str("\n| direction | eigenvalue | std along it | determined | largest components |\n|---:|---:|---:|---|---|\n");
+    s.push_str("\n| direction | eigenvalue | std along it | minimum along it | determined | largest components |\n|---:|---:|---:|---:|---|---|\n");
     for (k, d) in u.directions.iter().enumerate() {
         let sd = d.std.map_or("—".into(), |x| format!("{x:.4}"));
+        let to = d.to_minimum.map_or("—".into(), |x| format!("{x:+.4}"));
         s.push_str(&format!(
-            "| {} | {:.4} ± {:.4} | {sd} | {} | {} |\n",
+            "| {} | {:.4} ± {:.4} | {sd} | {to} | {} | {} |\n",
             k + 1,
             d.eigenvalue,
             d.eigenvalue_std,
