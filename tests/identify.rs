@@ -227,6 +227,15 @@ fn a_parameter_at_a_bound_gets_a_one_sided_interval() {
     assert!((0.1..0.13).contains(&b.within[1]), "{b:?}");
     assert_eq!(est.directions.len(), 1, "only the free parameter");
     assert!(est.std[1].unwrap() < 0.01 && est.determined[1]);
+    // One window: no batches to measure the noise with, so nothing is determined.
+    let one = Toy { n: 1, ..toy };
+    let est = one.run(&[0.3, 0.5], &settings(2, 25));
+    assert_eq!(est.batches, 1);
+    assert!(est.determined.iter().all(|d| !d), "{:?}", est.std);
+    assert!(est
+        .directions
+        .iter()
+        .all(|d| d.std.is_none() && !d.determined));
     let mut bad = settings(1, 25);
     assert_eq!(check(&bad).unwrap_err().0, "seeds");
     bad = settings(2, 25);

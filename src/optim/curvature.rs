@@ -20,7 +20,8 @@
 //!    parameters. Each eigenvalue's own noise comes from the seeds: sd_s(v_kᵀ H⁽ˢ⁾ v_k) / √S.
 //!    Along v_k the estimate's standard deviation is s_k = √(v_kᵀ Σ v_k) / λ_k (the minimiser of
 //!    the estimated objective moves by −H⁻¹ δg for a gradient error δg).
-//! 4. **Threshold.** A direction is *informative* when λ_k > 2 × its own noise and s_k < s_max =
+//! 4. **Threshold.** A direction is *informative* when the noise is known (≥ 2 batches), λ_k > 2 ×
+//!    its own noise and s_k < s_max =
 //!    1/√12 (the standard deviation of a value spread uniformly over the unit range: a direction
 //!    the data cannot narrow below that carries no information); it is *determined* when it is
 //!    informative and 2 s_k ≤ `accuracy` (its 2-std interval lies within ± accuracy; the default
@@ -288,7 +289,9 @@ fn assemble(
         .fold(DMatrix::<f64>::zeros(n, n), |a, b| a + b)
         / per_seed.len() as f64;
     let free: Vec<usize> = (0..n).filter(|&j| bound[j].is_none()).collect();
-    let (mut directions, cov) = directions(&h, &sigma, per_seed, &free, n, s);
+    // Fewer than 2 batches (a window or so) leave the noise unknown: nothing is informative.
+    let noise_known = loss_means.len() >= 2;
+    let (mut directions, cov) = directions(&h, &sigma, per_seed, &free, n, s, noise_known);
     for d in &mut directions {
         let along: f64 = d.vector.iter().zip(&gradient).map(|(v, g)| v * g).sum();
         d.to_minimum = d.std.map(|_| -along / d.eigenvalue);
@@ -308,7 +311,7 @@ fn assemble(
                 // The mean gradient points out of the box at a bound that holds: + at the lower.
                 let push = if upper { -gradient[j] } else { gradient[j] };
                 let room = hi[j] - lo[j];
-                let d = if c > 0.0 {
+                let d = if c > 0.0 && noise_known {
                     ((push + 2.0 * sj) / c).clamp(0.0, room)
                 } else {
                     room
@@ -350,6 +353,7 @@ fn directions(
     free: &[usize],
     n: usize,
     s: &Settings,
+    noise_known: bool,
 ) -> (Vec<Direction>, DMatrix<f64>) {
     let m = free.len();
     let mut cov = DMatrix::<f64>::zeros(n, n);
@@ -378,7 +382,7 @@ fn directions(
         let ls: Vec<f64> = seeds.iter().map(quad).collect();
         let lstd = sample_std(&ls) / (ls.len() as f64).sqrt();
         let sk = quad(&sig).max(0.0).sqrt() / lambda;
-        let informative = lambda > 0.0 && lambda > 2.0 * lstd && sk < S_MAX;
+        let informative = noise_known && lambda > 0.0 && lambda > 2.0 * lstd && sk < S_MAX;
         let mut full = vec![0.0; n];
         for (i, &f) in free.iter().enumerate() {
             full[f] = v[i];
