@@ -2,6 +2,8 @@
 //! and the averaged step. The state is serialisable, so a fit's checkpoint resumes exactly.
 //! Model-agnostic: the caller clamps the vector to its parameters' ranges.
 
+pub mod multistart;
+
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};

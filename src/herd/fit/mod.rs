@@ -12,6 +12,7 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod global;
 pub mod job;
 pub mod log;
 pub mod loss;
@@ -26,7 +27,8 @@ pub use crate::herd::guidance::{
 pub use crate::herd::start::{init_herd, population_control, settle, start_herd, Settle};
 pub use crate::optim::{OptState, Optimizer};
 pub use checkpoint::{Checkpoint, CheckpointDir};
-pub use config::{FitConfig, LossKind, ALIGNMENT};
+pub use config::{FitConfig, GlobalPhase, LossKind, ALIGNMENT};
+pub use global::{fit_global, GlobalReport};
 pub use job::{FitJob, FitSummary};
 pub use log::{log_csv, write_log, LogRow};
 pub use loss::{ensemble_loss, fields_loss};

@@ -312,8 +312,8 @@ impl<'a> FitRun<'a> {
             }
             let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &learnt.theta, rng)?;
             let (em, ev, ef) = (fwd.e_mean, fwd.e_var, fwd.e_fields);
-            let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
             if self.learn {
+                let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
                 // Learning rate decays linearly to 10 % over the epochs.
                 let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
                 update(&mut learnt.theta, &g, &mut learnt.opt, cfg, lr, rng);
