@@ -320,6 +320,19 @@ fn a_field_matching_fit_reduces_its_loss() {
 
 #[test]
 fn killed_and_resumed_fit_ends_with_the_same_bytes() {
+    resume_case(&["--starts", "1"], "checkpoint.json");
+}
+
+/// With the global phase: killed while the second candidate refines (its first checkpoint
+/// written, the first candidate's complete), then resumed.
+#[test]
+fn killed_and_resumed_global_fit_ends_with_the_same_bytes() {
+    resume_case(&["--starts", "3"], "start-1/checkpoint.json");
+}
+
+/// A fit with `extra` flags, run whole and run killed once `marker` (inside the checkpoint
+/// folder) exists and resumed: the outputs are the same bytes.
+fn resume_case(extra: &[&str], marker: &str) {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let clip = make_clip(d, "clip", "200", "40");
@@ -337,6 +350,7 @@ fn killed_and_resumed_fit_ends_with_the_same_bytes() {
             s(ck),
         ]
         .iter()
+        .chain(extra)
         .map(|x| x.to_string())
         .collect()
     };
@@ -353,7 +367,7 @@ fn killed_and_resumed_fit_ends_with_the_same_bytes() {
         .spawn()
         .unwrap();
     let t0 = std::time::Instant::now();
-    while !ckb.join("checkpoint.json").exists() && t0.elapsed().as_secs() < 60 {
+    while !ckb.join(marker).exists() && t0.elapsed().as_secs() < 120 {
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
     child.kill().unwrap();
@@ -375,6 +389,15 @@ fn killed_and_resumed_fit_ends_with_the_same_bytes() {
         }
     }
     // A resume with other settings is refused.
+    // The checkpoints that were resumed, each candidate's (and the plain fit's) epochs complete.
+    let written: Vec<_> = std::fs::read_dir(&ckb)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        written.iter().any(|n| marker.starts_with(n.as_str())),
+        "{written:?}"
+    );
     let mut v3 = args(&d.join("c.json"), &ckb);
     v3[5] = "8".into(); // --epochs 8
     v3.push("--resume".into());

@@ -199,6 +199,36 @@ fn demo_runs_the_whole_chain() {
     let out = dir.path().join("demo");
     let text = ok(&["demo", "--out", s(&out)]);
     assert!(text.contains("mean |θ − θ*| per parameter"));
+    // The start is clearly wrong (no cohesion, no alignment, the strongest avoidance) and the
+    // fitted set beats it on the held-out half: density and velocity errors and the measures.
+    let start = herdfit::herd::params::Params::load(&out.join("start.json")).unwrap();
+    let v = start.to_vec();
+    assert_eq!((v[0], v[3], v[6]), (0.0, 1.0, 0.0));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report/report.json")).unwrap())
+            .unwrap();
+    let err = |set: usize, m: usize| r["sets"][set]["rows"][m]["error"]["mean"].as_f64().unwrap();
+    let sums = |set: usize| (2..6).map(|m| err(set, m)).sum::<f64>();
+    assert_eq!(r["sets"][1]["name"], "baseline");
+    for (k, (fit, start)) in [
+        (err(0, 0), err(1, 0)),
+        (err(0, 1), err(1, 1)),
+        (sums(0), sums(1)),
+    ]
+    .iter()
+    .enumerate()
+    {
+        assert!(
+            fit < start,
+            "held-out measure {k}: fitted {fit} vs start {start}"
+        );
+        // The printed line carries these numbers.
+        assert!(text.contains(&format!("{start:.3} → {fit:.3}")), "{text}");
+    }
+    assert!(
+        text.contains("held-out frames 60..120, start → fitted"),
+        "{text}"
+    );
     for f in [
         "truth.json",
         "start.json",
@@ -217,6 +247,8 @@ fn demo_runs_the_whole_chain() {
     #[cfg(feature = "video")]
     {
         assert!(out.join("herd.avi").is_file());
+        assert!(out.join("report/side-by-side.avi").is_file());
+        assert!(text.contains("side-by-side video (clip | fitted simulation): "));
         assert!(out.join("clip/clip.json").is_file());
     }
     herdfit::herd::params::Params::load(&out.join("params.json")).unwrap();

@@ -3,6 +3,7 @@
 //! Model-agnostic: the caller clamps the vector to its parameters' ranges.
 
 pub mod curvature;
+pub mod multistart;
 
 use rand::Rng;
 use rand_distr::StandardNormal;

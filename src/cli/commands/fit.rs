@@ -5,7 +5,9 @@ use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PREC
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::job::{run, FitJob};
-use crate::herd::fit::{FitConfig, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE};
+use crate::herd::fit::{
+    FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
+};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -77,6 +79,15 @@ pub struct FitArgs {
     pub guidance_scale: f64,
     #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
+    /// Global phase: K candidate starts (the given one, then a Latin hypercube over the
+    /// parameter box), each refined by the gradient fit, the best on held-out frames kept
+    /// (1: the plain fit on every frame).
+    #[arg(long, value_name = "K", default_value_t = GlobalPhase::default().starts)]
+    pub starts: usize,
+    /// With --starts > 1: fraction of the frames (the last) held out of the refinements to rank
+    /// the candidates.
+    #[arg(long, value_name = "F", default_value_t = GlobalPhase::default().holdout)]
+    pub holdout: f64,
     /// Write a checkpoint into DIR after every epoch.
     #[arg(long, value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
@@ -126,6 +137,10 @@ pub fn exec(a: FitArgs) -> Result<()> {
             replicas: a.replicas,
             guidance_scale: a.guidance_scale,
             force_kernel: crate::herd::sim::ForceKernel::reference_if(a.reference_forces),
+            global: GlobalPhase {
+                starts: a.starts,
+                holdout: a.holdout,
+            },
         },
         eval_seeds: a.eval_seeds,
         checkpoint: a.checkpoint,
@@ -147,6 +162,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
                 ("split_gradients", "--joint-gradients"),
                 ("uncertainty.seeds", "--uncertainty-seeds"),
                 ("uncertainty.step", "--uncertainty-step"),
+                ("global.starts", "--starts"),
+                ("global.holdout", "--holdout"),
             ],
         )
     })?;

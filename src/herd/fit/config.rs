@@ -59,6 +59,55 @@ pub struct FitConfig {
         skip_serializing_if = "crate::herd::sim::ForceKernel::is_fused"
     )]
     pub force_kernel: crate::herd::sim::ForceKernel,
+    /// The global phase before the gradient refinement ([`crate::herd::fit::global`]; not
+    /// written when off, so checkpoints of single-start fits keep their bytes).
+    #[serde(default, skip_serializing_if = "GlobalPhase::is_off")]
+    pub global: GlobalPhase,
+}
+
+/// Settings of the multi-start global phase (issue #15 item 3, [`crate::herd::fit::global`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GlobalPhase {
+    /// Candidates: the given start, then `starts − 1` points of a Latin hypercube over the
+    /// parameter box; each refined by the gradient fit. 1: no global phase (the plain fit).
+    pub starts: usize,
+    /// Fraction of the frames (the last ones) held out of every refinement; the candidates are
+    /// ranked by the objective on them.
+    pub holdout: f64,
+}
+
+impl Default for GlobalPhase {
+    fn default() -> Self {
+        GlobalPhase {
+            starts: 1,
+            holdout: 0.25,
+        }
+    }
+}
+
+impl GlobalPhase {
+    /// No global phase: one start, the plain fit on every frame.
+    pub fn is_off(&self) -> bool {
+        self.starts <= 1
+    }
+
+    /// Checks the ranges; errors name `global.starts` / `global.holdout`.
+    pub fn check(&self) -> Result<()> {
+        if self.starts == 0 || self.starts > 64 {
+            return Err(Error::config(
+                "global.starts",
+                format!("{} is out of range 1..=64", self.starts),
+            ));
+        }
+        if !(self.holdout.is_finite() && self.holdout > 0.0 && self.holdout < 1.0) {
+            return Err(Error::config(
+                "global.holdout",
+                format!("{} is out of range (0, 1)", self.holdout),
+            ));
+        }
+        Ok(())
+    }
 }
 
 fn default_guidance_scale() -> f64 {
@@ -113,6 +162,7 @@ impl Default for FitConfig {
             replicas: 1,
             guidance_scale: GUIDANCE_SCALE,
             force_kernel: crate::herd::sim::ForceKernel::Fused,
+            global: GlobalPhase::default(),
         }
     }
 }
@@ -144,6 +194,7 @@ impl FitConfig {
         }
         check_counts(&[("window", self.window), ("epochs", self.epochs)])?;
         check_guidance_scale(self.guidance_scale)?;
+        self.global.check()?;
         for (key, v, lo, hi) in [
             ("beta", self.beta, 0.0, 1.0),
             ("var_weight", self.var_weight, 0.0, f64::INFINITY),

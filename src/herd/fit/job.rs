@@ -4,9 +4,10 @@
 
 use super::checkpoint::{Checkpoint, CheckpointDir};
 use super::config::FitConfig;
+use super::global::{fit_global, split_frames, GlobalReport};
 use super::identify::{identify, Uncertainty, UncertaintyConfig};
 use super::log::{write_log, LogRow};
-use super::run::{fit_clips, loss_of, FitResult};
+use super::run::{loss_of, FitResult};
 use crate::data::atomic::check_writable;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
@@ -119,6 +120,8 @@ pub struct FitSummary {
     pub window: usize,
     pub windows_per_epoch: usize,
     pub result: FitResult,
+    /// The global phase's candidates and choice, when it ran.
+    pub global: Option<GlobalReport>,
     /// (E_mean, E_var, E_fields) of the start and of the fitted set ([`loss_of`]).
     pub loss: [(f64, f64, f64); 2],
     /// (density error, velocity error) of the start and of the fitted set.
@@ -172,8 +175,14 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         }
         None => None,
     };
-    let windows_per_epoch = (frames.end - frames.start - 1).div_ceil(cfg.window) * clips.len();
-    progress.start("fit", (windows_per_epoch * cfg.epochs) as u64);
+    // With the global phase every candidate is refined on the frames before the held-out ones.
+    let (refine, starts) = if cfg.global.is_off() {
+        (frames.clone(), 1)
+    } else {
+        (split_frames(&frames, &cfg.global)?.0, cfg.global.starts)
+    };
+    let windows_per_epoch = (refine.end - refine.start - 1).div_ceil(cfg.window) * clips.len();
+    progress.start("fit", (windows_per_epoch * cfg.epochs * starts) as u64);
     if let Some(c) = ckpt.as_ref().filter(|c| c.resume) {
         if let Ok(text) = std::fs::read_to_string(c.file()) {
             if let Ok(k) = serde_json::from_str::<Checkpoint>(&text) {
@@ -181,7 +190,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
             }
         }
     }
-    let res = fit_clips(&clips, &init, &cfg, ckpt.as_ref(), |epoch, frame, e, ms| {
+    let (res, global) = fit_global(&clips, &init, &cfg, ckpt.as_ref(), |epoch, frame, e, ms| {
         progress.message(&format!(
             "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
         ));
@@ -203,7 +212,12 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     )?;
     let names: Vec<String> = job.clips.iter().map(|p| p.display().to_string()).collect();
     let mut out = res.params.clone();
-    out.provenance = Some(provenance(&names, &cfg, &res, loss, errors, job.eval_seeds));
+    let mut prov = provenance(&names, &cfg, &res, loss, errors, job.eval_seeds);
+    if let Some(g) = &global {
+        prov["global"] = serde_json::to_value(g)
+            .map_err(|e| Error::Internal(format!("serialising the global phase: {e}")))?;
+    }
+    out.provenance = Some(prov);
     // Issue #15 item 2: what the clip determines at the fitted point.
     let uncertainty = match job.uncertainty.enabled {
         true => {
@@ -227,6 +241,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         window: cfg.window,
         windows_per_epoch,
         result: res,
+        global,
         loss,
         errors: [errors[0], errors[1]],
         out: job.out.clone(),
@@ -373,6 +388,9 @@ impl std::fmt::Display for FitSummary {
             self.frames.end,
             self.clips.join(", ")
         )?;
+        if let Some(g) = &self.global {
+            write!(f, "{g}")?;
+        }
         writeln!(f, "{:<20} {:>8} {:>8}", "parameter", "start", "fitted")?;
         for (n, (s0, s1)) in param_names()
             .iter()

@@ -12,6 +12,7 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod global;
 pub mod identify;
 pub mod job;
 pub mod log;
@@ -27,7 +28,8 @@ pub use crate::herd::guidance::{
 pub use crate::herd::start::{init_herd, population_control, settle, start_herd, Settle};
 pub use crate::optim::{OptState, Optimizer};
 pub use checkpoint::{Checkpoint, CheckpointDir};
-pub use config::{FitConfig, LossKind, ALIGNMENT};
+pub use config::{FitConfig, GlobalPhase, LossKind, ALIGNMENT};
+pub use global::{fit_global, GlobalReport};
 pub use identify::{identify, Uncertainty, UncertaintyConfig};
 pub use job::{FitJob, FitSummary};
 pub use log::{log_csv, write_log, LogRow};

@@ -346,15 +346,22 @@ impl<'a> FitRun<'a> {
             }
             let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &learnt.theta, rng)?;
             let (em, ev, ef) = (fwd.e_mean, fwd.e_var, fwd.e_fields);
-            let value = match self.probe {
-                true => read_vec(&loss.clone().detach())?[0],
-                false => 0.0,
+            // The gradient is needed to learn and, for the identifiability probe, to record.
+            let g = match self.learn || self.probe {
+                true => {
+                    let value = match self.probe {
+                        true => read_vec(&loss.clone().detach())?[0],
+                        false => 0.0,
+                    };
+                    let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
+                    if self.probe {
+                        learnt.probes.push((value, g));
+                    }
+                    Some(g)
+                }
+                false => None,
             };
-            let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
-            if self.probe {
-                learnt.probes.push((value, g));
-            }
-            if self.learn {
+            if let (true, Some(g)) = (self.learn, g) {
                 // Learning rate decays linearly to 10 % over the epochs.
                 let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
                 update(&mut learnt.theta, &g, &mut learnt.opt, cfg, lr, rng);
