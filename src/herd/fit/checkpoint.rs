@@ -2,6 +2,8 @@
 
 use super::config::FitConfig;
 use super::log::LogRow;
+use crate::data::atomic::write_atomic;
+use crate::error::{Error, Result};
 use crate::herd::params::N_PARAMS;
 use crate::optim::OptState;
 use serde::{Deserialize, Serialize};
@@ -34,4 +36,75 @@ impl CheckpointDir {
     pub fn file(&self) -> PathBuf {
         self.dir.join("checkpoint.json")
     }
+}
+
+/// What a fit learns and a checkpoint keeps: θ, the optimiser's state and the log.
+pub(super) struct Learnt {
+    pub(super) theta: [f64; N_PARAMS],
+    pub(super) opt: OptState,
+    pub(super) log: Vec<LogRow>,
+    /// Each window's (loss, gradient) when the run probes ([`super::run::window_gradients`]).
+    pub(super) probes: Vec<(f64, [f64; N_PARAMS])>,
+}
+
+/// The state to start from: θ = the start, or the checkpoint's state when resuming (refused
+/// when the checkpoint was written with other settings or another start).
+pub(super) fn resume(
+    ckpt: Option<&CheckpointDir>,
+    cfg: &FitConfig,
+    start: [f64; N_PARAMS],
+) -> Result<(Learnt, usize)> {
+    match ckpt {
+        Some(c) if c.resume && c.file().exists() => {
+            let text = std::fs::read_to_string(c.file())
+                .map_err(|e| Error::file(c.file(), format!("cannot read: {e}")))?;
+            let k: Checkpoint = serde_json::from_str(&text).map_err(|e| {
+                Error::file(c.file(), format!("not a {CHECKPOINT_SCHEMA} file: {e}"))
+            })?;
+            if k.config != *cfg || k.start != start {
+                return Err(Error::file(
+                    c.file(),
+                    "was written by a fit with other settings or another start; resume with the same flags",
+                ));
+            }
+            let learnt = Learnt {
+                theta: k.theta,
+                opt: k.opt,
+                log: k.log,
+                probes: Vec::new(),
+            };
+            Ok((learnt, k.epochs_done))
+        }
+        _ => Ok((
+            Learnt {
+                theta: start,
+                opt: OptState::new(N_PARAMS),
+                log: Vec::new(),
+                probes: Vec::new(),
+            },
+            0,
+        )),
+    }
+}
+
+/// Writes the checkpoint after `epochs_done` epochs.
+pub(super) fn save_checkpoint(
+    c: &CheckpointDir,
+    epochs_done: usize,
+    learnt: &Learnt,
+    cfg: &FitConfig,
+    start: [f64; N_PARAMS],
+) -> Result<()> {
+    let k = Checkpoint {
+        schema: CHECKPOINT_SCHEMA.into(),
+        epochs_done,
+        theta: learnt.theta,
+        opt: learnt.opt.clone(),
+        log: learnt.log.clone(),
+        config: cfg.clone(),
+        start,
+    };
+    let text = serde_json::to_string(&k)
+        .map_err(|e| Error::Internal(format!("serialising checkpoint: {e}")))?;
+    write_atomic(&c.file(), text.as_bytes())
 }

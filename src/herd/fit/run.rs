@@ -1,7 +1,7 @@
 //! The fit loop (paper §6.1): epochs × clips × windows of planned, then evaluated, steps; the
 //! gradient of each window's loss, the optimiser step, population control between windows.
 
-use super::checkpoint::{Checkpoint, CheckpointDir, CHECKPOINT_SCHEMA};
+use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt};
 use super::config::{FitConfig, LossKind};
 use super::log::LogRow;
 use super::loss::StepTarget;
@@ -10,7 +10,6 @@ use super::plan::{plan_step, window_loss};
 use super::target::Stencil;
 use crate::backend::cpu_device;
 use crate::data::agents::AgentRow;
-use crate::data::atomic::write_atomic;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::eval::clip_model;
@@ -140,15 +139,6 @@ struct FitRun<'a> {
     probe: bool,
 }
 
-/// What a fit learns and a checkpoint keeps: θ, the optimiser's state and the log.
-struct Learnt {
-    theta: [f64; N_PARAMS],
-    opt: OptState,
-    log: Vec<LogRow>,
-    /// Each window's (loss, gradient) when the run probes ([`window_gradients`]).
-    probes: Vec<(f64, [f64; N_PARAMS])>,
-}
-
 /// The K replica herds of one clip in one epoch, with the next free id of each.
 struct Herds {
     rows: Vec<Vec<AgentRow>>,
@@ -194,68 +184,6 @@ fn fit_inner(
         start,
         log: learnt.log,
     })
-}
-
-/// The state to start from: θ = the start, or the checkpoint's state when resuming (refused
-/// when the checkpoint was written with other settings or another start).
-fn resume(
-    ckpt: Option<&CheckpointDir>,
-    cfg: &FitConfig,
-    start: [f64; N_PARAMS],
-) -> Result<(Learnt, usize)> {
-    match ckpt {
-        Some(c) if c.resume && c.file().exists() => {
-            let text = std::fs::read_to_string(c.file())
-                .map_err(|e| Error::file(c.file(), format!("cannot read: {e}")))?;
-            let k: Checkpoint = serde_json::from_str(&text).map_err(|e| {
-                Error::file(c.file(), format!("not a {CHECKPOINT_SCHEMA} file: {e}"))
-            })?;
-            if k.config != *cfg || k.start != start {
-                return Err(Error::file(
-                    c.file(),
-                    "was written by a fit with other settings or another start; resume with the same flags",
-                ));
-            }
-            let learnt = Learnt {
-                theta: k.theta,
-                opt: k.opt,
-                log: k.log,
-                probes: Vec::new(),
-            };
-            Ok((learnt, k.epochs_done))
-        }
-        _ => Ok((
-            Learnt {
-                theta: start,
-                opt: OptState::new(N_PARAMS),
-                log: Vec::new(),
-                probes: Vec::new(),
-            },
-            0,
-        )),
-    }
-}
-
-/// Writes the checkpoint after `epochs_done` epochs.
-fn save_checkpoint(
-    c: &CheckpointDir,
-    epochs_done: usize,
-    learnt: &Learnt,
-    cfg: &FitConfig,
-    start: [f64; N_PARAMS],
-) -> Result<()> {
-    let k = Checkpoint {
-        schema: CHECKPOINT_SCHEMA.into(),
-        epochs_done,
-        theta: learnt.theta,
-        opt: learnt.opt.clone(),
-        log: learnt.log.clone(),
-        config: cfg.clone(),
-        start,
-    };
-    let text = serde_json::to_string(&k)
-        .map_err(|e| Error::Internal(format!("serialising checkpoint: {e}")))?;
-    write_atomic(&c.file(), text.as_bytes())
 }
 
 /// The gradient of `loss` with respect to `theta` (zeros where none reaches it).
