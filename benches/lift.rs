@@ -8,7 +8,7 @@
 //! reference): whole runs at 200 × 5 and 300 × 20 (at 1000 × 200 one autodiff run takes over
 //! 300 s, BENCHMARKS.md), one energy + gradient evaluation at every size.
 //!
-//! `cargo bench --bench lift` (all, ≈ 10 min on 2 quiet cores); one group:
+//! `cargo bench --bench lift` (all, ≈ 15 min on 2 quiet cores); one group:
 //! `cargo bench --bench lift -- lift/whole_sequence`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};

@@ -184,13 +184,16 @@ impl Blocks {
                 consumed = hi;
                 tasks.push((b, lo, mine));
             }
-            let sums: Vec<(usize, [f64; 2])> = tasks
-                .into_par_iter()
-                .map(|(b, lo, mine)| {
-                    let r = self.ranges[b].clone();
-                    (b, f(mine, lo, r.start, &entries[r]))
-                })
-                .collect();
+            let one = |(b, lo, mine): (usize, usize, &mut [T])| {
+                let r = self.ranges[b].clone();
+                (b, f(mine, lo, r.start, &entries[r]))
+            };
+            // One task runs here: handing it to the pool would only add a wake-up.
+            let sums: Vec<(usize, [f64; 2])> = if tasks.len() == 1 {
+                tasks.into_iter().map(one).collect()
+            } else {
+                tasks.into_par_iter().map(one).collect()
+            };
             for (b, s) in sums {
                 part[b] = s;
             }
@@ -249,8 +252,8 @@ impl SeqPlan {
 /// Buffers reused across evaluations (one allocation per problem, not per evaluation).
 #[derive(Clone, Debug, Default)]
 pub struct SeqWorkspace {
-    d: Vec<f64>,
-    q: Vec<[f64; 3]>,
+    /// q_i and, last, d_i.
+    dq: Vec<[f64; 4]>,
     vel: Vec<Vel>,
     /// ∂E/∂q and, last, the direct ∂E/∂u of cohesion.
     gq: Vec<[f64; 4]>,
@@ -260,6 +263,12 @@ const EPS: f64 = 1e-12;
 
 #[inline]
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// q_j − q_i of two `[q, d]` entries.
+#[inline]
+fn sub4(a: [f64; 4], b: [f64; 4]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
@@ -293,6 +302,9 @@ fn chunk_sums<T: Send>(
     block: usize,
     f: impl Fn(usize, &mut [T]) -> [f64; 2] + Sync,
 ) -> [f64; 2] {
+    if data.len() <= block {
+        return f(0, data);
+    }
     let sums: Vec<[f64; 2]> = data
         .par_chunks_mut(block)
         .enumerate()
@@ -318,21 +330,18 @@ pub fn sequence_energy(
         plan.n == n && plan.nv == nv,
         "the plan of another structure"
     );
-    ws.d.resize(n, 0.0);
-    ws.q.resize(n, [0.0; 3]);
+    ws.dq.resize(n, [0.0; 4]);
     ws.vel.resize(nv, Vel::default());
-    let SeqWorkspace { d, q, vel, gq } = ws;
+    let SeqWorkspace { dq, vel, gq } = ws;
     let block = plan.block;
-    d.par_chunks_mut(block)
-        .zip(q.par_chunks_mut(block))
-        .enumerate()
-        .for_each(|(c, (dc, qc))| {
-            for (k, (di, qi)) in dc.iter_mut().zip(qc.iter_mut()).enumerate() {
-                *di = u[c * block + k].exp();
-                *qi = scaled(*di, st.ray[c * block + k]);
-            }
-        });
-    let (d, q) = (&d[..], &q[..]);
+    chunk_sums(dq, block, |at, chunk| {
+        for (k, x) in chunk.iter_mut().enumerate() {
+            let (d, r) = (u[at + k].exp(), st.ray[at + k]);
+            *x = [d * r[0], d * r[1], d * r[2], d];
+        }
+        [0.0; 2]
+    });
+    let q = &dq[..];
     let mut t = SeqTerms::default();
     let vt = w.v_target;
     // Velocities, speeds, headings and the per-velocity terms (speed, level).
@@ -341,7 +350,7 @@ pub fn sequence_energy(
         let mut sum = [0.0; 2];
         for (k, x) in chunk.iter_mut().enumerate() {
             let (p, c) = st.vel[at + k];
-            let v = sub(q[c], q[p]);
+            let v = sub4(q[c], q[p]);
             let s = (norm2(v) + EPS * vt * vt).sqrt();
             let inv_s = 1.0 / s;
             let r = s / vt - 1.0;
@@ -425,7 +434,7 @@ pub fn sequence_energy(
             sum[0] += du * du;
             g[j - off][3] += 2.0 * c_coh * du;
             g[i - off][3] -= 2.0 * c_coh * du;
-            let dq = sub(q[j], q[i]);
+            let dq = sub4(q[j], q[i]);
             // hinge > 0 ⇔ ‖dq‖² + ε d_sep² < d_sep²: the square root only inside d_sep.
             let d2 = norm2(dq) + EPS * near;
             if d2 < near {
@@ -443,12 +452,12 @@ pub fn sequence_energy(
     t.cohesion = c_coh * coh;
     t.separation = c_sep * sep;
     let gq = &gq[..];
-    gu.par_chunks_mut(block).enumerate().for_each(|(c, chunk)| {
+    chunk_sums(gu, block, |at, chunk| {
         for (k, g) in chunk.iter_mut().enumerate() {
-            let i = c * block + k;
-            let (gi, r) = (gq[i], st.ray[i]);
-            *g = gi[3] + d[i] * (gi[0] * r[0] + gi[1] * r[1] + gi[2] * r[2]);
+            let (gi, r, d) = (gq[at + k], st.ray[at + k], q[at + k][3]);
+            *g = gi[3] + d * (gi[0] * r[0] + gi[1] * r[1] + gi[2] * r[2]);
         }
+        [0.0; 2]
     });
     t
 }
@@ -459,26 +468,27 @@ fn pair_values(
     plan: &SeqPlan,
     w: &SeqWeights,
     u: &[f64],
-    q: &[[f64; 3]],
+    q: &[[f64; 4]],
 ) -> [f64; 2] {
     let ds = w.d_sep;
     let near = ds * ds;
-    let sums: Vec<[f64; 2]> = plan
-        .pairs
-        .ranges
-        .par_iter()
-        .map(|r| {
-            let mut sum = [0.0; 2];
-            for &(i, j) in &st.pairs[r.clone()] {
-                sum[0] += (u[j] - u[i]).powi(2);
-                let d2 = norm2(sub(q[j], q[i])) + EPS * near;
-                if d2 < near {
-                    sum[1] += (1.0 - d2.sqrt() / ds).powi(2);
-                }
+    let sum_of = |r: &std::ops::Range<usize>| {
+        let mut sum = [0.0; 2];
+        for &(i, j) in &st.pairs[r.clone()] {
+            sum[0] += (u[j] - u[i]).powi(2);
+            let d2 = norm2(sub4(q[j], q[i])) + EPS * near;
+            if d2 < near {
+                sum[1] += (1.0 - d2.sqrt() / ds).powi(2);
             }
-            sum
-        })
-        .collect();
+        }
+        sum
+    };
+    let ranges = &plan.pairs.ranges;
+    let sums: Vec<[f64; 2]> = if ranges.len() == 1 {
+        ranges.iter().map(sum_of).collect()
+    } else {
+        ranges.par_iter().map(sum_of).collect()
+    };
     sums.iter()
         .fold([0.0; 2], |a, s| [a[0] + s[0], a[1] + s[1]])
 }

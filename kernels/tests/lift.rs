@@ -5,13 +5,15 @@ use herdfit_kernels::lift::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// Three birds over five frames, the third leaving after frame 3; every term active.
-fn problem() -> (
+type Problem = (
     Vec<[f64; 3]>,
     Vec<(usize, usize)>,
     Vec<(usize, usize)>,
     Vec<f64>,
-) {
+);
+
+/// Three birds over five frames, the third leaving after frame 3; every term active.
+fn problem() -> Problem {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     // Observation order: frame-major; birds 0, 1 in frames 0..5, bird 2 in frames 0..3.
     let mut ray = Vec::new();

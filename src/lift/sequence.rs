@@ -251,7 +251,7 @@ pub enum Gradient {
     /// Hand-derived, plain Rust over `f64` slices (`herdfit_kernels::lift`).
     Analytic,
     /// burn tensor ops and reverse-mode autodiff ([`super::autodiff`], at `precision`): the
-    /// reference the analytic gradient is tested against; about 50× slower (BENCHMARKS.md).
+    /// reference the analytic gradient is tested against; much slower (BENCHMARKS.md, "Lift").
     Autodiff,
 }
 
