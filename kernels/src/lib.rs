@@ -1,12 +1,14 @@
 //! `herdfit-kernels`: the non-differentiable hot loops of herdfit — a uniform bucket grid,
 //! padded neighbour lists with capsule occlusion, obstacle-cell traversal, the fused force kernel
-//! of eq. 3–5 (forward and backward) and (later) splatting.
+//! of eq. 3–5 (forward and backward), the whole-sequence lifting energy with its gradient, and
+//! (later) splatting.
 //! Plain Rust (rayon for parallel loops), no burn: the differentiable model consumes their output
 //! as constant data, and wraps the force kernel's forward/backward pair as one autodiff operation.
 
 pub mod forces;
 pub mod geometry;
 pub mod grid;
+pub mod lift;
 pub mod obstacles;
 pub mod perception;
 

@@ -7,8 +7,9 @@
 //! 1. [`observe`] — tracks + camera → observations (rays, segments, frames); the virtual camera
 //!    that projects 3D tracks into 2D ones.
 //! 2. [`frame`] — the thesis's frame-by-frame optimisation (§3.3–3.5, Algorithms 1–3).
-//! 3. [`sequence`] — the whole-sequence optimisation (§5's future work) by burn autodiff,
-//!    started from the frame-by-frame depths.
+//! 3. [`sequence`] — the whole-sequence optimisation (§5's future work) by L-BFGS with a
+//!    hand-derived gradient (burn autodiff as its reference, `autodiff`), started from the
+//!    frame-by-frame depths.
 //! 4. [`boids`] — a synthetic 3D boids flock with homing (§4.1) seen by a ground observer: 2D
 //!    tracks with known 3D truth.
 //! 5. [`eval`] — depth and position errors against a truth, plausibility checks, baselines.
@@ -18,6 +19,7 @@
 //! (results 1 and 2): v_target 0.1, λ_t 0.3, λ_f 1.0, w_sep 2, d_sep 0.9. Lengths are in the
 //! camera's world unit; v_target is per frame (the position-based velocity of eq. 3.3).
 
+mod autodiff;
 pub mod boids;
 mod demo;
 pub mod eval;

@@ -1,6 +1,9 @@
 //! Stage 2b: the whole-sequence optimisation the thesis leaves as future work (§5: "optimize
-//! globally"): every depth of every frame at once, by reverse-mode autodiff (burn) and projected
-//! Adam, starting from the frame-by-frame result.
+//! globally"): every depth of every frame at once, by L-BFGS, starting from the frame-by-frame
+//! result. The gradient is hand-derived (`herdfit_kernels::lift`, plain Rust over `f64` slices);
+//! the same energy as burn tensor ops with reverse-mode autodiff ([`super::autodiff`]) is kept as
+//! its reference (`sequence.gradient = "autodiff"`; checked against each other in
+//! `tests/lift_gradient.rs`).
 //!
 //! Unknowns: u_i = ln d_i for every observation i (log-depth makes a step a relative change,
 //! whatever the distance). Positions b_i = C + d_i r_i (eq. 1.1), velocities v = b^f − b^{f−1}
@@ -42,10 +45,8 @@
 
 use super::observe::Observations;
 use super::LiftConfig;
-use crate::backend::cpu_device;
 use crate::error::{Error, Result};
 use crate::progress::Progress;
-use burn::tensor::{Device, Int, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
 /// Weights and settings of the whole-sequence energy (see the module docs).
@@ -69,7 +70,9 @@ pub struct SequenceConfig {
     pub w_level: f64,
     /// Image neighbours per bird and frame for the pair terms.
     pub neighbours: usize,
-    /// Tensor precision.
+    /// How the gradient is computed (`analytic`, the default, or `autodiff`, the reference).
+    pub gradient: Gradient,
+    /// Tensor precision of the `autodiff` gradient (the analytic one is always f64).
     pub precision: crate::backend::Precision,
 }
 
@@ -87,6 +90,7 @@ impl Default for SequenceConfig {
             w_separation: 100.0,
             w_level: 1.0,
             neighbours: 4,
+            gradient: Gradient::Analytic,
             precision: crate::backend::Precision::F32,
         }
     }
@@ -240,164 +244,110 @@ pub struct SequenceLog {
     pub pairs: usize,
 }
 
-struct Graph {
-    rx: Tensor<1>,
-    ry: Tensor<1>,
-    rz: Tensor<1>,
-    vp: Tensor<1, Int>,
-    vc: Tensor<1, Int>,
-    aa: Tensor<1, Int>,
-    ab: Tensor<1, Int>,
-    pi: Tensor<1, Int>,
-    pj: Tensor<1, Int>,
-    li: Tensor<1, Int>,
-    lj: Tensor<1, Int>,
+/// How the energy's gradient is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Gradient {
+    /// Hand-derived, plain Rust over `f64` slices (`herdfit_kernels::lift`).
+    Analytic,
+    /// burn tensor ops and reverse-mode autodiff ([`super::autodiff`], at `precision`): the
+    /// reference the analytic gradient is tested against; much slower (BENCHMARKS.md, "Lift").
+    Autodiff,
 }
 
-fn idx(v: impl Iterator<Item = usize>, device: &Device) -> Tensor<1, Int> {
-    let v: Vec<i64> = v.map(|i| i as i64).collect();
-    let n = v.len();
-    Tensor::from_data(TensorData::new(v, [n]), device)
+fn kernel_structure<'a>(
+    obs: &'a Observations,
+    s: &'a Structure,
+) -> herdfit_kernels::lift::SeqStructure<'a> {
+    herdfit_kernels::lift::SeqStructure {
+        ray: &obs.ray,
+        vel: &s.vel,
+        acc: &s.acc,
+        pairs: &s.pairs,
+        align: &s.align,
+    }
 }
 
-fn vec1(v: Vec<f64>, device: &Device) -> Tensor<1> {
-    let n = v.len();
-    Tensor::from_data(TensorData::new(v, [n]), device)
+/// One problem's energy, ready to evaluate many times.
+pub struct Energy<'a> {
+    s: &'a Structure,
+    obs: &'a Observations,
+    cfg: &'a LiftConfig,
+    how: How,
 }
 
-fn sum_sq(x: Tensor<1>) -> Tensor<1> {
-    x.powi_scalar(2).sum()
+enum How {
+    Analytic(
+        Box<(
+            herdfit_kernels::lift::SeqPlan,
+            herdfit_kernels::lift::SeqWorkspace,
+        )>,
+    ),
+    Autodiff(Box<super::autodiff::Graph>),
 }
 
-impl Graph {
-    fn new(obs: &Observations, s: &Structure, device: &Device) -> Self {
-        let comp = |k: usize| vec1(obs.ray.iter().map(|r| r[k]).collect(), device);
-        Graph {
-            rx: comp(0),
-            ry: comp(1),
-            rz: comp(2),
-            vp: idx(s.vel.iter().map(|v| v.0), device),
-            vc: idx(s.vel.iter().map(|v| v.1), device),
-            aa: idx(s.acc.iter().map(|a| a.0), device),
-            ab: idx(s.acc.iter().map(|a| a.1), device),
-            pi: idx(s.pairs.iter().map(|p| p.0), device),
-            pj: idx(s.pairs.iter().map(|p| p.1), device),
-            li: idx(s.align.iter().map(|p| p.0), device),
-            lj: idx(s.align.iter().map(|p| p.1), device),
-        }
+impl<'a> Energy<'a> {
+    /// The energy of `obs` with index lists `s`, by `cfg.sequence.gradient`.
+    pub fn new(obs: &'a Observations, s: &'a Structure, cfg: &'a LiftConfig) -> Result<Self> {
+        let how = match cfg.sequence.gradient {
+            Gradient::Analytic => How::Analytic(Box::new((
+                herdfit_kernels::lift::SeqPlan::new(&kernel_structure(obs, s)),
+                Default::default(),
+            ))),
+            Gradient::Autodiff => {
+                How::Autodiff(Box::new(super::autodiff::Graph::new(obs, s, cfg)?))
+            }
+        };
+        Ok(Energy { s, obs, cfg, how })
     }
 
-    /// The weighted terms (each a one-element tensor) at log-depths `u`.
-    fn energy(
-        &self,
-        u: &Tensor<1>,
-        s: &Structure,
-        cfg: &LiftConfig,
-        n: usize,
-    ) -> Vec<(&'static str, Tensor<1>)> {
-        let w = &cfg.sequence;
-        let vt = cfg.v_target;
-        let scale = 1.0 / n as f64;
-        let d = u.clone().exp();
-        let q = [
-            d.clone() * self.rx.clone(),
-            d.clone() * self.ry.clone(),
-            d * self.rz.clone(),
-        ];
-        let g = |t: &Tensor<1>, i: &Tensor<1, Int>| t.clone().gather(0, i.clone());
-        let mut out = Vec::new();
-        if !s.vel.is_empty() {
-            let v: Vec<Tensor<1>> = q.iter().map(|c| g(c, &self.vc) - g(c, &self.vp)).collect();
-            let sp2 = v[0].clone().powi_scalar(2)
-                + v[1].clone().powi_scalar(2)
-                + v[2].clone().powi_scalar(2);
-            let speed = (sp2 + 1e-12 * vt * vt).sqrt();
-            out.push((
-                "speed",
-                sum_sq(speed.clone().div_scalar(vt).sub_scalar(1.0)).mul_scalar(w.w_speed * scale),
-            ));
-            // Unit headings (scale-free: a flock twice as far has the same headings).
-            let head: Vec<Tensor<1>> = v.iter().map(|c| c.clone() / speed.clone()).collect();
-            out.push((
-                "level",
-                sum_sq(head[2].clone()).mul_scalar(w.w_level * scale),
-            ));
-            if !s.acc.is_empty() {
-                let a = v
-                    .iter()
-                    .map(|c| sum_sq(g(c, &self.ab) - g(c, &self.aa)))
-                    .reduce(|x, y| x + y)
-                    .expect("three components");
-                out.push(("accel", a.mul_scalar(w.w_accel * scale / (vt * vt))));
-            }
-            if !s.align.is_empty() {
-                let a = head
-                    .iter()
-                    .map(|c| sum_sq(g(c, &self.lj) - g(c, &self.li)))
-                    .reduce(|x, y| x + y)
-                    .expect("three components");
-                out.push(("align", a.mul_scalar(w.w_align * scale)));
+    /// The terms at log-depths `u` (one per observation) and, with `grad`, ∂E/∂u written into it.
+    pub fn eval(&mut self, u: &[f64], grad: Option<&mut [f64]>) -> Result<EnergyTerms> {
+        let n = self.obs.len();
+        if u.len() != n || grad.as_ref().is_some_and(|g| g.len() != n) {
+            return Err(Error::Internal(format!(
+                "{} log-depths for {n} observations",
+                u.len()
+            )));
+        }
+        let (cfg, sc, s) = (self.cfg, &self.cfg.sequence, self.s);
+        match &mut self.how {
+            How::Autodiff(g) => g.eval(u, cfg, grad),
+            How::Analytic(pw) => {
+                let (plan, ws) = &mut **pw;
+                let st = kernel_structure(self.obs, s);
+                let w = herdfit_kernels::lift::SeqWeights {
+                    accel: sc.w_accel,
+                    speed: sc.w_speed,
+                    align: sc.w_align,
+                    cohesion: sc.w_cohesion,
+                    separation: sc.w_separation,
+                    level: sc.w_level,
+                    scale: 1.0 / n as f64,
+                    v_target: cfg.v_target,
+                    d_sep: cfg.d_sep,
+                };
+                let t = herdfit_kernels::lift::sequence_energy(&st, plan, &w, u, grad, ws);
+                Ok(EnergyTerms {
+                    accel: t.accel,
+                    speed: t.speed,
+                    align: t.align,
+                    cohesion: t.cohesion,
+                    separation: t.separation,
+                    level: t.level,
+                    total: t.total(),
+                })
             }
         }
-        if !s.pairs.is_empty() {
-            out.push((
-                "cohesion",
-                sum_sq(g(u, &self.pj) - g(u, &self.pi)).mul_scalar(w.w_cohesion * scale),
-            ));
-            let d2 = q
-                .iter()
-                .map(|c| (g(c, &self.pj) - g(c, &self.pi)).powi_scalar(2))
-                .reduce(|x, y| x + y)
-                .expect("three components");
-            let ds = cfg.d_sep;
-            let dist = (d2 + 1e-12 * ds * ds).sqrt();
-            let hinge = dist.div_scalar(-ds).add_scalar(1.0).clamp_min(0.0);
-            out.push((
-                "separation",
-                sum_sq(hinge).mul_scalar(w.w_separation * scale),
-            ));
-        }
-        out
     }
 }
 
-/// Reads a rank-1 tensor back as f64 values.
-fn read_vec(t: &Tensor<1>) -> Result<Vec<f64>> {
-    t.clone()
-        .try_into_vec_as::<f64>()
-        .map_err(|e| Error::Internal(format!("tensor read-back failed: {e:?}")))
-}
-
-fn read1(t: Tensor<1>) -> Result<f64> {
-    Ok(read_vec(&t)?.first().copied().unwrap_or(0.0))
-}
-
-fn terms_of(parts: &[(&'static str, Tensor<1>)]) -> Result<EnergyTerms> {
-    let mut e = EnergyTerms::default();
-    for (k, t) in parts {
-        let v = read1(t.clone().detach())?;
-        match *k {
-            "accel" => e.accel = v,
-            "speed" => e.speed = v,
-            "align" => e.align = v,
-            "cohesion" => e.cohesion = v,
-            "separation" => e.separation = v,
-            _ => e.level = v,
-        }
-        e.total += v;
-    }
-    Ok(e)
-}
-
-/// The energy's terms at depths `depth` (no gradient).
+/// The energy's terms at depths `depth` (no gradient), by `cfg.sequence.gradient`.
 pub fn energy_terms(obs: &Observations, depth: &[f64], cfg: &LiftConfig) -> Result<EnergyTerms> {
-    let device = cpu_device(cfg.sequence.precision)?;
     let s = Structure::new(obs, cfg.sequence.neighbours);
-    let g = Graph::new(obs, &s, &device);
-    let u = vec1(depth.iter().map(|d| d.ln()).collect(), &device);
-    terms_of(&g.energy(&u, &s, cfg, obs.len()))
+    let u: Vec<f64> = depth.iter().map(|d| d.ln()).collect();
+    Energy::new(obs, &s, cfg)?.eval(&u, None)
 }
-
 /// Weight of the bound penalty (per observation, on log-depth).
 const W_BOUNDS: f64 = 1e4;
 
@@ -460,10 +410,26 @@ impl Knots {
         }
         Knots { k0, k1, w1, at }
     }
+
+    /// Log-depths `u` of every observation from the knots' values `x`.
+    fn interpolate(&self, x: &[f64], u: &mut [f64]) {
+        for (i, ui) in u.iter_mut().enumerate() {
+            *ui = (1.0 - self.w1[i]) * x[self.k0[i]] + self.w1[i] * x[self.k1[i]];
+        }
+    }
+
+    /// ∂E/∂x from ∂E/∂u (the transpose of [`Knots::interpolate`]), written into `g`.
+    fn pull_back(&self, gu: &[f64], g: &mut [f64]) {
+        g.iter_mut().for_each(|v| *v = 0.0);
+        for (i, &gi) in gu.iter().enumerate() {
+            g[self.k0[i]] += (1.0 - self.w1[i]) * gi;
+            g[self.k1[i]] += self.w1[i] * gi;
+        }
+    }
 }
 
 /// Whole-sequence depths from `init` (the frame-by-frame depths), by L-BFGS on the energy of the
-/// module docs, gradients by burn's reverse-mode autodiff.
+/// module docs, its gradient by `sequence.gradient`.
 ///
 /// Coarse to fine (`sequence.levels`): the log-depths are first one value per segment (started at
 /// the median of its initial log-depths), then linear between knots every 64, 16 and 4 frames,
@@ -486,17 +452,14 @@ pub fn whole_sequence(
             init.len()
         )));
     }
-    let device = cpu_device(sc.precision)?;
-    let ad = device.clone().autodiff();
     let s = Structure::new(obs, sc.neighbours);
-    let graph = Graph::new(obs, &s, &ad);
+    let mut energy = Energy::new(obs, &s, cfg)?;
     let (lo, hi) = (cfg.d_near.ln(), cfg.d_far.ln());
     let mut u: Vec<f64> = init
         .iter()
         .map(|d| d.clamp(cfg.d_near, cfg.d_far).ln())
         .collect();
-    let start = energy_terms(obs, init, cfg)?;
-    let wb = W_BOUNDS / n as f64;
+    let start = energy.eval(&init.iter().map(|d| d.ln()).collect::<Vec<_>>(), None)?;
     let segs = segments(obs);
     let opt = super::lbfgs::Lbfgs {
         iterations: sc.iterations,
@@ -505,6 +468,7 @@ pub fn whole_sequence(
     };
     let mut per_level = Vec::with_capacity(sc.levels.len());
     let mut evaluations = 0;
+    let (mut ut, mut gu) = (vec![0.0; n], vec![0.0; n]);
     for &spacing in &sc.levels {
         let knots = (spacing != 1).then(|| Knots::new(&segs, n, spacing));
         // Unknowns x: the knots' log-depths, or every log-depth.
@@ -520,38 +484,22 @@ pub fn whole_sequence(
                 .collect(),
             Some(k) => k.at.iter().map(|&i| u[i]).collect(),
         };
-        let interp = knots.as_ref().map(|k| {
-            (
-                idx(k.k0.iter().copied(), &ad),
-                idx(k.k1.iter().copied(), &ad),
-                vec1(k.w1.clone(), &ad),
-                vec1(k.w1.iter().map(|w| 1.0 - w).collect(), &ad),
-            )
-        });
-        let energy = |x: &[f64]| -> Result<(f64, Vec<f64>)> {
-            let xt = vec1(x.to_vec(), &ad).require_grad();
-            let ut = match &interp {
-                None => xt.clone(),
-                Some((k0, k1, w1, w0)) => {
-                    xt.clone().gather(0, k0.clone()) * w0.clone()
-                        + xt.clone().gather(0, k1.clone()) * w1.clone()
+        let objective = |x: &[f64]| -> Result<(f64, Vec<f64>)> {
+            let mut g = vec![0.0; x.len()];
+            let value = match &knots {
+                None => {
+                    let e = energy.eval(x, Some(&mut g))?;
+                    e.total
+                }
+                Some(k) => {
+                    k.interpolate(x, &mut ut);
+                    let e = energy.eval(&ut, Some(&mut gu))?;
+                    k.pull_back(&gu, &mut g);
+                    e.total
                 }
             };
-            let total = graph
-                .energy(&ut, &s, cfg, n)
-                .into_iter()
-                .map(|p| p.1)
-                .reduce(|a, b| a + b)
-                .ok_or_else(|| Error::Internal("empty energy".into()))?;
-            let value = read1(total.clone().detach())?;
-            let grads = total.backward();
-            let mut g = xt
-                .grad(&grads)
-                .map(|t| read_vec(&t))
-                .transpose()?
-                .unwrap_or_else(|| vec![0.0; x.len()]);
             // The bound barrier on the knots (each standing for about the frames it spans).
-            let weight = wb * n as f64 / x.len() as f64;
+            let weight = W_BOUNDS / x.len() as f64;
             let mut pen = 0.0;
             for (gk, &xk) in g.iter_mut().zip(x) {
                 let out = (lo - xk).max(0.0) - (xk - hi).max(0.0);
@@ -568,7 +516,7 @@ pub fn whole_sequence(
             },
             sc.iterations as u64,
         );
-        let run = opt.minimise(&mut x, energy, |_, f| {
+        let run = opt.minimise(&mut x, objective, |_, f| {
             progress.message(&format!("E {f:.5}"));
             progress.inc(1);
         })?;
@@ -577,16 +525,17 @@ pub fn whole_sequence(
         per_level.push(run.iterations);
         u = match &knots {
             None => x,
-            Some(k) => (0..n)
-                .map(|i| (1.0 - k.w1[i]) * x[k.k0[i]] + k.w1[i] * x[k.k1[i]])
-                .collect(),
+            Some(k) => {
+                k.interpolate(&x, &mut ut);
+                ut.clone()
+            }
         };
     }
     let depth: Vec<f64> = u
         .iter()
         .map(|x| x.exp().clamp(cfg.d_near, cfg.d_far))
         .collect();
-    let end = energy_terms(obs, &depth, cfg)?;
+    let end = energy.eval(&depth.iter().map(|d| d.ln()).collect::<Vec<_>>(), None)?;
     Ok((
         depth,
         SequenceLog {
