@@ -459,3 +459,32 @@ config_target!(
     "extract settings",
     herdfit::video::extract::ExtractConfig
 );
+
+/// Regressions the fuzz found in the GLB reader: NaN in the buffer reached the sampled poses,
+/// and out-of-range sampler/node indices were indexed unchecked.
+#[test]
+fn glb_with_nan_values_or_bad_indices_is_an_error() {
+    use herdfit::data::gltf::{read_glb, to_glb, GltfConfig};
+    use herdfit::data::tracks::Tracks;
+    let t = Tracks::load(&seeds::repo().join("examples/flocks/v.csv")).unwrap();
+    let cfg = GltfConfig {
+        mesh: false,
+        ..GltfConfig::default()
+    };
+    let (glb, _) = to_glb(&t, &cfg).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("t.glb");
+    std::fs::write(&p, &glb).unwrap();
+    let good = read_glb(&p).unwrap();
+    assert!(good.sample(0.5).is_ok());
+    let mut nan = read_glb(&p).unwrap();
+    for c in nan.bin.chunks_exact_mut(4) {
+        c.copy_from_slice(&f32::NAN.to_le_bytes());
+    }
+    let e = nan.sample(0.5).unwrap_err().to_string();
+    assert!(e.contains("non-finite"), "{e}");
+    let mut idx = read_glb(&p).unwrap();
+    idx.root.animations[0].channels[0].sampler = gltf_json::Index::new(9999);
+    let e = idx.sample(0.5).unwrap_err().to_string();
+    assert!(e.contains("sampler index"), "{e}");
+}

@@ -29,7 +29,9 @@ impl Checkpoint {
     /// continue from NaN). Errors name the file.
     pub fn load(path: &std::path::Path) -> crate::error::Result<Checkpoint> {
         use crate::error::Error;
-        let text = crate::data::atomic::read_input_text(path)?;
+        // Not recorded as an input (`note_input`): a resumed fit rewrites its checkpoint.
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let k: Checkpoint = serde_json::from_str(&text)
             .map_err(|e| Error::file(path, format!("not a {CHECKPOINT_SCHEMA} file: {e}")))?;
         if k.schema != CHECKPOINT_SCHEMA {

@@ -174,11 +174,7 @@ fn resume(
 ) -> Result<(Learnt, usize)> {
     match ckpt {
         Some(c) if c.resume && c.file().exists() => {
-            let text = std::fs::read_to_string(c.file())
-                .map_err(|e| Error::file(c.file(), format!("cannot read: {e}")))?;
-            let k: Checkpoint = serde_json::from_str(&text).map_err(|e| {
-                Error::file(c.file(), format!("not a {CHECKPOINT_SCHEMA} file: {e}"))
-            })?;
+            let k = Checkpoint::load(&c.file())?;
             if k.config != *cfg || k.start != start {
                 return Err(Error::file(
                     c.file(),
@@ -226,6 +222,36 @@ fn save_checkpoint(
 }
 
 /// The gradient of `loss` with respect to `theta` (zeros where none reaches it).
+/// The fit-loss guard (issue #14): a NaN/inf loss or gradient stops the fit with one line naming
+/// the epoch, the window and the likely cause, before the optimiser step, so θ, the checkpoint of
+/// the last finished epoch and every output stay as they were (the optimiser's own rule would
+/// otherwise take a random step past a non-finite gradient, §6.1).
+fn check_finite_step(
+    epoch: usize,
+    clip: usize,
+    window: std::ops::Range<usize>,
+    losses: [f64; 3],
+    g: &[f64; N_PARAMS],
+) -> Result<()> {
+    let bad_loss = losses.iter().any(|v| !v.is_finite());
+    let bad_grad = g.iter().position(|v| !v.is_finite());
+    if !bad_loss && bad_grad.is_none() {
+        return Ok(());
+    }
+    let what = match (bad_loss, bad_grad) {
+        (true, _) => format!(
+            "the loss is not finite (E_mean {}, E_var {}, E_fields {})",
+            losses[0], losses[1], losses[2]
+        ),
+        (false, Some(p)) => format!("the gradient of parameter {p} is {}", g[p]),
+        (false, None) => unreachable!("checked above"),
+    };
+    Err(Error::invalid(format!(
+        "epoch {epoch}, clip #{clip}, window frames {}..{}: {what}; likely cause: extreme values in          the clip's fields (density, velocity, fps) or a step size (lr) too large for them;          the last finished epoch's checkpoint is kept",
+        window.start, window.end
+    )))
+}
+
 fn grad_of(loss: Tensor<1>, theta: &Tensor<1>) -> Result<[f64; N_PARAMS]> {
     let grads = loss.backward();
     let gv = theta
@@ -313,6 +339,7 @@ impl<'a> FitRun<'a> {
             let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &learnt.theta, rng)?;
             let (em, ev, ef) = (fwd.e_mean, fwd.e_var, fwd.e_fields);
             let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
+            check_finite_step(epoch, ci, f..f + w, [em, ev, ef], &g)?;
             if self.learn {
                 // Learning rate decays linearly to 10 % over the epochs.
                 let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
