@@ -11,7 +11,7 @@
 //! | [`MAX_COORD`] | 1e9 BL | squared distances stay far from f64 overflow (1e308) and f32 (3e38) |
 //! | [`MAX_DENSITY`] | 1e3 agents/BL² | counts (density × cell area) fit a `usize` |
 //! | [`MAX_SPEED`] | 1e6 BL/s | a speed × Δt stays within [`MAX_COORD`] over any run |
-//! | memory | the machine's available memory (`/proc/meminfo` `MemAvailable`, `RLIMIT_AS`) | an estimate above it is refused with both figures |
+//! | memory | the machine's available memory (`/proc/meminfo` `MemAvailable`, `RLIMIT_AS`, and `HERDFIT_MEMORY_LIMIT` bytes when set) | an estimate above it is refused with both figures |
 //! | disk | the free space of the output's file system (`statvfs`) | a streamed output larger than it is refused up front |
 
 use crate::error::{Error, Result};
@@ -90,7 +90,9 @@ pub fn check_magnitude(key: &str, value: f64, max: f64) -> Result<()> {
     Ok(())
 }
 
-/// Memory available to this process (bytes): `MemAvailable` capped by `RLIMIT_AS`.
+/// Memory available to this process (bytes): `MemAvailable` capped by `RLIMIT_AS` and by the
+/// environment variable `HERDFIT_MEMORY_LIMIT` (bytes) when it is set (a shared machine's
+/// budget; the parser fuzz runs under it).
 pub fn available_memory() -> u64 {
     let mut avail = std::fs::read_to_string("/proc/meminfo")
         .ok()
@@ -107,6 +109,12 @@ pub fn available_memory() -> u64 {
         if libc::getrlimit(libc::RLIMIT_AS, &mut r) == 0 && r.rlim_cur != libc::RLIM_INFINITY {
             avail = avail.min(r.rlim_cur as u64);
         }
+    }
+    if let Some(cap) = std::env::var("HERDFIT_MEMORY_LIMIT")
+        .ok()
+        .and_then(|v| v.trim().parse::<u64>().ok())
+    {
+        avail = avail.min(cap);
     }
     avail
 }

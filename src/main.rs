@@ -14,6 +14,10 @@ fn main() {
     // Temporary siblings go with the process on SIGINT/SIGTERM; outputs never replace inputs.
     herdfit::data::atomic::install_signal_cleanup();
     herdfit::data::atomic::guard_inputs();
+    // `-` as an output: data keep standard output, messages go to standard error.
+    if std::env::args_os().skip(1).any(|a| a == "-") {
+        herdfit::data::atomic::take_stdout();
+    }
     // A panic is a bug; still, the user sees one line and a non-zero exit, not a backtrace.
     std::panic::set_hook(Box::new(|info| {
         let msg = info

@@ -834,3 +834,274 @@ fn sigkill_leftovers_are_removed_by_the_next_run_on_the_same_output() {
     assert!(temp_leftovers(t.path()).is_empty());
     assert!(t.path().join("long.csv").is_file());
 }
+
+// ---- The "Lesser" list: truncated video, clamped ranges, nonsense flags, polygons, duplicate
+// frames, resume without a checkpoint, OpenCV's own log line, `-` ----
+
+/// A workdir with a 12-frame synthetic video `v.avi` (and its clip `vclip/`).
+fn with_video() -> tempfile::TempDir {
+    let t = workdir();
+    #[rustfmt::skip]
+    let o = harness::bin()
+        .args(["synth", "--agents", "20", "--frame-count", "12", "--grid-size", "8x8",
+               "--cell-size", "2", "--video-file", "v.avi", "--out", "vclip"])
+        .current_dir(t.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    t
+}
+
+const EXTRACT: [&str; 4] = ["extract", "v.avi", "--body-length-px", "12"];
+
+fn extract_case(dir: &std::path::Path, extra: &[&str], names: &str) {
+    let mut args: Vec<&str> = EXTRACT.to_vec();
+    args.extend_from_slice(extra);
+    case_in(dir, &args, names);
+}
+
+#[test]
+fn extract_of_a_truncated_video_is_refused() {
+    let t = with_video();
+    let p = t.path().join("v.avi");
+    let bytes = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    extract_case(t.path(), &["--out", "c"], "v.avi");
+}
+
+#[test]
+fn extract_frames_beyond_the_video_are_refused_not_clamped() {
+    let t = with_video();
+    extract_case(
+        t.path(),
+        &["--frames", "0..100000", "--out", "c"],
+        "--frames",
+    );
+}
+
+#[test]
+fn extract_one_preview_every_zero_frames_is_refused() {
+    let t = with_video();
+    #[rustfmt::skip]
+    extract_case(t.path(), &["--preview", "pv", "--preview-every", "0", "--out", "c"], "--preview-every");
+}
+
+#[test]
+fn extract_a_negative_colour_threshold_is_refused() {
+    let t = with_video();
+    #[rustfmt::skip]
+    extract_case(t.path(), &["--colour-threshold=-1", "--out", "c"], "--colour-threshold");
+}
+
+#[test]
+fn extract_a_grid_of_100000_cells_per_side_is_refused() {
+    let t = with_video();
+    extract_case(t.path(), &["--grid", "100000", "--out", "c"], "--grid");
+}
+
+#[test]
+fn extract_a_missing_mask_gives_one_line_and_no_opencv_warning() {
+    let t = with_video();
+    #[rustfmt::skip]
+    extract_case(t.path(), &["--obstacles", "nomask.png", "--out", "c"], "nomask.png");
+}
+
+#[test]
+fn fit_a_window_longer_than_the_clip_is_refused() {
+    #[rustfmt::skip]
+    case(&["fit", "clip", "--out", "q.json", "--epochs", "1", "--window", "1000"], "--window");
+}
+
+#[test]
+fn fit_a_nan_density_threshold_is_refused() {
+    #[rustfmt::skip]
+    case(&["fit", "clip", "--out", "q.json", "--density-threshold", "NaN"], "--density-threshold");
+}
+
+#[test]
+fn fit_resume_without_a_checkpoint_is_refused() {
+    #[rustfmt::skip]
+    case(&["fit", "clip", "--out", "q.json", "--epochs", "1", "--checkpoint", "ck", "--resume"],
+         "checkpoint.json");
+}
+
+#[test]
+fn validate_a_warmup_longer_than_the_clip_is_refused() {
+    #[rustfmt::skip]
+    case(&["validate", "clip", "--params", "p.json", "--warmup", "1000000000", "--no-video",
+           "--out", "rep"], "--warmup");
+}
+
+#[test]
+fn bench_with_zero_repeats_is_refused() {
+    #[rustfmt::skip]
+    case(&["bench", "--agents", "10", "--steps", "2", "--repeats", "0", "--json", "b.json"],
+         "--repeats");
+}
+
+#[test]
+fn synth_with_every_cell_an_obstacle_is_refused() {
+    let t = workdir();
+    let cells: Vec<String> = (0..8)
+        .flat_map(|x| (0..8).map(move |y| format!("[{x},{y}]")))
+        .collect();
+    let text = format!("{{\"cells\": [{}]}}", cells.join(","));
+    std::fs::write(t.path().join("all.json"), text).unwrap();
+    #[rustfmt::skip]
+    case_in(t.path(), &["synth", "--agents", "10", "--frame-count", "3", "--grid-size", "8x8",
+                        "--cell-size", "2", "--obstacles", "all.json", "--out", "s"], "all.json");
+}
+
+#[test]
+fn simulate_a_replay_of_another_herd_names_the_recording() {
+    let t = workdir();
+    #[rustfmt::skip]
+    let o = harness::bin()
+        .args(["simulate", "--agents", "5", "--steps", "3", "--record", "r.json", "--out", "a.csv"])
+        .current_dir(t.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    #[rustfmt::skip]
+    case_in(t.path(), &["simulate", "--agents", "6", "--steps", "3", "--replay", "r.json",
+                        "--out", "b.csv"], "r.json");
+    #[rustfmt::skip]
+    case_in(t.path(), &["simulate", "--agents", "5", "--steps", "9", "--replay", "r.json",
+                        "--out", "b.csv"], "r.json");
+}
+
+/// A workdir with the pasture scene (and its parameter files) as `scene.json`, edited by `f`.
+fn with_scene(f: impl FnOnce(&mut serde_json::Value)) -> tempfile::TempDir {
+    let t = workdir();
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::fs::create_dir_all(t.path().join("pasture")).unwrap();
+    for n in ["narrow.json", "broad.json"] {
+        std::fs::copy(
+            repo.join("scenes/pasture").join(n),
+            t.path().join("pasture").join(n),
+        )
+        .unwrap();
+    }
+    let mut v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(repo.join("scenes/pasture.json")).unwrap()).unwrap();
+    f(&mut v);
+    std::fs::write(t.path().join("scene.json"), v.to_string()).unwrap();
+    t
+}
+
+#[test]
+fn author_a_self_intersecting_polygon_is_refused() {
+    let t = with_scene(|v| {
+        v["obstacles"]["polygons"] = serde_json::json!([[[0, 0], [10, 10], [10, 0], [0, 10]]]);
+    });
+    case_in(
+        t.path(),
+        &["author", "scene.json", "--out", "a"],
+        "obstacles.polygons[0]",
+    );
+}
+
+#[test]
+fn author_a_zero_area_region_is_refused() {
+    let t = with_scene(|v| {
+        v["regions"][0]["polygon"] = serde_json::json!([[0, 0], [10, 10], [20, 20]]);
+    });
+    case_in(
+        t.path(),
+        &["author", "scene.json", "--out", "a"],
+        "regions[0].polygon",
+    );
+}
+
+#[test]
+fn author_a_missing_mask_gives_one_line_and_no_opencv_warning() {
+    let t = with_scene(|v| v["obstacles"]["mask"] = serde_json::json!("nomask.png"));
+    case_in(
+        t.path(),
+        &["author", "scene.json", "--out", "a"],
+        "obstacles.mask",
+    );
+}
+
+#[test]
+fn import_reference_with_a_repeated_frame_number_is_refused() {
+    let t = workdir();
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference");
+    for e in std::fs::read_dir(&src).unwrap() {
+        let e = e.unwrap();
+        let mut text = std::fs::read_to_string(e.path()).unwrap();
+        if e.file_name().to_string_lossy().ends_with("_frame.txt") {
+            text = text.replace("Frame 12", "Frame 11");
+        }
+        std::fs::write(t.path().join(e.file_name()), text).unwrap();
+    }
+    case_in(
+        t.path(),
+        &["import-reference", "sample", "--out", "r"],
+        "Frame 11 repeats",
+    );
+}
+
+#[test]
+fn validate_video_on_a_full_disk_leaves_nothing() {
+    let t = workdir();
+    harness::case_full_disk(
+        t.path(),
+        &[
+            "validate", "clip", "--params", "p.json", "--seeds", "1", "--out", "rep",
+        ],
+        "rep",
+        40_000,
+    );
+}
+
+#[test]
+fn author_video_on_a_full_disk_leaves_nothing() {
+    let t = with_scene(|_| {});
+    harness::case_full_disk(
+        t.path(),
+        &["author", "scene.json", "--video", "--out", "a"],
+        "a",
+        60_000,
+    );
+}
+
+#[test]
+fn folders_and_sidecar_outputs_refuse_stdout() {
+    #[rustfmt::skip]
+    case(&["synth", "--agents", "10", "--frame-count", "3", "--grid-size", "8x8", "--cell-size",
+           "2", "--out", "-"], "standard output");
+    case(
+        &["validate", "clip", "--params", "p.json", "--out", "-"],
+        "standard output",
+    );
+}
+
+#[test]
+fn simulate_to_stdout_writes_the_csv_there_and_nothing_on_disk() {
+    let t = workdir();
+    let before = harness::snapshot(t.path());
+    #[rustfmt::skip]
+    let o = harness::bin()
+        .args(["simulate", "--agents", "5", "--steps", "3", "--out", "-"])
+        .current_dir(t.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8(o.stdout).unwrap();
+    let lines: Vec<&str> = out.lines().collect();
+    // The header, then 5 agents × 4 frames, and nothing else.
+    assert_eq!(lines.len(), 1 + 5 * 4, "{out}");
+    assert!(lines[0].starts_with("frame,"), "{out}");
+    assert!(
+        lines[1..].iter().all(|l| l.split(',').count() == 8),
+        "{out}"
+    );
+    assert_eq!(before, harness::snapshot(t.path()), "nothing on disk");
+}
+
+#[test]
+fn fit_to_stdout_without_log_and_plot_paths_is_refused() {
+    #[rustfmt::skip]
+    case(&["fit", "clip", "--out", "-", "--epochs", "1"], "--out");
+}

@@ -126,17 +126,9 @@ impl Layout {
                 )));
             }
         }
-        let polygon = |p: &[V2], key: String| {
-            if p.len() < 3 {
-                Err(Error::invalid(format!(
-                    "{key}: a polygon needs at least 3 points, found {}",
-                    p.len()
-                )))
-            } else if !finite(p) {
-                Err(Error::invalid(format!("{key}: points are not finite")))
-            } else {
-                Ok(())
-            }
+        let polygon = |p: &[V2], key: String| match crate::data::polygon::polygon_problem(p) {
+            Some(m) => Err(Error::invalid(format!("{key}: {m}"))),
+            None => Ok(()),
         };
         for (i, o) in self.obstacles.iter().enumerate() {
             polygon(o, format!("obstacles[{i}]"))?;

@@ -5,9 +5,11 @@
 
 pub mod cleanup;
 mod policy;
+pub mod stdout;
 
 pub use cleanup::install_signal_cleanup;
 pub use policy::{check_target, guard_inputs, note_input, read_input_text};
+pub use stdout::{is_stdout, take_stdout};
 
 use crate::error::{Error, Result};
 use std::io::Write;
@@ -32,6 +34,9 @@ fn prepare(path: &Path) -> Result<&Path> {
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a reader
 /// never sees a half-written file and a failed write leaves nothing behind.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    if is_stdout(path) {
+        return stdout::write_all(path, bytes);
+    }
     if path.is_dir() {
         return Err(Error::file(path, "cannot write: is a directory"));
     }
@@ -68,6 +73,9 @@ fn temp_builder(prefix: &str) -> tempfile::Builder<'_, 'static> {
 /// A temporary sibling of `path` (same folder, ordinary permissions) for writers that need a file
 /// name of their own (PNG, AVI); [`persist`] renames it into place.
 pub fn temp_sibling(path: &Path, suffix: &str) -> Result<tempfile::NamedTempFile> {
+    if is_stdout(path) {
+        return Err(stdout::not_a_stream(path, &format!("a {suffix} file")));
+    }
     let dir = prepare(path)?;
     let t = temp_builder(&cleanup::temp_prefix(path))
         .suffix(suffix)
@@ -92,6 +100,9 @@ pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
 /// Checks early that `path` can be created (its folder exists and is writable, and the output-path
 /// policy allows it), so long runs fail before they start rather than at the end.
 pub fn check_writable(path: &Path) -> Result<()> {
+    if is_stdout(path) {
+        return Ok(());
+    }
     if path.is_dir() {
         return Err(Error::file(path, "cannot write: is a directory"));
     }
@@ -106,12 +117,39 @@ pub fn check_writable(path: &Path) -> Result<()> {
 /// dropped without commit, it leaves nothing behind.
 pub struct AtomicFile {
     path: std::path::PathBuf,
-    out: std::io::BufWriter<tempfile::NamedTempFile>,
+    out: std::io::BufWriter<Sink>,
+}
+
+/// Where an [`AtomicFile`] goes: its temporary sibling, or standard output for `-`.
+enum Sink {
+    Temp(tempfile::NamedTempFile),
+    Stdout(stdout::Stdout),
+}
+
+impl Write for Sink {
+    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+        match self {
+            Sink::Temp(t) => t.write(b),
+            Sink::Stdout(s) => s.write(b),
+        }
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            Sink::Temp(t) => t.flush(),
+            Sink::Stdout(s) => s.flush(),
+        }
+    }
 }
 
 impl AtomicFile {
     /// Starts writing `path`.
     pub fn create(path: &Path) -> Result<Self> {
+        if is_stdout(path) {
+            return Ok(AtomicFile {
+                path: path.to_path_buf(),
+                out: std::io::BufWriter::with_capacity(1 << 16, Sink::Stdout(stdout::Stdout)),
+            });
+        }
         if path.is_dir() {
             return Err(Error::file(path, "cannot write: is a directory"));
         }
@@ -122,7 +160,7 @@ impl AtomicFile {
         cleanup::register(tmp.path());
         Ok(AtomicFile {
             path: path.to_path_buf(),
-            out: std::io::BufWriter::with_capacity(1 << 20, tmp),
+            out: std::io::BufWriter::with_capacity(1 << 20, Sink::Temp(tmp)),
         })
     }
 
@@ -137,7 +175,10 @@ impl AtomicFile {
     pub fn commit(self) -> Result<()> {
         let path = self.path;
         let fail = |e: std::io::Error| Error::file(&path, format!("cannot write: {e}"));
-        let tmp = self.out.into_inner().map_err(|e| fail(e.into_error()))?;
+        let tmp = match self.out.into_inner().map_err(|e| fail(e.into_error()))? {
+            Sink::Temp(t) => t,
+            Sink::Stdout(mut s) => return s.flush().map_err(fail),
+        };
         let name = tmp.path().to_path_buf();
         let done = (|| {
             tmp.as_file().sync_all().map_err(fail)?;
@@ -185,6 +226,9 @@ fn replaceable(dir: &Path) -> Result<bool> {
 impl AtomicDir {
     /// Starts writing the folder `target` (its parent must exist).
     pub fn create(target: &Path) -> Result<Self> {
+        if is_stdout(target) {
+            return Err(stdout::not_a_stream(target, "a folder"));
+        }
         replaceable(target)?;
         let parent = parent_of(target);
         cleanup::remove_stale(parent, target);

@@ -168,6 +168,7 @@ type Row = (usize, usize, f64, Option<(f64, f64, f64)>);
 fn parse_frames(path: &Path, res: usize) -> Result<Vec<Vec<Row>>> {
     let text = read(path)?;
     let mut frames: Vec<Vec<Row>> = Vec::new();
+    let mut last: Option<(u64, usize)> = None;
     for (i, raw) in text.lines().enumerate() {
         let ln = i + 1;
         let tok: Vec<&str> = raw.split_whitespace().collect();
@@ -176,7 +177,15 @@ fn parse_frames(path: &Path, res: usize) -> Result<Vec<Vec<Row>>> {
         }
         match tok[0] {
             "Frame" => {
-                let _: u64 = num(path, ln, tok.get(1).copied(), "frame number")?;
+                let f: u64 = num(path, ln, tok.get(1).copied(), "frame number")?;
+                if let Some((g, at)) = last.filter(|&(g, _)| f <= g) {
+                    let what = if f == g { "repeats" } else { "comes after" };
+                    return Err(Error::file(
+                        path,
+                        format!("line {ln}: Frame {f} {what} Frame {g} (line {at}): frame numbers must increase"),
+                    ));
+                }
+                last = Some((f, ln));
                 frames.push(Vec::new());
             }
             "Data" => {

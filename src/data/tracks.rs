@@ -274,6 +274,12 @@ impl Tracks {
     /// Writes `path` (CSV) and its sidecar, each atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
         self.check().map_err(|e| e.in_file(path))?;
+        if crate::data::atomic::is_stdout(path) {
+            return Err(crate::data::atomic::stdout::not_a_stream(
+                path,
+                "a tracks file (CSV + sidecar)",
+            ));
+        }
         let side = sidecar_path(path);
         if side == path {
             return Err(Error::file(path, "a tracks CSV must not end in .json"));

@@ -199,6 +199,9 @@ impl BenchConfig {
         if self.steps == 0 {
             return Err(crate::Error::config("steps", "must be ≥ 1"));
         }
+        if self.repeats == 0 && !self.sim_only {
+            return Err(crate::Error::config("repeats", "0 must be ≥ 1"));
+        }
         Ok(())
     }
 }

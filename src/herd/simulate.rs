@@ -159,6 +159,20 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
         }
     };
     let replay = job.run.replay.as_deref().map(Recording::load).transpose()?;
+    if let (Some(r), Some(p)) = (&replay, &job.run.replay) {
+        if r.steps.len() < cfg.steps || r.agents != rows.len() {
+            return Err(Error::file(
+                p,
+                format!(
+                    "holds {} steps of {} agents; {} steps of {} requested",
+                    r.steps.len(),
+                    r.agents,
+                    cfg.steps,
+                    rows.len()
+                ),
+            ));
+        }
+    }
     crate::limits::check_count("agents", rows.len(), crate::limits::MAX_AGENTS)?;
     // A trajectory row is about 100 bytes of text.
     let rows_out = rows.len() as f64 * (cfg.steps as f64 + 1.0);

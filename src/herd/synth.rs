@@ -257,7 +257,16 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         ny,
     };
     let obstacles = match &job.obstacles {
-        Some(p) => read_cells(p, nx, ny)?,
+        Some(p) => {
+            let m = read_cells(p, nx, ny)?;
+            if m.iter().all(|&c| c != 0) {
+                return Err(Error::file(
+                    p,
+                    format!("every cell of the {nx}×{ny} grid is an obstacle: no room for a herd"),
+                ));
+            }
+            m
+        }
         None => Array2::zeros((ny, nx)),
     };
     AtomicDir::create(&job.out)?; // fail early on an unusable output folder

@@ -65,15 +65,18 @@ impl Glb {
         };
         let start = view.byte_offset.map_or(0, |o| o.0 as usize)
             + acc.byte_offset.map_or(0, |o| o.0 as usize);
-        let n = acc.count.0 as usize * width;
-        let raw = self
-            .bin
-            .get(start..start + 4 * n)
+        let raw = (acc.count.0 as usize)
+            .checked_mul(4 * width)
+            .and_then(|len| self.bin.get(start..start.checked_add(len)?))
             .ok_or_else(|| Error::invalid("accessor beyond the buffer"))?;
-        Ok(raw
+        let v: Vec<f32> = raw
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes(c.try_into().expect("four bytes")))
-            .collect())
+            .collect();
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(Error::invalid("an accessor holds a non-finite value"));
+        }
+        Ok(v)
     }
 
     /// Every node's (name, translation, rotation, scale) at time `t` of the first animation
@@ -97,10 +100,31 @@ impl Glb {
             return Ok(out);
         };
         for ch in &anim.channels {
-            let s = &anim.samplers[ch.sampler.value()];
+            let s = anim
+                .samplers
+                .get(ch.sampler.value())
+                .ok_or_else(|| Error::invalid("a channel's sampler index is out of range"))?;
             let times = self.floats(s.input)?;
             let vals = self.floats(s.output)?;
-            let w = vals.len() / times.len().max(1);
+            if times.is_empty() || times.windows(2).any(|p| p[1] <= p[0]) {
+                return Err(Error::invalid(
+                    "a sampler's times are empty or do not increase",
+                ));
+            }
+            let w = match ch.target.path {
+                Valid(gj::animation::Property::Rotation) => 4,
+                _ => 3,
+            };
+            if vals.len() != times.len() * w {
+                return Err(Error::invalid(format!(
+                    "a sampler has {} values for {} times of width {w}",
+                    vals.len(),
+                    times.len()
+                )));
+            }
+            if ch.target.node.value() >= out.len() {
+                return Err(Error::invalid("a channel's node index is out of range"));
+            }
             let k = times.partition_point(|&x| f64::from(x) <= t);
             let step = matches!(s.interpolation, Valid(gj::animation::Interpolation::Step));
             let value: Vec<f64> = if k == 0 {

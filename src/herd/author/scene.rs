@@ -247,6 +247,11 @@ impl Scene {
 #[cfg(feature = "video")]
 fn mask_cells(path: &Path, obstacles: &mut Array2<u8>) -> Result<()> {
     use opencv::prelude::*;
+    // OpenCV logs a WARN line of its own for an unreadable file: the error below says it once.
+    let _ = opencv::core::set_log_level(opencv::core::LogLevel::LOG_LEVEL_SILENT);
+    if !path.is_file() {
+        return Err(Error::file(path, "cannot read: no such file"));
+    }
     let img = opencv::imgcodecs::imread(path.as_os_str(), opencv::imgcodecs::IMREAD_GRAYSCALE)
         .map_err(|e| Error::file(path, format!("OpenCV: {}", e.message)))?;
     if img.empty() {
@@ -336,11 +341,8 @@ fn obstacle_cells(file: &SceneFile, grid: &Grid, path: &Path) -> Result<Array2<u
         obstacles[[c[1] as usize, c[0] as usize]] = 1;
     }
     for (k, poly) in o.polygons.iter().enumerate() {
-        if poly.len() < 3 {
-            return Err(bad(
-                &format!("obstacles.polygons[{k}]"),
-                "a polygon needs at least 3 points",
-            ));
+        if let Some(m) = crate::data::polygon::polygon_problem(poly) {
+            return Err(bad(&format!("obstacles.polygons[{k}]"), &m));
         }
         for iy in 0..ny {
             for ix in 0..nx {
@@ -453,11 +455,8 @@ fn region_params(file: &SceneFile, path: &Path) -> Result<Vec<Params>> {
         None => Params::default(),
     }];
     for (k, r) in file.regions.iter().enumerate() {
-        if r.polygon.len() < 3 {
-            return Err(bad(
-                &format!("regions[{k}].polygon"),
-                "a polygon needs at least 3 points",
-            ));
+        if let Some(m) = crate::data::polygon::polygon_problem(&r.polygon) {
+            return Err(bad(&format!("regions[{k}].polygon"), &m));
         }
         if let Some(c) = r.speed_cap {
             if !(c.is_finite() && c > 0.0) {

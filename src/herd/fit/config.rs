@@ -228,6 +228,16 @@ impl FitConfig {
                 ),
             ));
         }
+        let steps = self.frames.end.saturating_sub(self.frames.start + 1);
+        if self.window > steps {
+            return Err(Error::config(
+                "window",
+                format!(
+                    "{} steps is longer than the {steps} steps of frames {}..{}",
+                    self.window, self.frames.start, self.frames.end
+                ),
+            ));
+        }
         let total: f64 = (self.frames.start..self.frames.end)
             .map(|k| clip.count(k))
             .sum();

@@ -106,6 +106,13 @@ impl FitJob {
         if self.uncertainty.enabled {
             self.uncertainty.check()?;
         }
+        if crate::data::atomic::is_stdout(&self.out) && (self.log.is_none() || self.plot.is_none())
+        {
+            return Err(Error::config(
+                "out",
+                "'-' (standard output) needs the log and the plot given paths of their own",
+            ));
+        }
         Ok(())
     }
 }
@@ -164,6 +171,16 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
     }
+    if job.resume {
+        let file = job.checkpoint.as_ref().map(|d| d.join("checkpoint.json"));
+        match file {
+            None => return Err(Error::config("resume", "needs a checkpoint folder")),
+            Some(f) if !f.is_file() => {
+                return Err(Error::file(&f, "no checkpoint to resume from"));
+            }
+            Some(_) => {}
+        }
+    }
     let ckpt = match &job.checkpoint {
         Some(d) => {
             std::fs::create_dir_all(d)
@@ -195,6 +212,10 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
             "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
         ));
         progress.inc(1);
+    })
+    .map_err(|e| match job.clips.as_slice() {
+        [one] => e.in_file(one),
+        _ => e,
     })?;
     progress.finish();
     let mut start_params = init.clone();

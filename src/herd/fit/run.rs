@@ -186,6 +186,38 @@ fn fit_inner(
     })
 }
 
+/// The fit-loss guard (issue #14): a NaN/inf loss or gradient stops the fit with one line naming
+/// the epoch, the window and the likely cause, before the optimiser step, so θ, the checkpoint of
+/// the last finished epoch and every output stay as they were (the optimiser's own rule would
+/// otherwise take a random step past a non-finite gradient, §6.1).
+fn check_finite_step(
+    epoch: usize,
+    clip: usize,
+    window: std::ops::Range<usize>,
+    losses: [f64; 3],
+    g: &[f64; N_PARAMS],
+) -> Result<()> {
+    let bad_loss = losses.iter().any(|v| !v.is_finite());
+    let bad_grad = g.iter().position(|v| !v.is_finite());
+    if !bad_loss && bad_grad.is_none() {
+        return Ok(());
+    }
+    let what = match (bad_loss, bad_grad) {
+        (true, _) => format!(
+            "the loss is not finite (E_mean {}, E_var {}, E_fields {})",
+            losses[0], losses[1], losses[2]
+        ),
+        (false, Some(p)) => format!("the gradient of parameter {p} is {}", g[p]),
+        (false, None) => unreachable!("checked above"),
+    };
+    Err(Error::invalid(format!(
+        "epoch {epoch}, clip #{clip}, window frames {}..{}: {what}; likely cause: extreme values in \
+         the clip's fields (density, velocity, fps) or a step size (lr) too large for them; \
+         the last finished epoch's checkpoint is kept",
+        window.start, window.end
+    )))
+}
+
 /// The gradient of `loss` with respect to `theta` (zeros where none reaches it).
 fn grad_of(loss: Tensor<1>, theta: &Tensor<1>) -> Result<[f64; N_PARAMS]> {
     let grads = loss.backward();
@@ -282,6 +314,7 @@ impl<'a> FitRun<'a> {
                         false => 0.0,
                     };
                     let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
+                    check_finite_step(epoch, ci, f..f + w, [em, ev, ef], &g)?;
                     if self.probe {
                         learnt.probes.push((value, g));
                     }

@@ -235,6 +235,15 @@ pub fn validate(
             "the held-out part {start}..{nf} has fewer than 2 frames"
         )));
     }
+    if cfg.warmup > start {
+        return Err(Error::config(
+            "warmup",
+            format!(
+                "{} frames reach before the clip: the held-out part starts at frame {start}",
+                cfg.warmup
+            ),
+        ));
+    }
     let device = cpu_device(Precision::F32)?;
     // The leaders' guidance of every frame, the same for every set and seed.
     let guidance = guidance_fields(clip, cfg.guidance_scale);

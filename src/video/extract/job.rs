@@ -41,6 +41,12 @@ impl Default for ExtractJob {
 impl ExtractJob {
     /// Checks the settings ([`ExtractConfig::check`]).
     pub fn check(&self) -> Result<()> {
+        if self.preview.is_some() && self.preview_every == 0 {
+            return Err(crate::error::Error::config(
+                "preview_every",
+                "0 must be ≥ 1 (one preview every N frames)",
+            ));
+        }
         self.config.check()
     }
 }

@@ -137,7 +137,7 @@ pub fn extract(
         Some([a, b]) => (a, b),
         None => (0, usize::MAX),
     };
-    if vid.count > 0 && first >= vid.count {
+    if vid.count > 0 && (first >= vid.count || (last != usize::MAX && last > vid.count)) {
         return Err(Error::config(
             "frames",
             format!(
@@ -165,6 +165,18 @@ pub fn extract(
     let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
     let raw = camera::camera_path(&mut vid, path, cfg, (first, last), &mut progress)?;
     let frames = raw.len();
+    // A truncated file: fewer frames readable than its header declares (one frame of tolerance
+    // for containers whose count is estimated from the duration).
+    let declared = last.min(vid.count).saturating_sub(first);
+    if vid.count > 0 && frames + 1 < declared {
+        return Err(Error::file(
+            path,
+            format!(
+                "truncated or damaged: only {frames} of the {declared} frames its header declares                  in {first}..{} are readable",
+                first + declared
+            ),
+        ));
+    }
     if frames < 2 {
         return Err(Error::file(
             path,
