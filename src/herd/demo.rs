@@ -8,7 +8,11 @@
 use crate::backend::Precision;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::fit::{fit, write_log, FitConfig, LossKind, Optimizer, Settle, GUIDANCE_SCALE};
+use crate::herd::fit::identify::summary;
+use crate::herd::fit::{
+    fit, identify, write_log, FitConfig, LossKind, Optimizer, Settle, UncertaintyConfig,
+    GUIDANCE_SCALE,
+};
 use crate::herd::params::{param_names, Params};
 use crate::herd::synth::{write_clip, SynthJob, SynthVideo};
 use crate::herd::validate::{self, Report, ValidateConfig, ValidateJob};
@@ -31,7 +35,6 @@ pub struct DemoSummary {
     pub fitted: Params,
     /// The identifiability summary of the fitted set (issue #15 item 2), printed after the
     /// held-out errors when present.
-    // IDENTIFIABILITY HOOK: the fit's identifiability report (branch fit2) is wired in here.
     pub identifiability: Option<String>,
     /// The side-by-side video of the clip and the fitted set's simulation (with OpenCV).
     pub video: Option<PathBuf>,
@@ -99,8 +102,19 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
         progress.inc(1);
     })?;
     progress.finish();
+    // What the clip determines at the fitted point (issue #15 item 2), as `herdfit fit` reports it.
+    let ucfg = UncertaintyConfig::default();
+    let uncertainty = identify(
+        &[&clip],
+        &start.with_vec(&res.params.to_vec()),
+        &cfg,
+        &ucfg,
+        progress,
+    )?;
+    let identifiability = summary(&uncertainty, &res.params.to_vec());
     let params_path = out.join("params.json");
     let mut fitted = res.params.clone();
+    fitted.uncertainty = Some(uncertainty);
     fitted.provenance = Some(serde_json::json!({
         "source": "demo fit",
         "clip": clip_dir.display().to_string(),
@@ -140,7 +154,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
         truth,
         start,
         fitted: res.params,
-        identifiability: None,
+        identifiability: Some(identifiability),
         video,
         seconds: t0.elapsed().as_secs_f64(),
     })
