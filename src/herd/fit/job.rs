@@ -172,7 +172,15 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         check_writable(p)?;
     }
     if job.resume {
-        let file = job.checkpoint.as_ref().map(|d| d.join("checkpoint.json"));
+        // With the global phase the first candidate's folder holds the first checkpoint.
+        let first = match cfg.global.is_off() {
+            true => std::path::PathBuf::new(),
+            false => "start-0".into(),
+        };
+        let file = job
+            .checkpoint
+            .as_ref()
+            .map(|d| d.join(&first).join("checkpoint.json"));
         match file {
             None => return Err(Error::config("resume", "needs a checkpoint folder")),
             Some(f) if !f.is_file() => {
