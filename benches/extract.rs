@@ -1,6 +1,8 @@
 //! Extraction throughput at 1280×720 (criterion): a synthetic overhead video of 1000 agents,
 //! 50 frames through a moving camera, extracted with three CSRT anchors (stabilisation,
-//! segmentation, Farneback flow, fields). Frames per second = 50 / time per iteration.
+//! segmentation, Farneback flow, fields), with no settings at all (automatic calibration and
+//! feature registration, issue #16), and as if the camera were static (no stabilisation).
+//! Frames per second = 50 / time per iteration.
 //!
 //! `cargo bench --bench extract`
 
@@ -53,8 +55,8 @@ fn bench(c: &mut Criterion) {
     .unwrap();
     pending.commit().unwrap();
     let ex = ExtractConfig {
-        grid: 32,
-        body_length_px: 16.0,
+        grid: Some(32),
+        body_length_px: Some(16.0),
         body_colour: Some([235, 235, 225]),
         anchors: vec![[850, 60, 80, 80], [850, 580, 80, 80], [950, 320, 80, 80]],
         ..ExtractConfig::default()
@@ -64,8 +66,15 @@ fn bench(c: &mut Criterion) {
     g.bench_function("50_frames_3_anchors", |b| {
         b.iter(|| extract(&video, &ex, None, |_, _, _| {}).unwrap())
     });
+    // No settings at all: threshold, body size, grid estimated; the camera registered on the
+    // background's features (issue #16).
+    let auto = ExtractConfig::default();
+    g.bench_function("50_frames_automatic", |b| {
+        b.iter(|| extract(&video, &auto, None, |_, _, _| {}).unwrap())
+    });
     let still = ExtractConfig {
         anchors: vec![],
+        stabilise: false,
         ..ex.clone()
     };
     g.bench_function("50_frames_static", |b| {

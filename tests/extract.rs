@@ -3,110 +3,12 @@
 #![cfg(feature = "video")]
 
 mod common;
+#[path = "common/score.rs"]
+mod score;
 use common::{herdfit, ok, s};
-use herdfit::data::agents::AgentRow;
-use herdfit::data::{ClipFields, Grid};
-use herdfit::measure::rasterise;
-use ndarray::Array2;
+use herdfit::data::ClipFields;
+use score::{read_traj, score};
 use std::path::{Path, PathBuf};
-
-fn read_traj(path: &Path) -> Vec<Vec<AgentRow>> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut frames: Vec<Vec<AgentRow>> = Vec::new();
-    for l in text.lines().skip(1) {
-        let c: Vec<&str> = l.split(',').collect();
-        let f: usize = c[0].parse().unwrap();
-        if frames.len() <= f {
-            frames.push(Vec::new());
-        }
-        frames[f].push(AgentRow {
-            id: c[2].parse().unwrap(),
-            x: c[3].parse().unwrap(),
-            y: c[4].parse().unwrap(),
-            vx: c[5].parse().unwrap(),
-            vy: c[6].parse().unwrap(),
-        });
-    }
-    frames
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-/// (median per-frame Pearson r of density, median direction error in degrees, relative error of
-/// the mean speed) of an extraction against the rasterised truth.
-pub fn score(
-    extracted: &ClipFields,
-    truth_traj: &[Vec<AgentRow>],
-    truth_speed: f64,
-) -> (f64, f64, f64) {
-    let m = &extracted.meta;
-    let grid = Grid {
-        origin: [0.0, 0.0],
-        cell_size: m.cell_size,
-        nx: m.nx,
-        ny: m.ny,
-    };
-    let truth = rasterise(
-        truth_traj,
-        grid,
-        m.fps,
-        Array2::zeros((m.ny, m.nx)),
-        serde_json::Value::Null,
-    )
-    .unwrap();
-    let mut rs = Vec::new();
-    let mut errs = Vec::new();
-    for f in 0..m.frames {
-        let a: Vec<f64> = extracted
-            .density
-            .index_axis(ndarray::Axis(0), f)
-            .iter()
-            .map(|&v| v as f64)
-            .collect();
-        let b: Vec<f64> = truth
-            .density
-            .index_axis(ndarray::Axis(0), f)
-            .iter()
-            .map(|&v| v as f64)
-            .collect();
-        let (ma, mb) = (
-            a.iter().sum::<f64>() / a.len() as f64,
-            b.iter().sum::<f64>() / b.len() as f64,
-        );
-        let cov: f64 = a.iter().zip(&b).map(|(x, y)| (x - ma) * (y - mb)).sum();
-        let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-        let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-        rs.push(cov / (va * vb).sqrt());
-        for iy in 0..m.ny {
-            for ix in 0..m.nx {
-                if truth.density[[f, iy, ix]] > 0.0 && extracted.density[[f, iy, ix]] > 0.0 {
-                    let u = [
-                        truth.velocity[[f, iy, ix, 0]] as f64,
-                        truth.velocity[[f, iy, ix, 1]] as f64,
-                    ];
-                    let v = [
-                        extracted.velocity[[f, iy, ix, 0]] as f64,
-                        extracted.velocity[[f, iy, ix, 1]] as f64,
-                    ];
-                    if u[0].hypot(u[1]) > 1e-6 && v[0].hypot(v[1]) > 1e-6 {
-                        let a = (u[0] * v[1] - u[1] * v[0])
-                            .abs()
-                            .atan2(u[0] * v[0] + u[1] * v[1]);
-                        errs.push(a.to_degrees());
-                    }
-                }
-            }
-        }
-    }
-    (
-        median(rs),
-        median(errs),
-        (m.speed.mean - truth_speed).abs() / truth_speed,
-    )
-}
 
 fn synth_video(dir: &Path, name: &str, camera: bool) -> (PathBuf, PathBuf) {
     let clip = dir.join(name);
@@ -171,7 +73,8 @@ fn synthetic_videos_extract_to_the_true_fields() {
     let truth = read_traj(&clip.join("trajectories.csv"));
     let truth_speed = ClipFields::load(&clip).unwrap().meta.speed.mean;
     let still = extract(d, &video, "ex-still", false);
-    let (r, dir_err, speed_err) = score(&still, &truth, truth_speed);
+    let sc = score(&still, &truth, truth_speed);
+    let (r, dir_err, speed_err) = (sc.r, sc.dir_err, sc.speed_err);
     eprintln!(
         "static: r {r:.3}, direction {dir_err:.2}°, speed {:.1}%",
         speed_err * 100.0
@@ -186,7 +89,8 @@ fn synthetic_videos_extract_to_the_true_fields() {
         std::fs::read(clip_m.join("trajectories.csv")).unwrap()
     );
     let moving = extract(d, &video_m, "ex-moving", true);
-    let (rm, dm, sm) = score(&moving, &truth, truth_speed);
+    let sc = score(&moving, &truth, truth_speed);
+    let (rm, dm, sm) = (sc.r, sc.dir_err, sc.speed_err);
     eprintln!(
         "moving: r {rm:.3}, direction {dm:.2}°, speed {:.1}%",
         sm * 100.0

@@ -209,8 +209,8 @@ fn fields_of(
         preview: Some(out.join("preview")),
         preview_every: 60,
         config: ExtractConfig {
-            grid: 16,
-            body_length_px: 12.0,
+            grid: Some(16),
+            body_length_px: Some(12.0),
             body_colour: Some([235, 235, 225]),
             ..ExtractConfig::default()
         },

@@ -3,6 +3,17 @@
 use crate::cli::args::{parse_range, parse_rgb};
 use crate::error::{Error, Result};
 use clap::Args;
+
+/// An animal count on one frame (the library's `UserCount`; mirrored here so that the command
+/// line builds without the `video` feature).
+#[cfg(feature = "video")]
+use crate::video::extract::UserCount;
+#[cfg(not(feature = "video"))]
+#[derive(Clone, Debug)]
+pub struct UserCount {
+    pub animals: usize,
+    pub frame: usize,
+}
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -16,10 +27,10 @@ pub struct ExtractArgs {
     /// given on the command line override it.
     #[arg(long, value_name = "extract.json")]
     pub config: Option<PathBuf>,
-    /// Cells along the longer side of the frame.
+    /// Cells along the longer side of the frame (default: cells of 3 body lengths).
     #[arg(long, value_name = "N")]
     pub grid: Option<usize>,
-    /// Body length in pixels.
+    /// Body length in pixels (default: estimated from the isolated animals).
     #[arg(long, value_name = "L")]
     pub body_length_px: Option<f64>,
     /// Body colour R,G,B (herd pixels must also be within --colour-threshold of it).
@@ -27,14 +38,23 @@ pub struct ExtractArgs {
     pub body_colour: Option<[u8; 3]>,
     #[arg(long, value_name = "T")]
     pub colour_threshold: Option<f64>,
-    /// Per-channel difference to the background above which a pixel can be herd.
+    /// Per-channel difference to the background above which a pixel can be herd (default:
+    /// Otsu's threshold above the noise).
     #[arg(long, value_name = "T")]
     pub background_threshold: Option<f64>,
-    /// Body pixels per animal (default: an ellipse of L × 0.4 L).
+    /// Body pixels per animal (default: the median area of the isolated animals).
     #[arg(long, value_name = "NBP")]
     pub body_pixels: Option<f64>,
+    /// N animals counted on one frame (video frame index): body pixels per animal = the herd
+    /// pixels of that frame / N.
+    #[arg(long, value_name = "N@FRAME", value_parser = parse_count)]
+    pub count: Option<UserCount>,
+    /// The camera does not move: no automatic stabilisation.
+    #[arg(long)]
+    pub static_camera: bool,
     /// Anchor rectangle x,y,w,h of the first frame tracked with CSRT (repeat for several;
-    /// `center` for the central quarter of the frame). None: a static camera.
+    /// `center` for the central quarter of the frame). None: automatic stabilisation on the
+    /// background's features.
     #[arg(long, value_name = "x,y,w,h")]
     pub anchor: Vec<String>,
     /// `auto` (temporal median of stabilised frames) or a background image.
@@ -55,6 +75,15 @@ pub struct ExtractArgs {
     /// One preview every N frames.
     #[arg(long, value_name = "N", default_value_t = 25)]
     pub preview_every: usize,
+}
+
+/// A `--count` value `N@FRAME`.
+fn parse_count(s: &str) -> std::result::Result<UserCount, String> {
+    let bad = || format!("'{s}' is not N@FRAME (animals counted on a frame, e.g. 8@0)");
+    let (n, f) = s.split_once('@').ok_or_else(bad)?;
+    let animals = n.trim().parse::<usize>().map_err(|_| bad())?;
+    let frame = f.trim().parse::<usize>().map_err(|_| bad())?;
+    Ok(UserCount { animals, frame })
 }
 
 #[cfg(not(feature = "video"))]
@@ -102,11 +131,15 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
     };
     // Flags given on the command line override the settings file.
     let set = |v: &mut f64, x: Option<f64>| *v = x.unwrap_or(*v);
-    cfg.grid = a.grid.unwrap_or(cfg.grid);
-    set(&mut cfg.body_length_px, a.body_length_px);
+    cfg.grid = a.grid.or(cfg.grid);
+    cfg.body_length_px = a.body_length_px.or(cfg.body_length_px);
     cfg.body_colour = a.body_colour.or(cfg.body_colour);
     set(&mut cfg.colour_threshold, a.colour_threshold);
-    set(&mut cfg.background_threshold, a.background_threshold);
+    cfg.background_threshold = a.background_threshold.or(cfg.background_threshold);
+    cfg.count = a.count.or(cfg.count);
+    if a.static_camera {
+        cfg.stabilise = false;
+    }
     cfg.body_pixels = a.body_pixels.or(cfg.body_pixels);
     cfg.smooth = a.smooth.unwrap_or(cfg.smooth);
     cfg.frames = a.frames.map(|(x, y)| [x, y]).or(cfg.frames);
@@ -115,9 +148,6 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
         None => {}
         Some("auto") => cfg.background = None,
         Some(p) => cfg.background = Some(PathBuf::from(p)),
-    }
-    if a.config.is_none() && a.body_length_px.is_none() {
-        return Err(Error::invalid("give --body-length-px (or --config)"));
     }
     if !a.anchor.is_empty() {
         cfg.anchors = a
@@ -146,11 +176,19 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
         "obstacles" => a.obstacles.is_some(),
         "frames" => a.frames.is_some(),
         "smooth" => a.smooth.is_some(),
+        "count" => a.count.is_some(),
+        "stabilise" => a.static_camera,
         _ => false,
     };
     let settings = settings.as_ref().map(|(p, j)| (p.as_path(), j));
-    let ex = run(&job, &mut crate::cli::Bars::default())
-        .map_err(|e| with_settings(e, &[("anchors", "--anchor")], settings, &given))?;
+    let ex = run(&job, &mut crate::cli::Bars::default()).map_err(|e| {
+        with_settings(
+            e,
+            &[("anchors", "--anchor"), ("stabilise", "--static-camera")],
+            settings,
+            &given,
+        )
+    })?;
     println!("{}", ex.summary(&job.out));
     Ok(())
 }

@@ -81,32 +81,41 @@ impl<'a> Geometry<'a> {
     }
 }
 
+/// Stabilised frames sampled over the range at the processing resolution: the background's
+/// median and the calibration are taken from them.
+pub(super) struct Sample {
+    /// (frame index within the range, BGR bytes, valid-pixel mask: non-zero where the warped
+    /// frame has data).
+    pub frames: Vec<(usize, Vec<u8>, Vec<u8>)>,
+}
+
 /// The background at the processing resolution (BGR bytes): `cfg.background`, or the per-pixel
-/// median of up to 31 sampled stabilised frames of `first..first + frames`.
+/// median of up to 31 sampled stabilised frames of `first..first + frames`; and the sample
+/// (which also holds frame `extra` of the range when given: the frame of a user count).
 pub(super) fn background(
     vid: &mut Video,
     geom: &Geometry,
     cfg: &ExtractConfig,
     camera: &[Similarity],
     (first, frames): (usize, usize),
+    extra: Option<usize>,
     progress: &mut impl FnMut(&str, usize, usize),
-) -> Result<Vec<u8>> {
+) -> Result<(Vec<u8>, Sample)> {
     let path = geom.path;
     let fail = cv(path);
-    if let Some(bg) = &cfg.background {
-        let img = geom.image(bg, imgcodecs::IMREAD_COLOR)?;
-        let mut out = Mat::default();
-        geom.warp(&img, &Similarity::IDENTITY, &mut out, imgproc::INTER_AREA)?;
-        return Ok(out.data_bytes().map_err(cv(path))?.to_vec());
-    }
     let samples = frames.min(31);
-    let pick: Vec<usize> = (0..samples)
+    let mut pick: Vec<usize> = (0..samples)
         .map(|k| k * (frames - 1) / (samples - 1).max(1))
         .collect();
+    let median_of = pick.clone();
+    if let Some(e) = extra {
+        pick.push(e);
+    }
     vid.rewind()?;
     vid.skip(first)?;
-    let mut stack: Vec<Vec<u8>> = Vec::with_capacity(samples);
-    let mut masks: Vec<Vec<u8>> = Vec::with_capacity(samples);
+    let mut sample = Sample {
+        frames: Vec::with_capacity(pick.len()),
+    };
     let ones = geom.ones()?;
     for (i, cam) in camera.iter().enumerate() {
         let Some(f) = vid.next()? else { break };
@@ -114,17 +123,31 @@ pub(super) fn background(
             let (mut o, mut m) = (Mat::default(), Mat::default());
             geom.warp(&f, cam, &mut o, imgproc::INTER_LINEAR)?;
             geom.warp(&ones, cam, &mut m, imgproc::INTER_NEAREST)?;
-            stack.push(o.data_bytes().map_err(&fail)?.to_vec());
-            masks.push(m.data_bytes().map_err(&fail)?.to_vec());
+            sample.frames.push((
+                i,
+                o.data_bytes().map_err(&fail)?.to_vec(),
+                m.data_bytes().map_err(&fail)?.to_vec(),
+            ));
         }
         progress("background", i + 1, frames);
     }
+    if let Some(bg) = &cfg.background {
+        let img = geom.image(bg, imgcodecs::IMREAD_COLOR)?;
+        let mut out = Mat::default();
+        geom.warp(&img, &Similarity::IDENTITY, &mut out, imgproc::INTER_AREA)?;
+        return Ok((out.data_bytes().map_err(cv(path))?.to_vec(), sample));
+    }
+    let stack: Vec<&(usize, Vec<u8>, Vec<u8>)> = sample
+        .frames
+        .iter()
+        .filter(|(i, _, _)| median_of.contains(i))
+        .collect();
     let mut bg = vec![0u8; geom.pw * geom.ph * 3];
     let mut vals = Vec::with_capacity(stack.len());
     for p in 0..geom.pw * geom.ph {
         for c in 0..3 {
             vals.clear();
-            for (s, m) in stack.iter().zip(&masks) {
+            for (_, s, m) in &stack {
                 if m[p] > 0 {
                     vals.push(s[p * 3 + c]);
                 }
@@ -135,7 +158,7 @@ pub(super) fn background(
             }
         }
     }
-    Ok(bg)
+    Ok((bg, sample))
 }
 
 /// The grid of an extraction: square cells of max(W, H) / N video pixels over the first frame,

@@ -90,6 +90,22 @@ impl Similarity {
     }
 }
 
+/// The largest distance a corner of the `w × h` frame moves under `s` (pixels).
+pub(super) fn corner_shift(s: &Similarity, w: usize, h: usize) -> f64 {
+    [
+        [0.0, 0.0],
+        [w as f64, 0.0],
+        [0.0, h as f64],
+        [w as f64, h as f64],
+    ]
+    .iter()
+    .map(|&c| {
+        let q = s.apply(c);
+        (q[0] - c[0]).hypot(q[1] - c[1])
+    })
+    .fold(0.0, f64::max)
+}
+
 /// The camera path smoothed over a centred window of `window` frames (log-scale, angle and
 /// translation averaged).
 pub(super) fn smooth_path(raw: &[Similarity], window: usize) -> Vec<Similarity> {

@@ -5,11 +5,11 @@
 //! variance (paper §4, §6.2).
 
 use super::background::{CellGrid, Geometry};
+use super::calibrate::blobs;
 use super::camera::Similarity;
 use super::decode::{cv, forward, Video};
 use super::preview::preview_png;
 use super::ExtractConfig;
-use crate::data::clip::BODY_WIDTH_BL;
 use crate::error::Result;
 use ndarray::{Array3, Array4};
 use opencv::core::{Mat, Point, Scalar, Size};
@@ -34,44 +34,73 @@ pub(super) struct Sums {
     pub previews: Vec<(String, Vec<u8>)>,
 }
 
-/// What segmentation needs, built once.
-struct Segmenter<'a> {
-    geom: &'a Geometry<'a>,
-    cfg: &'a ExtractConfig,
-    background: &'a [u8],
-    ones: Mat,
-    kernel: Mat,
-    /// Morphological opening of the mask when a body is wide enough (≥ 6 processing pixels).
-    morph: bool,
+/// The largest per-channel difference between the BGR pixel `p` of `px` and of `bg`.
+pub(super) fn difference(px: &[u8], bg: &[u8], p: usize) -> u8 {
+    (0..3)
+        .map(|c| px[p * 3 + c].abs_diff(bg[p * 3 + c]))
+        .max()
+        .unwrap_or(0)
 }
 
-impl Segmenter<'_> {
-    /// Stabilises frame `f` by the camera `cam`, segments it and converts it to grey.
-    fn frame(&self, f: &Mat, cam: &Similarity) -> Result<Stage> {
+/// What segmentation needs, built once: the background, the threshold on the difference to it,
+/// the optional colour test, a morphological opening for wide bodies and the smallest component
+/// kept (smaller ones are compression specks, not animals).
+pub(super) struct Segmenter<'a> {
+    geom: &'a Geometry<'a>,
+    background: &'a [u8],
+    threshold: f64,
+    colour: Option<([u8; 3], f64)>,
+    /// Morphological opening of the mask (when a body is ≥ 6 processing pixels wide).
+    morph: bool,
+    /// Components smaller than this (processing pixels) are dropped.
+    min_area: usize,
+    ones: Mat,
+    kernel: Mat,
+}
+
+impl<'a> Segmenter<'a> {
+    pub fn new(
+        geom: &'a Geometry<'a>,
+        background: &'a [u8],
+        cfg: &ExtractConfig,
+        threshold: f64,
+        morph: bool,
+        min_area: usize,
+    ) -> Result<Self> {
+        let kernel = imgproc::get_structuring_element(
+            imgproc::MORPH_ELLIPSE,
+            Size::new(3, 3),
+            Point::new(-1, -1),
+        )
+        .map_err(cv(geom.path))?;
+        Ok(Segmenter {
+            geom,
+            background,
+            threshold,
+            colour: cfg.body_colour.map(|c| (c, cfg.colour_threshold)),
+            morph,
+            min_area,
+            ones: geom.ones()?,
+            kernel,
+        })
+    }
+
+    /// The herd mask (255 = herd) of the stabilised BGR frame `px` with valid pixels `vm`.
+    pub fn mask(&self, px: &[u8], vm: &[u8]) -> Result<Vec<u8>> {
         let fail = cv(self.geom.path);
-        let (mut st, mut valid) = (Mat::default(), Mat::default());
-        self.geom.warp(f, cam, &mut st, imgproc::INTER_LINEAR)?;
-        self.geom
-            .warp(&self.ones, cam, &mut valid, imgproc::INTER_NEAREST)?;
-        let px = st.data_bytes().map_err(&fail)?;
-        let vm = valid.data_bytes().map_err(&fail)?;
         let mut herd = vec![0u8; self.geom.pw * self.geom.ph];
         for p in 0..self.geom.pw * self.geom.ph {
             if vm[p] == 0 {
                 continue;
             }
-            let (b, g, r) = (px[p * 3] as f64, px[p * 3 + 1] as f64, px[p * 3 + 2] as f64);
-            let d = (b - self.background[p * 3] as f64)
-                .abs()
-                .max((g - self.background[p * 3 + 1] as f64).abs())
-                .max((r - self.background[p * 3 + 2] as f64).abs());
-            let mut on = d > self.cfg.background_threshold;
-            if let Some(c) = self.cfg.body_colour {
+            let mut on = difference(px, self.background, p) as f64 > self.threshold;
+            if let Some((c, t)) = self.colour {
+                let (b, g, r) = (px[p * 3] as f64, px[p * 3 + 1] as f64, px[p * 3 + 2] as f64);
                 let dist = ((r - c[0] as f64).powi(2)
                     + (g - c[1] as f64).powi(2)
                     + (b - c[2] as f64).powi(2))
                 .sqrt();
-                on = on && dist < self.cfg.colour_threshold;
+                on = on && dist < t;
             }
             herd[p] = if on { 255 } else { 0 };
         }
@@ -96,7 +125,23 @@ impl Segmenter<'_> {
             .map_err(&fail)?;
             herd.copy_from_slice(o.data_bytes().map_err(&fail)?);
         }
+        if self.min_area > 1 {
+            blobs(&mut herd, self.geom.pw, self.min_area, true);
+        }
+        Ok(herd)
+    }
 
+    /// Stabilises frame `f` by the camera `cam`, segments it and converts it to grey.
+    fn frame(&self, f: &Mat, cam: &Similarity) -> Result<Stage> {
+        let fail = cv(self.geom.path);
+        let (mut st, mut valid) = (Mat::default(), Mat::default());
+        self.geom.warp(f, cam, &mut st, imgproc::INTER_LINEAR)?;
+        self.geom
+            .warp(&self.ones, cam, &mut valid, imgproc::INTER_NEAREST)?;
+        let herd = self.mask(
+            st.data_bytes().map_err(&fail)?,
+            valid.data_bytes().map_err(&fail)?,
+        )?;
         let mut grey = Mat::default();
         imgproc::cvt_color(&st, &mut grey, imgproc::COLOR_BGR2GRAY, 0).map_err(&fail)?;
         Ok((st, herd, grey))
@@ -111,33 +156,17 @@ pub(super) fn pass_c(
     vid: &mut Video,
     geom: &Geometry,
     grid: &CellGrid,
-    cfg: &ExtractConfig,
+    seg: &Segmenter,
+    body_length_px: f64,
     camera: &[Similarity],
-    background: &[u8],
     (first, frames): (usize, usize),
     preview_every: Option<usize>,
     progress: &mut impl FnMut(&str, usize, usize),
 ) -> Result<Sums> {
     let (path, scale) = (geom.path, geom.scale);
-    let fail = cv(path);
-    let morph = cfg.body_length_px * BODY_WIDTH_BL * scale >= 6.0;
-    let to_bl_s = vid.fps / (cfg.body_length_px * scale);
+    let to_bl_s = vid.fps / (body_length_px * scale);
     vid.rewind()?;
     vid.skip(first)?;
-    let kernel = imgproc::get_structuring_element(
-        imgproc::MORPH_ELLIPSE,
-        Size::new(3, 3),
-        Point::new(-1, -1),
-    )
-    .map_err(&fail)?;
-    let seg = Segmenter {
-        geom,
-        cfg,
-        background,
-        ones: geom.ones()?,
-        kernel,
-        morph,
-    };
     let cells = grid.cells();
     let mut sums = Sums {
         count: vec![vec![0.0f64; cells]; frames],
@@ -152,7 +181,6 @@ pub(super) fn pass_c(
     std::thread::scope(|scope| -> Result<()> {
         let producer = {
             let tx = tx.clone();
-            let seg = &seg;
             let vid = &mut *vid;
             scope.spawn(move || {
                 for cam in camera.iter() {
@@ -275,10 +303,16 @@ impl Sums {
     /// Density (herd pixels / body pixels per animal / cell area, agents/BL²), velocity (flow
     /// sums over the smoothing window / herd pixels in it) and direction variance of every cell
     /// and frame; `body_px_proc` is the body pixels per animal at the processing resolution.
-    pub fn fields(&self, grid: &CellGrid, cfg: &ExtractConfig, body_px_proc: f64) -> Fields {
+    pub fn fields(
+        &self,
+        grid: &CellGrid,
+        smooth: usize,
+        body_length_px: f64,
+        body_px_proc: f64,
+    ) -> Fields {
         let frames = self.count.len();
-        let half = cfg.smooth / 2;
-        let area_bl = (grid.cell_px / cfg.body_length_px).powi(2);
+        let half = smooth / 2;
+        let area_bl = (grid.cell_px / body_length_px).powi(2);
         let mut density = Array3::<f32>::zeros((frames, grid.ny, grid.nx));
         let mut velocity = Array4::<f32>::zeros((frames, grid.ny, grid.nx, 2));
         let mut dir_variance = Array3::<f32>::zeros((frames, grid.ny, grid.nx));

@@ -1,5 +1,6 @@
 //! An extraction as `herdfit extract` runs it: the video, the settings, the clip folder written
-//! (`fields.npz`, `clip.json`, `camera.json`) and the optional preview folder.
+//! (`fields.npz`, `clip.json`, `camera.json`, `extract-report.png`: the calibration on one page)
+//! and the optional preview folder.
 
 use super::{extract, ExtractConfig, Extraction};
 use crate::data::atomic::AtomicDir;
@@ -100,9 +101,13 @@ pub fn run(job: &ExtractJob, progress: &mut dyn Progress) -> Result<Extraction> 
     progress.finish();
     let cams =
         serde_json::to_string_pretty(&ex.camera).map_err(|e| Error::Internal(e.to_string()))?;
+    let report = super::report::report_png(&ex.calibration, &ex.camera)?;
     ex.clip.save(
         &job.out,
-        &[("camera.json", format!("{cams}\n").into_bytes())],
+        &[
+            ("camera.json", format!("{cams}\n").into_bytes()),
+            ("extract-report.png", report),
+        ],
     )?;
     if let Some(d) = &job.preview {
         let dir = AtomicDir::create(d)?;
@@ -119,12 +124,25 @@ pub fn run(job: &ExtractJob, progress: &mut dyn Progress) -> Result<Extraction> 
 }
 
 impl Extraction {
-    /// The line `herdfit extract` prints: frames, grid, animals per frame, mean speed.
+    /// The lines `herdfit extract` prints: the calibration (each value and where it came from);
+    /// frames, grid, animals per frame, mean speed.
     pub fn summary(&self, out: &Path) -> String {
         let c = &self.clip;
         let counts: Vec<f64> = (0..c.frames()).map(|f| c.count(f)).collect();
+        let k = &self.calibration;
         format!(
-            "extract: {} frames, {}×{} cells of {:.3} BL, {:.1}–{:.1} animals per frame, mean speed {:.3} BL/s; wrote {}",
+            "calibration: body length {:.2} px ({}), {:.1} px per animal ({}), threshold {} ({}), \
+             grid {} ({}), camera {}\n\
+             extract: {} frames, {}×{} cells of {:.3} BL, {:.1}–{:.1} animals per frame, mean speed {:.3} BL/s; wrote {}",
+            k.body_length_px,
+            k.body_length_from,
+            k.body_pixels,
+            k.body_pixels_from,
+            k.threshold,
+            k.threshold_from,
+            k.grid,
+            k.grid_from,
+            k.camera,
             c.frames(),
             c.meta.nx,
             c.meta.ny,

@@ -12,41 +12,64 @@
 //! segmentation, flow, per-cell sums and fields), `preview`, and `job` (the files).
 
 mod background;
+mod calibrate;
 mod camera;
 mod decode;
 mod fields;
 mod job;
 mod preview;
+mod register;
+mod report;
 
+pub use calibrate::Calibration;
 pub use camera::Similarity;
 pub use decode::quietly;
 pub use job::{run, ExtractJob, CENTRE_ANCHOR};
 
-use crate::data::clip::BODY_WIDTH_BL;
 use crate::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
 use crate::error::{Error, Result};
 use crate::measure::speed_density_table;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// Every setting of an extraction (recorded in `clip.json`; loadable with `--config`).
+/// An animal count the user made on one frame (`--count N@frame`): N_bp = herd pixels of that
+/// frame / N.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UserCount {
+    pub animals: usize,
+    /// Frame index in the video.
+    pub frame: usize,
+}
+
+/// Every setting of an extraction (recorded in `clip.json`; loadable with `--config`). The
+/// optional ones are estimated from the video when absent (see `calibrate`); the values used are
+/// recorded in `clip.json` under `provenance.calibration`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExtractConfig {
-    /// Cells along the longer side of the frame.
-    pub grid: usize,
-    /// Body length in pixels.
-    pub body_length_px: f64,
+    /// Cells along the longer side of the frame; none: cells of [`AUTO_CELL_BL`] body lengths.
+    pub grid: Option<usize>,
+    /// Body length in pixels; none: estimated from the isolated animals.
+    pub body_length_px: Option<f64>,
     /// Body colour (RGB) for the colour-distance test; none: background difference only.
     pub body_colour: Option<[u8; 3]>,
     /// Largest Euclidean RGB distance to the body colour of a herd pixel.
     pub colour_threshold: f64,
-    /// Smallest per-channel difference to the background of a herd pixel.
-    pub background_threshold: f64,
-    /// Body pixels per animal; estimated as an ellipse of L × [`BODY_WIDTH_BL`]·L when absent.
+    /// Smallest per-channel difference to the background of a herd pixel; none: Otsu's threshold
+    /// of the difference histogram above its noise floor.
+    pub background_threshold: Option<f64>,
+    /// Body pixels per animal N_bp (§4); none: from `count`, else the median area of the
+    /// isolated animals.
     pub body_pixels: Option<f64>,
-    /// Anchor rectangles x,y,w,h in the first frame; empty: static camera.
+    /// An animal count on one frame to derive N_bp from.
+    pub count: Option<UserCount>,
+    /// Anchor rectangles x,y,w,h in the first frame tracked with CSRT; empty: automatic
+    /// stabilisation (or a static camera without `stabilise`).
     pub anchors: Vec<[i32; 4]>,
+    /// Without anchors, register every frame on the background features (eq. 1); false: the
+    /// camera is static.
+    pub stabilise: bool,
     /// Background image; none: per-pixel temporal median of sampled stabilised frames.
     pub background: Option<PathBuf>,
     /// Obstacle mask (non-zero = obstacle), the size of the video frame.
@@ -60,16 +83,25 @@ pub struct ExtractConfig {
     pub max_side: usize,
 }
 
+/// Largest shift (video pixels) of a frame corner, in 90 % of the frames, under a registered
+/// camera that is still taken for a static camera.
+pub const STILL_PX: f64 = 0.5;
+
+/// Cell side (body lengths) of the automatic grid.
+pub const AUTO_CELL_BL: f64 = 3.0;
+
 impl Default for ExtractConfig {
     fn default() -> Self {
         ExtractConfig {
-            grid: 20,
-            body_length_px: 10.0,
+            grid: None,
+            body_length_px: None,
             body_colour: None,
             colour_threshold: 60.0,
-            background_threshold: 30.0,
+            background_threshold: None,
             body_pixels: None,
+            count: None,
             anchors: Vec::new(),
+            stabilise: true,
             background: None,
             obstacles: None,
             frames: None,
@@ -83,9 +115,14 @@ impl ExtractConfig {
     /// Checks the settings on their own (the frames and anchors are checked against the video
     /// when it is opened); errors name the key.
     pub fn check(&self) -> Result<()> {
-        crate::error::check_counts(&[("grid", self.grid), ("smooth", self.smooth)])?;
-        crate::limits::check_grid("grid", self.grid, self.grid)?;
-        crate::error::check_positive(&[("body_length_px", self.body_length_px)])?;
+        crate::error::check_counts(&[("smooth", self.smooth)])?;
+        if let Some(g) = self.grid {
+            crate::error::check_counts(&[("grid", g)])?;
+            crate::limits::check_grid("grid", g, g)?;
+        }
+        if let Some(l) = self.body_length_px {
+            crate::error::check_positive(&[("body_length_px", l)])?;
+        }
         if let Some([a, b]) = self.frames {
             if a >= b {
                 return Err(Error::config("frames", format!("{a}..{b} is empty")));
@@ -96,12 +133,28 @@ impl ExtractConfig {
                 return Err(Error::config("body_pixels", format!("{n} must be > 0")));
             }
         }
-        for (key, v) in [
-            ("colour_threshold", self.colour_threshold),
+        if let Some(c) = &self.count {
+            if c.animals == 0 {
+                return Err(Error::config("count", "0 animals: must be ≥ 1"));
+            }
+            if let Some([a, b]) = self.frames {
+                if !(a..b).contains(&c.frame) {
+                    return Err(Error::config(
+                        "count",
+                        format!("frame {} is outside the frames {a}..{b}", c.frame),
+                    ));
+                }
+            }
+        }
+        let thresholds = [
+            ("colour_threshold", Some(self.colour_threshold)),
             ("background_threshold", self.background_threshold),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(Error::config(key, format!("{v} must be ≥ 0")));
+        ];
+        for (key, v) in thresholds {
+            if let Some(v) = v {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(Error::config(key, format!("{v} must be ≥ 0")));
+                }
             }
         }
         if self.max_side < 16 {
@@ -114,22 +167,30 @@ impl ExtractConfig {
     }
 }
 
+/// `b⁻¹ ∘ a`: the identity where the two cameras agree.
+fn compose_inverse(a: &Similarity, b: &Similarity) -> Similarity {
+    let inv = b.inverse();
+    Similarity {
+        scale: inv.scale * a.scale,
+        angle: inv.angle + a.angle,
+        t: inv.apply(a.t),
+    }
+}
+
 /// Result of an extraction.
 pub struct Extraction {
     pub clip: ClipFields,
+    /// The calibration used (given or estimated).
+    pub calibration: Calibration,
     /// Camera path (frame → first frame), smoothed.
     pub camera: Vec<Similarity>,
     /// Preview PNGs to write (name, bytes).
     pub previews: Vec<(String, Vec<u8>)>,
 }
 
-/// Runs the extraction. `progress(stage, done, total)` after every processed frame of each pass.
-pub fn extract(
-    path: &Path,
-    cfg: &ExtractConfig,
-    preview_every: Option<usize>,
-    mut progress: impl FnMut(&str, usize, usize),
-) -> Result<Extraction> {
+/// Opens the video and checks the frame range and anchors against it; the video is at the first
+/// frame of the range `first..last`.
+fn open_range(path: &Path, cfg: &ExtractConfig) -> Result<(decode::Video, usize, usize)> {
     cfg.check()?;
     let mut vid = decode::open(path)?;
     let (w, h) = (vid.w, vid.h);
@@ -161,9 +222,36 @@ pub fn extract(
             format!("{first}..{last} starts past the end of the video"),
         ));
     }
-    let t_start = std::time::Instant::now();
-    let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
-    let raw = camera::camera_path(&mut vid, path, cfg, (first, last), &mut progress)?;
+    Ok((vid, first, last))
+}
+
+/// Pass A: the smoothed camera path of the range (registered, from anchors, or static), what it
+/// came from, and with anchors the cross-check against the registration.
+#[allow(clippy::type_complexity)]
+fn camera_pass(
+    vid: &mut decode::Video,
+    path: &Path,
+    cfg: &ExtractConfig,
+    (first, last): (usize, usize),
+    progress: &mut impl FnMut(&str, usize, usize),
+) -> Result<(Vec<Similarity>, &'static str, Option<serde_json::Value>)> {
+    let (w, h) = (vid.w, vid.h);
+    let registered = cfg.anchors.is_empty() && cfg.stabilise;
+    let raw = if registered {
+        register::camera_path(vid, path, cfg, (first, last), &mut *progress)?
+    } else {
+        camera::camera_path(vid, path, cfg, (first, last), &mut *progress)?
+    };
+    if cfg.frames.is_none() && vid.count > 0 && raw.len() < vid.count {
+        return Err(Error::file(
+            path,
+            format!(
+                "truncated: only {} of the {} frames its header lists could be read",
+                raw.len(),
+                vid.count
+            ),
+        ));
+    }
     let frames = raw.len();
     // A truncated file: fewer frames readable than its header declares (one frame of tolerance
     // for containers whose count is estimated from the duration).
@@ -183,41 +271,121 @@ pub fn extract(
             format!("only {frames} frame(s) readable in the range: need ≥ 2"),
         ));
     }
+    let mut camera = camera::smooth_path(&raw, cfg.smooth);
+    // Anchors, cross-checked against the automatic registration: the largest distance between
+    // the two paths at a frame corner.
+    let cross_check = if !cfg.anchors.is_empty() && cfg.stabilise {
+        vid.rewind()?;
+        vid.skip(first)?;
+        match register::camera_path(vid, path, cfg, (first, last), &mut *progress) {
+            Ok(auto) => {
+                let auto = camera::smooth_path(&auto, cfg.smooth);
+                let worst = camera
+                    .iter()
+                    .zip(&auto)
+                    .map(|(a, b)| camera::corner_shift(&compose_inverse(a, b), w, h))
+                    .fold(0.0, f64::max);
+                Some(serde_json::json!(worst))
+            }
+            Err(e) => Some(serde_json::json!(e.to_string())),
+        }
+    } else {
+        None
+    };
+    // A registered camera that moves the frame corners by less than half a pixel in 90 % of the
+    // frames is a static one (the rest: the herd's pull in the first frames, see `register`):
+    // the identity, no resampling of the frames.
+    let mut shifts: Vec<f64> = camera
+        .iter()
+        .map(|c| camera::corner_shift(c, w, h))
+        .collect();
+    shifts.sort_by(f64::total_cmp);
+    let still = shifts[(shifts.len() * 9 / 10).min(shifts.len() - 1)] < STILL_PX;
+    let camera_kind = if !cfg.anchors.is_empty() {
+        "anchors"
+    } else if registered && !still {
+        "registered"
+    } else {
+        if registered {
+            camera.iter_mut().for_each(|c| *c = Similarity::IDENTITY);
+        }
+        "static"
+    };
+    Ok((camera, camera_kind, cross_check))
+}
+
+/// Runs the extraction. `progress(stage, done, total)` after every processed frame of each pass.
+pub fn extract(
+    path: &Path,
+    cfg: &ExtractConfig,
+    preview_every: Option<usize>,
+    mut progress: impl FnMut(&str, usize, usize),
+) -> Result<Extraction> {
+    let (mut vid, first, last) = open_range(path, cfg)?;
+    let (w, h) = (vid.w, vid.h);
+    let t_start = std::time::Instant::now();
+    let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
+    let (camera, camera_kind, cross_check) =
+        camera_pass(&mut vid, path, cfg, (first, last), &mut progress)?;
+    let frames = camera.len();
     if debug {
         eprintln!("pass A (camera) done at {:?}", t_start.elapsed());
     }
-    let camera = camera::smooth_path(&raw, cfg.smooth);
     let geom = background::Geometry::new(path, w, h, cfg.max_side);
-    let bg = background::background(
+    let count_at = match &cfg.count {
+        Some(c) if c.frame < first || c.frame - first >= frames => {
+            return Err(Error::config(
+                "count",
+                format!(
+                    "frame {} is outside the {frames} frames read from {first}",
+                    c.frame
+                ),
+            ))
+        }
+        Some(c) => Some(c.frame - first),
+        None => None,
+    };
+    let (bg, sample) = background::background(
         &mut vid,
         &geom,
         cfg,
         &camera,
         (first, frames),
+        count_at,
         &mut progress,
     )?;
     if debug {
         eprintln!("background done at {:?}", t_start.elapsed());
     }
-    let grid = background::CellGrid::new(&geom, cfg.grid);
-    let obstacles = background::obstacle_cells(cfg, &geom, &grid)?;
-    let body_px = cfg.body_pixels.unwrap_or(
-        std::f64::consts::PI / 4.0 * cfg.body_length_px * BODY_WIDTH_BL * cfg.body_length_px,
-    );
-    if !(body_px.is_finite() && body_px > 0.0) {
-        return Err(Error::config(
-            "body_pixels",
-            format!("{body_px} must be > 0"),
-        ));
+    let mut calib = calibrate::calibrate(cfg, &geom, &bg, &sample, count_at)?;
+    drop(sample);
+    calib.camera = camera_kind.to_string();
+    calib.registration_vs_anchors_px = cross_check;
+    if debug {
+        eprintln!(
+            "calibration {}",
+            serde_json::to_string(&calib).unwrap_or_default()
+        );
     }
+    let (body_len, body_px) = (calib.body_length_px, calib.body_pixels);
+    let grid = background::CellGrid::new(&geom, calib.grid);
+    let obstacles = background::obstacle_cells(cfg, &geom, &grid)?;
     let body_px_proc = body_px * geom.scale * geom.scale;
+    let seg = fields::Segmenter::new(
+        &geom,
+        &bg,
+        cfg,
+        calib.threshold,
+        calib.opening,
+        calib.min_component_px,
+    )?;
     let sums = fields::pass_c(
         &mut vid,
         &geom,
         &grid,
-        cfg,
+        &seg,
+        body_len,
         &camera,
-        &bg,
         (first, frames),
         preview_every,
         &mut progress,
@@ -225,18 +393,18 @@ pub fn extract(
     if debug {
         eprintln!("fields done at {:?}", t_start.elapsed());
     }
-    let fields = sums.fields(&grid, cfg, body_px_proc);
+    let fields = sums.fields(&grid, cfg.smooth, body_len, body_px_proc);
     let (mean, std_bp) = fields.speed;
     let clip = ClipFields {
         meta: ClipMeta {
             schema: CLIP_SCHEMA.into(),
             fps: vid.fps,
-            cell_size: grid.cell_px / cfg.body_length_px,
+            cell_size: grid.cell_px / body_len,
             nx: grid.nx,
             ny: grid.ny,
             frames,
             origin: [0.0, 0.0],
-            body_length_px: Some(cfg.body_length_px),
+            body_length_px: Some(body_len),
             body_pixel_coverage: Some(body_px),
             speed: ClipSpeed {
                 mean,
@@ -251,6 +419,7 @@ pub fn extract(
                 "first_frame": first,
                 "processing_scale": geom.scale,
                 "settings": cfg,
+                "calibration": &calib,
             }),
         },
         density: fields.density,
@@ -261,6 +430,7 @@ pub fn extract(
     clip.validate()?;
     Ok(Extraction {
         clip,
+        calibration: calib,
         camera,
         previews: sums.previews,
     })

@@ -1,0 +1,482 @@
+//! Automatic calibration of an extraction (paper §4): the foreground threshold on the difference
+//! to the background, the body length L in pixels and the body pixels per animal N_bp, each
+//! estimated from the sampled stabilised frames of the background unless the settings give it.
+//!
+//! - Threshold: Otsu's split of the histogram of the per-pixel difference d = max over channels
+//!   |frame − background|, taken above the noise floor (median of d + 4 robust σ, at least
+//!   [`MIN_THRESHOLD`]) so that a herd covering 1 % of the frame is not split inside the noise.
+//! - Body size: connected components of the herd mask (8-connected) over the sampled frames; the
+//!   single animals are the mode of the distribution of log-area (a kernel density, bandwidth
+//!   0.12): isolated animals all have nearly the same area while merged groups spread over 2, 3,
+//!   … times it. N_bp is the median area of the components within ×0.7–1.4 of the mode; L is the
+//!   median full major axis 4 √λ₁ of their second moments (exact for a filled ellipse).
+//! - Or from a user count: N_bp = herd pixels of one frame / the animals counted on it.
+
+use super::background::{Geometry, Sample};
+use super::fields::{difference, Segmenter};
+use super::{ExtractConfig, UserCount, AUTO_CELL_BL};
+use crate::data::clip::BODY_WIDTH_BL;
+use crate::error::{Error, Result};
+use serde::Serialize;
+
+/// The calibration an extraction ran with: each value and where it came from ("given" or how it
+/// was estimated); recorded in `clip.json` under `provenance.calibration`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Calibration {
+    /// Threshold on the difference to the background (grey levels).
+    pub threshold: f64,
+    pub threshold_from: String,
+    /// Threshold of the body-length estimate: half the herd's contrast.
+    pub length_threshold: f64,
+    /// Body length L (video pixels).
+    pub body_length_px: f64,
+    pub body_length_from: String,
+    /// Body pixels per animal N_bp (video pixels).
+    pub body_pixels: f64,
+    pub body_pixels_from: String,
+    /// Cells along the longer side.
+    pub grid: usize,
+    pub grid_from: String,
+    /// Components taken as single animals (0 when N_bp and L were given).
+    pub isolated_animals: usize,
+    /// Components of the sampled frames' herd masks.
+    pub components: usize,
+    /// Whether the mask is opened (bodies ≥ 6 processing pixels wide).
+    pub opening: bool,
+    /// Smallest component kept (processing pixels).
+    pub min_component_px: usize,
+    /// How the camera was found: "anchors", "registered" or "static".
+    pub camera: String,
+    /// With anchors: the largest distance (video pixels) at a frame corner between the anchors'
+    /// camera path and the automatic registration's, or why the registration failed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub registration_vs_anchors_px: Option<serde_json::Value>,
+    /// Area of every component of the sampled frames (video pixels), for the report.
+    #[serde(skip)]
+    pub areas: Vec<f64>,
+}
+
+/// Herd masks of the sampled frames under `seg`, and their components.
+fn sample_blobs(seg: &Segmenter, sample: &Sample, w: usize) -> Result<Vec<Blob>> {
+    let mut all = Vec::new();
+    for (_, px, vm) in &sample.frames {
+        let mut m = seg.mask(px, vm)?;
+        all.extend(blobs(&mut m, w, MIN_COMPONENT, false));
+    }
+    Ok(all)
+}
+
+/// Smallest component (processing pixels) the body-size estimate looks at.
+const MIN_COMPONENT: usize = 4;
+
+/// The calibration of an extraction from its background `bg` and `sample` (module docs); `count`
+/// is the index within the sample's range of the frame of `cfg.count`.
+pub(super) fn calibrate(
+    cfg: &ExtractConfig,
+    geom: &Geometry,
+    bg: &[u8],
+    sample: &Sample,
+    count: Option<usize>,
+) -> Result<Calibration> {
+    let (pw, scale) = (geom.pw, geom.scale);
+    let path = geom.path;
+    let (threshold, threshold_from) = match cfg.background_threshold {
+        Some(t) => (t, "given".to_string()),
+        None => {
+            let mut hist = [0u64; 256];
+            for (_, px, vm) in &sample.frames {
+                for p in 0..geom.pw * geom.ph {
+                    if vm[p] > 0 {
+                        hist[difference(px, bg, p) as usize] += 1;
+                    }
+                }
+            }
+            let t = threshold(&hist).ok_or_else(|| {
+                Error::file(
+                    path,
+                    format!(
+                        "no animals found: no pixel of the {} sampled frames differs from the \
+                         background by more than the noise (a video of one colour?)",
+                        sample.frames.len()
+                    ),
+                )
+            })?;
+            (t, "Otsu above the noise floor".to_string())
+        }
+    };
+    // Stage 1: the mask at half the herd's contrast (the 90th percentile of the difference of
+    // herd pixels) gives the body's length and width — where a blurred edge crosses half its
+    // contrast is the true edge — and so whether to open the mask.
+    let raw = Segmenter::new(geom, bg, cfg, threshold, false, 1)?;
+    let mut diffs = Vec::new();
+    for (_, px, vm) in &sample.frames {
+        let m = raw.mask(px, vm)?;
+        diffs.extend(
+            m.iter()
+                .enumerate()
+                .filter(|(_, &v)| v > 0)
+                .map(|(p, _)| difference(px, bg, p)),
+        );
+    }
+    diffs.sort_unstable();
+    let contrast = diffs.get(diffs.len() * 9 / 10).map_or(0.0, |&v| v as f64);
+    let length_threshold = threshold.max(contrast / 2.0);
+    let raw = Segmenter::new(geom, bg, cfg, length_threshold, false, 1)?;
+    let first = sample_blobs(&raw, sample, pw)?;
+    let no_animals = || {
+        Error::file(
+            path,
+            format!(
+                "no animals found: nothing in the {} sampled frames stands out of the background \
+                 by more than {threshold} grey levels",
+                sample.frames.len()
+            ),
+        )
+    };
+    let size1 = body_size(&first);
+    let (body_length_px, body_length_from, opening) = match (cfg.body_length_px, size1) {
+        (Some(l), _) => (l, "given".to_string(), l * BODY_WIDTH_BL * scale >= 6.0),
+        (None, Some((b, n))) => (
+            b.major / scale,
+            format!("median major axis of {n} isolated animals"),
+            b.minor >= 6.0,
+        ),
+        (None, None) => return Err(no_animals()),
+    };
+    // Stage 2: the mask as the fields see it gives N_bp.
+    let seg = Segmenter::new(geom, bg, cfg, threshold, opening, 1)?;
+    let comps = sample_blobs(&seg, sample, pw)?;
+    let size2 = body_size(&comps);
+    let (body_pixels, body_pixels_from, isolated) = match (cfg.body_pixels, &cfg.count, size2) {
+        (Some(n), _, _) => (n, "given".to_string(), 0),
+        (None, Some(c), _) => {
+            let k = count.and_then(|i| sample.frames.iter().find(|f| f.0 == i));
+            let Some((_, px, vm)) = k else {
+                return Err(Error::config(
+                    "count",
+                    format!("frame {} is not in the video", c.frame),
+                ));
+            };
+            let mut m = seg.mask(px, vm)?;
+            blobs(&mut m, pw, MIN_COMPONENT, true);
+            let on = m.iter().filter(|&&v| v > 0).count() as f64;
+            (
+                from_count(on, c)? / (scale * scale),
+                format!("{} animals counted on frame {}", c.animals, c.frame),
+                0,
+            )
+        }
+        (None, None, Some((b, n))) => (
+            b.area / (scale * scale),
+            format!("median area of {n} isolated animals"),
+            n,
+        ),
+        (None, None, None) => return Err(no_animals()),
+    };
+    let longer = geom.w.max(geom.h) as f64;
+    let (grid, grid_from) = match cfg.grid {
+        Some(g) => (g, "given".to_string()),
+        None => (
+            ((longer / (AUTO_CELL_BL * body_length_px)).round() as usize).clamp(1, 4096),
+            format!("cells of {AUTO_CELL_BL} body lengths"),
+        ),
+    };
+    crate::limits::check_grid("grid", grid, grid)?;
+    let min_component_px =
+        ((0.2 * body_pixels * scale * scale).floor() as usize).max(MIN_COMPONENT);
+    Ok(Calibration {
+        threshold,
+        threshold_from,
+        length_threshold,
+        body_length_px,
+        body_length_from,
+        body_pixels,
+        body_pixels_from,
+        grid,
+        grid_from,
+        isolated_animals: isolated,
+        components: comps.len(),
+        opening,
+        min_component_px,
+        camera: String::new(),
+        registration_vs_anchors_px: None,
+        areas: comps.iter().map(|b| b.area / (scale * scale)).collect(),
+    })
+}
+
+/// Smallest automatic threshold (grey levels): below it lies compression noise.
+pub(super) const MIN_THRESHOLD: f64 = 10.0;
+
+/// One connected component of a herd mask.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Blob {
+    /// Pixels.
+    pub area: f64,
+    /// Full major and minor axes of the ellipse with the same second moments (pixels).
+    pub major: f64,
+    pub minor: f64,
+}
+
+/// The 8-connected components of `mask` (non-zero = on), `w` pixels wide, of at least
+/// `min_area` pixels; with `keep`, the mask is rewritten without the smaller ones.
+pub(super) fn blobs(mask: &mut [u8], w: usize, min_area: usize, keep: bool) -> Vec<Blob> {
+    let h = mask.len() / w.max(1);
+    let mut seen = vec![false; mask.len()];
+    let mut out = Vec::new();
+    let mut stack = Vec::new();
+    let mut members = Vec::new();
+    for start in 0..mask.len() {
+        if mask[start] == 0 || seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start);
+        members.clear();
+        let (mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        while let Some(p) = stack.pop() {
+            members.push(p);
+            let (x, y) = ((p % w) as f64, (p / w) as f64);
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            syy += y * y;
+            sxy += x * y;
+            let (px, py) = (p % w, p / w);
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (nx, ny) = (px as i64 + dx, py as i64 + dy);
+                    if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                        continue;
+                    }
+                    let q = ny as usize * w + nx as usize;
+                    if mask[q] != 0 && !seen[q] {
+                        seen[q] = true;
+                        stack.push(q);
+                    }
+                }
+            }
+        }
+        let n = members.len() as f64;
+        if members.len() < min_area {
+            if keep {
+                for &p in &members {
+                    mask[p] = 0;
+                }
+            }
+            continue;
+        }
+        // Covariance of the pixel centres (+1/12 for the pixel's own extent).
+        let (mx, my) = (sx / n, sy / n);
+        let cxx = sxx / n - mx * mx + 1.0 / 12.0;
+        let cyy = syy / n - my * my + 1.0 / 12.0;
+        let cxy = sxy / n - mx * my;
+        let tr = cxx + cyy;
+        let disc = ((cxx - cyy).powi(2) / 4.0 + cxy * cxy).sqrt();
+        let (l1, l2) = (tr / 2.0 + disc, (tr / 2.0 - disc).max(0.0));
+        out.push(Blob {
+            area: n,
+            major: 4.0 * l1.sqrt(),
+            minor: 4.0 * l2.sqrt(),
+        });
+    }
+    out
+}
+
+/// Otsu's threshold of the difference histogram `hist` (256 bins) above its noise floor; `None`
+/// when nothing in the frames stands out of the background.
+pub(super) fn threshold(hist: &[u64; 256]) -> Option<f64> {
+    let total: u64 = hist.iter().sum();
+    if total == 0 {
+        return None;
+    }
+    let quantile = |q: f64| {
+        let target = (q * total as f64).ceil() as u64;
+        let mut acc = 0;
+        for (v, &c) in hist.iter().enumerate() {
+            acc += c;
+            if acc >= target.max(1) {
+                return v as f64;
+            }
+        }
+        255.0
+    };
+    let med = quantile(0.5);
+    // Robust σ from the median absolute deviation (the background is most of the frame).
+    let mut dev = [0u64; 256];
+    for (v, &c) in hist.iter().enumerate() {
+        dev[(v as f64 - med).abs() as usize] += c;
+    }
+    let mut acc = 0;
+    let mut mad = 0.0;
+    for (v, &c) in dev.iter().enumerate() {
+        acc += c;
+        if acc * 2 >= total {
+            mad = v as f64;
+            break;
+        }
+    }
+    let floor = (med + 4.0 * 1.4826 * mad.max(1.0)).max(MIN_THRESHOLD);
+    let (n, sum): (f64, f64) = hist.iter().enumerate().fold((0.0, 0.0), |(n, s), (v, &c)| {
+        (n + c as f64, s + v as f64 * c as f64)
+    });
+    if hist[(floor.ceil() as usize).min(255)..]
+        .iter()
+        .all(|&c| c == 0)
+    {
+        return None;
+    }
+    // Otsu over the whole histogram: the split maximising the between-class variance, the middle
+    // of the run of splits that tie (an empty gap between background and herd).
+    let (mut w0, mut s0, mut best) = (0.0, 0.0, -1.0);
+    let (mut first, mut last) = (0usize, 0usize);
+    for (v, &c) in hist.iter().enumerate().take(255) {
+        w0 += c as f64;
+        s0 += v as f64 * c as f64;
+        let w1 = n - w0;
+        if w0 == 0.0 || w1 == 0.0 {
+            continue;
+        }
+        let (m0, m1) = (s0 / w0, (sum - s0) / w1);
+        let between = w0 * w1 * (m0 - m1).powi(2);
+        if between > best * (1.0 + 1e-12) {
+            best = between;
+            (first, last) = (v, v);
+        } else if between >= best * (1.0 - 1e-12) && last + 1 == v {
+            last = v;
+        }
+    }
+    let t = (first + last) as f64 / 2.0 + 0.5;
+    Some(t.max(floor))
+}
+
+/// The single animals among `blobs`: the median area (N_bp), major axis (L) and minor axis of
+/// the components near the mode of log-area, and how many components that was.
+pub(super) fn body_size(blobs: &[Blob]) -> Option<(Blob, usize)> {
+    if blobs.is_empty() {
+        return None;
+    }
+    let logs: Vec<f64> = blobs.iter().map(|b| b.area.ln()).collect();
+    let (lo, hi) = logs
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let bw = 0.12;
+    let steps = (((hi - lo) / 0.01).ceil() as usize).max(1);
+    let mut mode = (f64::NEG_INFINITY, lo);
+    for k in 0..=steps {
+        let x = lo + (hi - lo) * k as f64 / steps as f64;
+        let dens: f64 = logs
+            .iter()
+            .map(|&v| (-(v - x).powi(2) / (2.0 * bw * bw)).exp())
+            .sum();
+        if dens > mode.0 {
+            mode = (dens, x);
+        }
+    }
+    let m = mode.1.exp();
+    let near: Vec<Blob> = blobs
+        .iter()
+        .copied()
+        .filter(|b| b.area >= 0.7 * m && b.area <= 1.4 * m)
+        .collect();
+    if near.is_empty() {
+        return None;
+    }
+    let med = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let n = near.len();
+    let area = med(&mut near.iter().map(|b| b.area).collect());
+    let major = med(&mut near.iter().map(|b| b.major).collect());
+    let minor = med(&mut near.iter().map(|b| b.minor).collect());
+    Some((Blob { area, major, minor }, n))
+}
+
+/// N_bp from a user count: `pixels` herd pixels on the counted frame.
+pub(super) fn from_count(pixels: f64, count: &UserCount) -> Result<f64> {
+    if pixels <= 0.0 {
+        return Err(Error::config(
+            "count",
+            format!(
+                "frame {} has no herd pixels to divide among {} animals",
+                count.frame, count.animals
+            ),
+        ));
+    }
+    Ok(pixels / count.animals as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ellipse_blob_has_its_axes() {
+        // A filled ellipse of full axes 40 × 12 pixels.
+        let (w, h) = (80, 40);
+        let mut m = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let (u, v) = (
+                    (x as f64 + 0.5 - 40.0) / 20.0,
+                    (y as f64 + 0.5 - 20.0) / 6.0,
+                );
+                if u * u + v * v <= 1.0 {
+                    m[y * w + x] = 255;
+                }
+            }
+        }
+        let b = blobs(&mut m, w, 1, false);
+        assert_eq!(b.len(), 1);
+        assert!((b[0].major - 40.0).abs() < 0.5, "{:?}", b[0]);
+        assert!((b[0].minor - 12.0).abs() < 0.5, "{:?}", b[0]);
+        assert!((b[0].area - std::f64::consts::PI * 20.0 * 6.0).abs() < 8.0);
+    }
+
+    #[test]
+    fn small_components_are_removed_and_modes_found() {
+        let w = 10;
+        let mut m = vec![0u8; 100];
+        m[0] = 255; // a speck
+        for p in [44, 45, 54, 55] {
+            m[p] = 255;
+        }
+        let b = blobs(&mut m, w, 2, true);
+        assert_eq!(b.len(), 1);
+        assert_eq!(m[0], 0);
+        assert_eq!(m[44], 255);
+        // Ten singles of ~100 px, three pairs, a triple: the singles win.
+        let mut v: Vec<Blob> = (0..10)
+            .map(|k| Blob {
+                area: 95.0 + k as f64,
+                major: 20.0,
+                minor: 6.0,
+            })
+            .collect();
+        for a in [200.0, 205.0, 190.0, 310.0] {
+            v.push(Blob {
+                area: a,
+                major: 30.0,
+                minor: 10.0,
+            });
+        }
+        let (b, n) = body_size(&v).unwrap();
+        assert_eq!(n, 10);
+        assert!((b.area - 100.0).abs() <= 1.0);
+        assert_eq!((b.major, b.minor), (20.0, 6.0));
+    }
+
+    #[test]
+    fn otsu_splits_a_sparse_foreground_from_noise() {
+        let mut hist = [0u64; 256];
+        for (v, c) in [(0, 40_000), (1, 30_000), (2, 20_000), (3, 8_000), (4, 1000)] {
+            hist[v] = c;
+        }
+        hist[60..120].fill(20);
+        let t = threshold(&hist).unwrap();
+        assert!((10.0..60.0).contains(&t), "{t}");
+        assert_eq!(threshold(&[0u64; 256]), None);
+    }
+}
