@@ -276,15 +276,31 @@ fn a_warm_up_starts_earlier_and_reports_the_same_frames() {
         ]);
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
     };
-    let (a, b, c) = (run("0"), run("6"), run("500"));
+    let (a, b, c) = (run("0"), run("6"), run("12"));
     for r in [&a, &b, &c] {
         assert_eq!(r["frames"], serde_json::json!([12, 24]));
         assert_eq!(r["sets"][0]["per_frame"].as_array().unwrap().len(), 12);
     }
-    // Another start, another herd; a warm-up longer than the training part starts at frame 0.
+    // Another start, another herd; the whole training part (12 frames) starts at frame 0.
     assert_ne!(a["sets"][0]["per_frame"], b["sets"][0]["per_frame"]);
     assert_ne!(b["sets"][0]["per_frame"], c["sets"][0]["per_frame"]);
-    assert_eq!(c["sets"][0]["per_frame"], run("12")["sets"][0]["per_frame"]);
+    // A warm-up reaching before the clip is refused (issue #14: no silent clamping), in one line.
+    let err = common::fails(&[
+        "validate",
+        s(&clip),
+        "--params",
+        s(&clip.join("truth.json")),
+        "--warmup",
+        "500",
+        "--no-video",
+        "--out",
+        s(&d.join("r500")),
+    ]);
+    assert!(
+        err.contains("--warmup") && err.contains("frame 12"),
+        "{err}"
+    );
+    assert!(!d.join("r500").exists());
 }
 
 #[test]
