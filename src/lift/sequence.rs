@@ -1,7 +1,7 @@
 //! Stage 2b: the whole-sequence optimisation the thesis leaves as future work (§5: "optimize
 //! globally"): every depth of every frame at once, by L-BFGS, starting from the frame-by-frame
 //! result. The gradient is hand-derived (`herdfit_kernels::lift`, plain Rust over `f64` slices);
-//! the same energy as burn tensor ops with reverse-mode autodiff ([`super::autodiff`]) is kept as
+//! the same energy as burn tensor ops with reverse-mode autodiff (`super::autodiff`) is kept as
 //! its reference (`sequence.gradient = "autodiff"`; checked against each other in
 //! `tests/lift_gradient.rs`).
 //!
@@ -250,7 +250,7 @@ pub struct SequenceLog {
 pub enum Gradient {
     /// Hand-derived, plain Rust over `f64` slices (`herdfit_kernels::lift`).
     Analytic,
-    /// burn tensor ops and reverse-mode autodiff ([`super::autodiff`], at `precision`): the
+    /// burn tensor ops and reverse-mode autodiff (`super::autodiff`, at `precision`): the
     /// reference the analytic gradient is tested against; much slower (BENCHMARKS.md, "Lift").
     Autodiff,
 }

@@ -96,7 +96,7 @@ pub fn loss_of(clips: &[&ClipFields], params: &Params, cfg: &FitConfig) -> Resul
 }
 
 /// Each window's (back-propagated loss, gradient as the fit uses it) over one epoch of the fit's
-/// schedule at `params`, without updates: the probe of [`crate::herd::fit::identify`]. The same
+/// schedule at `params`, without updates: the probe of [`crate::herd::fit::identify()`]. The same
 /// `cfg.seed` gives the same herds and noise (common random numbers).
 pub fn window_gradients(
     clips: &[&ClipFields],
