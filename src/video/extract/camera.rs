@@ -5,7 +5,7 @@
 //! leave-one-out rejection of a tracker that slid off (re-initialised where the camera says it
 //! is); the path is smoothed over the extraction's window.
 
-use super::decode::{cv, forward, Video};
+use super::decode::{cv, downscaled, forward, Video};
 use super::ExtractConfig;
 use crate::error::Result;
 use opencv::core::{Mat, Point, Rect, Scalar, Size};
@@ -188,17 +188,7 @@ pub(super) fn camera_path(
                     // CSRT runs on a frame scaled to the processing size; positions are refined
                     // at full resolution.
                     let small = if track_scale < 1.0 && anchors_on {
-                        let mut m = Mat::default();
-                        imgproc::resize(
-                            &frame,
-                            &mut m,
-                            Size::new(0, 0),
-                            track_scale,
-                            track_scale,
-                            imgproc::INTER_AREA,
-                        )
-                        .map_err(cv(path))?;
-                        m
+                        downscaled(&frame, track_scale, path)?
                     } else {
                         Mat::default()
                     };

@@ -12,6 +12,22 @@ pub(super) fn cv(path: &Path) -> impl Fn(opencv::Error) -> Error + '_ {
     move |e| Error::file(path, format!("OpenCV: {}", e.message))
 }
 
+/// `frame` scaled by `scale` with area averaging (the processing-size copy that tracking and
+/// registration work on).
+pub(super) fn downscaled(frame: &Mat, scale: f64, path: &Path) -> Result<Mat> {
+    let mut small = Mat::default();
+    opencv::imgproc::resize(
+        frame,
+        &mut small,
+        opencv::core::Size::new(0, 0),
+        scale,
+        scale,
+        opencv::imgproc::INTER_AREA,
+    )
+    .map_err(cv(path))?;
+    Ok(small)
+}
+
 /// An open video and its size, frame rate and (reported) frame count.
 pub(super) struct Video {
     pub cap: videoio::VideoCapture,

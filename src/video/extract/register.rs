@@ -19,7 +19,7 @@
 //! deterministic.
 
 use super::camera::Similarity;
-use super::decode::{cv, forward, Video};
+use super::decode::{cv, downscaled, forward, Video};
 use super::ExtractConfig;
 use crate::error::{Error, Result};
 use opencv::core::{Mat, Point2f, Scalar, Size, TermCriteria, Vector, CV_8UC1};
@@ -306,16 +306,7 @@ pub(super) fn camera_path(
                     let Some(frame) = vid.next()? else {
                         return Ok(None);
                     };
-                    let mut small = Mat::default();
-                    imgproc::resize(
-                        &frame,
-                        &mut small,
-                        Size::new(0, 0),
-                        scale,
-                        scale,
-                        imgproc::INTER_AREA,
-                    )
-                    .map_err(cv(path))?;
+                    let small = downscaled(&frame, scale, path)?;
                     let mut grey = Mat::default();
                     imgproc::cvt_color(&small, &mut grey, imgproc::COLOR_BGR2GRAY, 0)
                         .map_err(cv(path))?;
