@@ -300,6 +300,34 @@ fn recorded_settings_reproduce_the_extraction() {
     assert!(clip.obstacles.column(9).iter().all(|&v| v == 1));
     assert!(clip.obstacles.column(8).iter().all(|&v| v == 1));
     assert!(clip.obstacles.column(6).iter().all(|&v| v == 0));
+    // The same obstacle as painted polygons (issue #16, step 5): the same cells.
+    let polys = d.join("rocks.json");
+    std::fs::write(
+        &polys,
+        r#"{"schema": "herdfit.obstacle-polygons/1",
+            "polygons": [[[480, 0], [640, 0], [640, 384], [480, 384]]]}"#,
+    )
+    .unwrap();
+    let p = d.join("p");
+    ok(&[
+        "extract",
+        s(&video),
+        "--out",
+        s(&p),
+        "--grid",
+        "10",
+        "--body-length-px",
+        "16",
+        "--body-colour",
+        "235,235,225",
+        "--obstacles",
+        s(&polys),
+        "--frames",
+        "5..8",
+        "--smooth",
+        "1",
+    ]);
+    assert_eq!(ClipFields::load(&p).unwrap().obstacles, clip.obstacles);
     let settings = &clip.meta.provenance["settings"];
     assert_eq!(settings["smooth"], 5);
     let cfg = d.join("extract.json");

@@ -4,7 +4,8 @@
 //! error naming the file — never a panic, never more heap than the memory limit allows. Seeds are
 //! fixed, so a failure reproduces; proptest shrinks it to a small case.
 //!
-//! Longer runs: `HERDFIT_FUZZ_CASES=2000000 cargo test --release --test fuzz -- <parser>`.
+//! Longer runs: `HERDFIT_FUZZ_CPU_SECONDS=600 cargo test --release --test fuzz -- --exact <parser>`
+//! (rounds of `HERDFIT_FUZZ_CASES` cases, each with its own seed, until 600 s of CPU).
 
 #[path = "fuzz/engine.rs"]
 mod engine;
@@ -329,6 +330,27 @@ fn obstacle_cells_json() {
         "cells",
         vec![("c.json", br#"{"cells": [[0, 1], [3, 2], [7, 7]]}"#.to_vec())],
         Box::new(|d| read_cells(&d.join("c.json"), 8, 8).map(|_| ())),
+    ));
+}
+
+#[test]
+fn obstacle_polygons_json() {
+    use herdfit::data::obstacle_polygons::ObstaclePolygons;
+    fuzz(target(
+        "obstacle polygons",
+        vec![(
+            "rocks.json",
+            br#"{"schema": "herdfit.obstacle-polygons/1",
+  "polygons": [[[10, 10], [60, 12], [40, 50]], [[100, 0], [160, 0], [160, 90], [100, 90]]]}"#
+                .to_vec(),
+        )],
+        Box::new(|d| {
+            let p = ObstaclePolygons::load(&d.join("rocks.json"))?;
+            // Painting any accepted file into a frame neither panics nor allocates past it.
+            let m = p.mask(64, 48);
+            assert_eq!(m.len(), 64 * 48);
+            Ok(())
+        }),
     ));
 }
 

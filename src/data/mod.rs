@@ -10,6 +10,7 @@ pub mod csv;
 pub mod gltf;
 pub mod jackdaw;
 pub mod npy_tracks;
+pub mod obstacle_polygons;
 pub mod polygon;
 pub mod reference;
 pub mod tracks;

@@ -81,12 +81,46 @@ pub fn measured<T>(f: impl FnOnce() -> T) -> (T, usize) {
     (r, (peak - start).max(0) as usize)
 }
 
-/// Cases per parser: `HERDFIT_FUZZ_CASES`, default 10,000.
+/// Cases per parser: `HERDFIT_FUZZ_CASES`, default 10,000. With `HERDFIT_FUZZ_CPU_SECONDS` this
+/// is the size of one round (see [`cpu_budget`]).
 pub fn cases() -> u32 {
     std::env::var("HERDFIT_FUZZ_CASES")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(10_000)
+}
+
+/// The long-run mode: `HERDFIT_FUZZ_CPU_SECONDS=S` repeats rounds of [`cases`] cases, round r
+/// seeded with r (round 0 is the default run), until the test's thread has used S seconds of
+/// CPU. CPU time rather than wall time, so a run on a shared machine still fuzzes for S seconds.
+pub fn cpu_budget() -> Option<f64> {
+    std::env::var("HERDFIT_FUZZ_CPU_SECONDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+}
+
+/// CPU seconds used by the calling thread (`CLOCK_THREAD_CPUTIME_ID`).
+pub fn thread_cpu_seconds() -> f64 {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `t` is a valid, writable timespec; the clock id is a constant the kernel knows.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    assert_eq!(rc, 0, "clock_gettime(CLOCK_THREAD_CPUTIME_ID)");
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+}
+
+/// The seed of round `r`: round 0 is proptest's deterministic default, so the default run is
+/// the first round of every long run.
+fn round_rng(r: u64) -> TestRng {
+    if r == 0 {
+        return TestRng::deterministic_rng(RngAlgorithm::ChaCha);
+    }
+    let mut seed = [0u8; 32];
+    seed[..8].copy_from_slice(&r.to_le_bytes());
+    seed[8..16].copy_from_slice(b"herdfuzz");
+    TestRng::from_seed(RngAlgorithm::ChaCha, &seed)
 }
 
 /// Replacement tokens: huge, tiny, negative, non-finite, out-of-range integers, wrong types.
@@ -385,51 +419,60 @@ pub fn fuzz(t: Target) {
         max_shrink_iters: 2000,
         ..Config::default()
     };
-    let rng = TestRng::deterministic_rng(RngAlgorithm::ChaCha);
-    let mut runner = TestRunner::new_with_rng(config, rng);
     let start = std::time::Instant::now();
-    let (oks, errs) = (Cell::new(0u32), Cell::new(0u32));
-    let res = runner.run(&case(), |c| {
-        valid(dir.path());
-        let (k, bytes) = match &c {
-            Case::Bytes(f, b) => (f.index(names.len()), b.clone()),
-            Case::Mutate(f, ops) => {
-                let k = f.index(names.len());
-                (k, mutate(&t.files[k].1, ops))
-            }
-        };
-        std::fs::write(dir.path().join(&names[k]), &bytes).expect("write case");
-        let (r, peak) = measured(|| (t.parse)(dir.path()));
-        if peak > HEAP_CAP {
-            return Err(TestCaseError::fail(format!(
-                "{}: held {peak} bytes of heap (cap {HEAP_CAP}); result {r:?}",
-                names[k]
-            )));
-        }
-        if r.is_ok() {
-            oks.set(oks.get() + 1);
-        }
-        if let Err(e) = r {
-            errs.set(errs.get() + 1);
-            let m = e.to_string();
-            let d = dir.path().display().to_string();
-            if !m.contains(&d) && !names.iter().any(|n| m.contains(n.as_str())) {
+    let cpu0 = thread_cpu_seconds();
+    let (oks, errs) = (Cell::new(0u64), Cell::new(0u64));
+    let mut round = 0u64;
+    loop {
+        let mut runner = TestRunner::new_with_rng(config.clone(), round_rng(round));
+        let res = runner.run(&case(), |c| {
+            valid(dir.path());
+            let (k, bytes) = match &c {
+                Case::Bytes(f, b) => (f.index(names.len()), b.clone()),
+                Case::Mutate(f, ops) => {
+                    let k = f.index(names.len());
+                    (k, mutate(&t.files[k].1, ops))
+                }
+            };
+            std::fs::write(dir.path().join(&names[k]), &bytes).expect("write case");
+            let (r, peak) = measured(|| (t.parse)(dir.path()));
+            if peak > HEAP_CAP {
                 return Err(TestCaseError::fail(format!(
-                    "{}: the error names no file: {m}",
+                    "{}: held {peak} bytes of heap (cap {HEAP_CAP}); result {r:?}",
                     names[k]
                 )));
             }
+            if r.is_ok() {
+                oks.set(oks.get() + 1);
+            }
+            if let Err(e) = r {
+                errs.set(errs.get() + 1);
+                let m = e.to_string();
+                let d = dir.path().display().to_string();
+                if !m.contains(&d) && !names.iter().any(|n| m.contains(n.as_str())) {
+                    return Err(TestCaseError::fail(format!(
+                        "{}: the error names no file: {m}",
+                        names[k]
+                    )));
+                }
+            }
+            Ok(())
+        });
+        if let Err(e) = res {
+            panic!("{} (round {round}): {e}", t.name);
         }
-        Ok(())
-    });
-    if let Err(e) = res {
-        panic!("{}: {e}", t.name);
+        round += 1;
+        match cpu_budget() {
+            Some(s) if thread_cpu_seconds() - cpu0 < s => {}
+            _ => break,
+        }
     }
     eprintln!(
-        "fuzz {}: {} cases in {:.1} s ({} Ok, {} Err)",
+        "fuzz {}: {} cases in {round} round(s), {:.1} s wall, {:.1} s CPU ({} Ok, {} Err)",
         t.name,
-        cases(),
+        round * u64::from(cases()),
         start.elapsed().as_secs_f64(),
+        thread_cpu_seconds() - cpu0,
         oks.get(),
         errs.get()
     );

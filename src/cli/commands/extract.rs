@@ -60,8 +60,10 @@ pub struct ExtractArgs {
     /// `auto` (temporal median of stabilised frames) or a background image.
     #[arg(long, value_name = "auto|IMAGE")]
     pub background: Option<String>,
-    /// Obstacle mask image (non-zero = obstacle), the size of the video frame.
-    #[arg(long, value_name = "MASK.png")]
+    /// Obstacles: a mask image the size of the video frame (non-zero = obstacle), or a JSON
+    /// file of polygons in video pixels of the first frame (x right, y down):
+    /// {"schema": "herdfit.obstacle-polygons/1", "polygons": [[[x, y], …], …]}.
+    #[arg(long, value_name = "MASK.png|POLYGONS.json")]
     pub obstacles: Option<PathBuf>,
     /// Frames used, a..b (b exclusive).
     #[arg(long, value_name = "a..b", value_parser = parse_range)]

@@ -5,6 +5,7 @@
 use super::camera::Similarity;
 use super::decode::{cv, Video};
 use super::ExtractConfig;
+use crate::data::obstacle_polygons::ObstaclePolygons;
 use crate::error::{Error, Result};
 use ndarray::Array2;
 use opencv::core::{Mat, Scalar, Size, CV_8UC1};
@@ -201,8 +202,9 @@ impl CellGrid {
     }
 }
 
-/// Obstacle cells from `cfg.obstacles` (a mask the size of the video frame, non-zero =
-/// obstacle): a cell is an obstacle when more than half its pixels are.
+/// Obstacle cells from `cfg.obstacles` (a mask image the size of the video frame, non-zero =
+/// obstacle, or a `herdfit.obstacle-polygons/1` JSON file of polygons in video pixels painted
+/// into such a mask): a cell is an obstacle when more than half its pixels are.
 pub(super) fn obstacle_cells(
     cfg: &ExtractConfig,
     geom: &Geometry,
@@ -213,8 +215,18 @@ pub(super) fn obstacle_cells(
     let obstacles = match &cfg.obstacles {
         None => Array2::<u8>::zeros((ny, nx)),
         Some(mp) => {
-            let img = geom.image(mp, imgcodecs::IMREAD_GRAYSCALE)?;
-            let data = img.data_bytes().map_err(cv(mp))?;
+            let painted;
+            let img;
+            let data: &[u8] = if mp
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+            {
+                painted = ObstaclePolygons::load(mp)?.mask(w, h);
+                &painted
+            } else {
+                img = geom.image(mp, imgcodecs::IMREAD_GRAYSCALE)?;
+                img.data_bytes().map_err(cv(mp))?
+            };
             let (mut on, mut all) = (vec![0usize; cells], vec![0usize; cells]);
             for (p, &v) in data.iter().enumerate() {
                 let (x, y) = ((p % w) as f64 + 0.5, h as f64 - (p / w) as f64 - 0.5);

@@ -72,7 +72,8 @@ pub struct ExtractConfig {
     pub stabilise: bool,
     /// Background image; none: per-pixel temporal median of sampled stabilised frames.
     pub background: Option<PathBuf>,
-    /// Obstacle mask (non-zero = obstacle), the size of the video frame.
+    /// Obstacle mask image (non-zero = obstacle) the size of the video frame, or a
+    /// `herdfit.obstacle-polygons/1` JSON file (`data::obstacle_polygons`).
     pub obstacles: Option<PathBuf>,
     /// Frames used, start..end (end exclusive); all when absent.
     pub frames: Option<[usize; 2]>,

@@ -103,6 +103,96 @@ impl Key {
     }
 }
 
+/// Evidence that the camera does not move, gathered while registering, for when registration
+/// fails on a nearly textureless ground (GFTT then finds sensor noise and RANSAC no consensus,
+/// issue #16): every 1/24th frame, slightly blurred, agrees with the per-pixel median of those
+/// frames everywhere but on the animals. A moving camera over a textured ground, or a cut to
+/// another view, disagrees over much of the frame; over a ground without texture the motion
+/// cannot be seen, and a static camera is then the only reading the video supports.
+struct Stillness {
+    every: usize,
+    frames: Vec<Vec<u8>>,
+}
+
+/// Grey levels (after the blur, beyond the frame's common brightness change) by which a pixel
+/// differs from the median for it to count as changed.
+const STILL_GREY: i16 = 12;
+/// Largest fraction of changed pixels in a still frame: the animals and their old places in the
+/// median (a herd may cover a large part of the frame; an 8-fish tank covers under 1 %).
+const STILL_FRACTION: f64 = 0.05;
+/// Gaussian blur (processing pixels) of the compared frames: sensor noise and MJPG blocks out.
+const STILL_BLUR_PX: f64 = 1.5;
+
+impl Stillness {
+    fn new(total: usize) -> Stillness {
+        Stillness {
+            every: (total / 24).max(1),
+            frames: Vec::new(),
+        }
+    }
+
+    /// Keeps frame `i` (grey, processing pixels), blurred, when it is a sampled one.
+    fn add(&mut self, i: usize, grey: &Mat, path: &Path) -> Result<()> {
+        if i % self.every != 0 {
+            return Ok(());
+        }
+        let mut f = Mat::default();
+        imgproc::gaussian_blur_def(grey, &mut f, Size::new(0, 0), STILL_BLUR_PX)
+            .map_err(cv(path))?;
+        self.frames.push(f.data_bytes().map_err(cv(path))?.to_vec());
+        Ok(())
+    }
+
+    /// The largest fraction of pixels of a sampled frame that differ from the samples' median
+    /// (after removing the frame's median difference: a light that dims is not a moving camera).
+    fn changed_fraction(&self) -> f64 {
+        let n = self.frames.len();
+        let Some(len) = self.frames.first().map(Vec::len) else {
+            return 1.0;
+        };
+        let mut col = vec![0u8; n];
+        let median: Vec<u8> = (0..len)
+            .map(|p| {
+                for (c, f) in col.iter_mut().zip(&self.frames) {
+                    *c = f[p];
+                }
+                col.sort_unstable();
+                col[n / 2]
+            })
+            .collect();
+        let mut worst: f64 = 0.0;
+        let mut hist = [0usize; 511];
+        for f in &self.frames {
+            hist.fill(0);
+            for (&a, &m) in f.iter().zip(&median) {
+                hist[(a as i16 - m as i16 + 255) as usize] += 1;
+            }
+            // The frame's median difference (its brightness change).
+            let (mut acc, mut off) = (0usize, 0i16);
+            for (k, &c) in hist.iter().enumerate() {
+                acc += c;
+                if acc * 2 >= len {
+                    off = k as i16 - 255;
+                    break;
+                }
+            }
+            let changed: usize = hist
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| (*k as i16 - 255 - off).abs() > STILL_GREY)
+                .map(|(_, &c)| c)
+                .sum();
+            worst = worst.max(changed as f64 / len as f64);
+        }
+        worst
+    }
+
+    /// Whether the camera is still by [`Stillness::changed_fraction`] (at least 3 samples).
+    fn is_still(&self) -> bool {
+        self.frames.len() >= 3 && self.changed_fraction() < STILL_FRACTION
+    }
+}
+
 /// `a ∘ b`: first `b`, then `a`.
 fn compose(a: &Similarity, b: &Similarity) -> Similarity {
     Similarity {
@@ -296,6 +386,7 @@ pub(super) fn camera_path(
     let mut failed = Vec::new();
     let mut key: Option<Key> = None;
     let mut last_good: Option<(Mat, Similarity)> = None;
+    let mut stillness = Stillness::new(total);
     let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Mat>>(4);
     std::thread::scope(|scope| -> Result<()> {
@@ -321,6 +412,7 @@ pub(super) fn camera_path(
         while let Ok(item) = rx.recv() {
             let grey = item?;
             let i = raw.len();
+            stillness.add(i, &grey, path)?;
             match &mut key {
                 None => {
                     key = Some(Key::new(grey, Similarity::IDENTITY, path)?);
@@ -364,6 +456,19 @@ pub(super) fn camera_path(
         let _ = producer.join();
         Ok(())
     })?;
+    if debug {
+        eprintln!(
+            "register: largest fraction of changed pixels in {} samples against their median: \
+             {:.4}",
+            stillness.frames.len(),
+            stillness.changed_fraction()
+        );
+    }
+    let textureless = key.as_ref().is_some_and(|k| k.start < MIN_INLIERS) && raw.len() > 1;
+    if (textureless || !failed.is_empty()) && stillness.is_still() {
+        // Nothing to register on, but the frames do not change: a static camera.
+        return Ok(vec![Similarity::IDENTITY; raw.len()]);
+    }
     if let Some(k) = &key {
         if k.start < MIN_INLIERS && raw.len() > 1 {
             return Err(Error::file(
