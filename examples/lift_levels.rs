@@ -47,13 +47,8 @@ fn main() {
     let a: Vec<String> = std::env::args().collect();
     let birds: usize = a.get(1).map_or(200, |s| s.parse().unwrap());
     let frames: usize = a.get(2).map_or(200, |s| s.parse().unwrap());
-    let b = BoidsConfig {
-        birds,
-        frames,
-        crop: false,
-        hfov: 80.0,
-        ..BoidsConfig::default()
-    };
+    let mut b = BoidsConfig::default();
+    (b.birds, b.frames, b.crop, b.hfov) = (birds, frames, false, 80.0);
     let syn = synth_flock(&b, &mut NoProgress).unwrap();
     let obs = Observations::new(&syn.tracks, &syn.camera).unwrap();
     let overrides: Vec<String> = if a.len() > 3 {
