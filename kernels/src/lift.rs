@@ -78,8 +78,7 @@ impl SeqTerms {
 #[derive(Clone, Copy, Debug, Default)]
 struct Vel {
     v: [f64; 3],
-    /// h = v / s and 1 / s.
-    h: [f64; 3],
+    /// 1 / s (the heading h = v / s is recomputed where needed: a smaller record to stream).
     inv_s: f64,
     /// ∂E/∂v and ∂E/∂h so far.
     gv: [f64; 3],
@@ -89,6 +88,14 @@ struct Vel {
 /// Elements per block of the parallel passes (fixed, so results do not depend on the thread
 /// count).
 const BLOCK: usize = 8192;
+
+impl Vel {
+    /// The heading h = v / s.
+    #[inline]
+    fn h(&self) -> [f64; 3] {
+        scaled(self.inv_s, self.v)
+    }
+}
 
 /// A scatter list cut into blocks of its target space. Each entry belongs to the block of its
 /// larger target (`forward` false: it writes only into `starts[b − 1]..starts[b + 1]`) or of its
@@ -360,7 +367,6 @@ pub fn sequence_energy(
             // ∂(c r²)/∂v = 2c r / v_t · v / s = 2c r / v_t · h; ∂(c h_z²)/∂h = (0, 0, 2c h_z).
             *x = Vel {
                 v,
-                h,
                 inv_s,
                 gv: scaled(2.0 * c_speed * r / vt, h),
                 gh: [0.0, 0.0, 2.0 * c_level * h[2]],
@@ -390,7 +396,7 @@ pub fn sequence_energy(
         * plan.align.run(vel, st.align, |x, off, _, list| {
             let mut sum = 0.0;
             for &(a, b) in list {
-                let dh = sub(x[b - off].h, x[a - off].h);
+                let dh = sub(x[b - off].h(), x[a - off].h());
                 sum += norm2(dh);
                 let g = scaled(2.0 * c_align, dh);
                 axpy(&mut x[b - off].gh, 1.0, g);
@@ -412,7 +418,7 @@ pub fn sequence_energy(
     plan.vel.run(gq, st.vel, |g, off, first, list| {
         for (k, &(p, c)) in list.iter().enumerate() {
             let x = &vel[first + k];
-            let (h, gh) = (x.h, x.gh);
+            let (h, gh) = (x.h(), x.gh);
             let hg = h[0] * gh[0] + h[1] * gh[1] + h[2] * gh[2];
             let mut gk = x.gv;
             axpy(

@@ -28,8 +28,53 @@ pub struct LbfgsLog {
     pub end: f64,
 }
 
+/// Elements per chunk of the vector algebra: fixed, so sums (added chunk by chunk in order) give
+/// the same bytes for any thread count; vectors of one chunk or less run on the calling thread.
+const CHUNK: usize = 16_384;
+
+/// a · b, in chunks of [`CHUNK`] added in order.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    use rayon::prelude::*;
+    let one = |(a, b): (&[f64], &[f64])| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
+    if a.len() <= CHUNK {
+        return one((a, b));
+    }
+    let parts: Vec<f64> = a
+        .par_chunks(CHUNK)
+        .zip(b.par_chunks(CHUNK))
+        .map(one)
+        .collect();
+    parts.iter().sum()
+}
+
+/// y_i = f(y_i, x_i) for every i (element-wise, in parallel chunks for long vectors).
+fn zip_map(y: &mut [f64], x: &[f64], f: impl Fn(f64, f64) -> f64 + Sync) {
+    use rayon::prelude::*;
+    if y.len() <= CHUNK {
+        y.iter_mut().zip(x).for_each(|(a, &b)| *a = f(*a, b));
+        return;
+    }
+    y.par_chunks_mut(CHUNK)
+        .zip(x.par_chunks(CHUNK))
+        .for_each(|(ys, xs)| ys.iter_mut().zip(xs).for_each(|(a, &b)| *a = f(*a, b)));
+}
+
+/// out_i = f(a_i, b_i) for every i (element-wise, in parallel chunks for long vectors).
+fn zip_into(out: &mut [f64], a: &[f64], b: &[f64], f: impl Fn(f64, f64) -> f64 + Sync) {
+    use rayon::prelude::*;
+    if out.len() <= CHUNK {
+        out.iter_mut()
+            .zip(a.iter().zip(b))
+            .for_each(|(o, (&x, &y))| *o = f(x, y));
+        return;
+    }
+    out.par_chunks_mut(CHUNK)
+        .zip(a.par_chunks(CHUNK).zip(b.par_chunks(CHUNK)))
+        .for_each(|(os, (xs, ys))| {
+            os.iter_mut()
+                .zip(xs.iter().zip(ys))
+                .for_each(|(o, (&x, &y))| *o = f(x, y))
+        });
 }
 
 /// Armijo constant and the step's shrink factor of the line search.
@@ -38,45 +83,51 @@ const SHRINK: f64 = 0.5;
 const MAX_BACKTRACK: usize = 30;
 
 impl Lbfgs {
-    /// Minimises `f` (returning the value and the gradient) from `x`; `x` holds the best point on
-    /// return. `on_iteration` sees the iteration number and the value.
+    /// Minimises `f` from `x`: `f(x, g)` returns the value at `x` and writes the gradient into `g`.
+    /// `x` holds the best point on return. `on_iteration` sees the iteration number and the value.
+    /// Every vector is allocated once per call (the history's pairs are recycled).
     pub fn minimise(
         &self,
         x: &mut [f64],
-        mut f: impl FnMut(&[f64]) -> Result<(f64, Vec<f64>)>,
+        mut f: impl FnMut(&[f64], &mut [f64]) -> Result<f64>,
         mut on_iteration: impl FnMut(usize, f64),
     ) -> Result<LbfgsLog> {
         let n = x.len();
-        let (mut fx, mut g) = f(x)?;
+        let mut g = vec![0.0; n];
+        let mut fx = f(x, &mut g)?;
         let start = fx;
         let mut evaluations = 1;
+        // (s, y, 1 / sᵀy), oldest first.
         let mut hist: std::collections::VecDeque<(Vec<f64>, Vec<f64>, f64)> = Default::default();
+        let (mut d, mut trial, mut gt) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let mut alpha = Vec::with_capacity(self.memory);
+        let mut spare: Option<(Vec<f64>, Vec<f64>)> = None;
         let mut done = 0;
         for it in 0..self.iterations {
             // Two-loop recursion: d = −H g.
-            let mut q = g.clone();
-            let mut alpha = Vec::with_capacity(hist.len());
+            d.copy_from_slice(&g);
+            alpha.clear();
             for (s, y, rho) in hist.iter().rev() {
-                let a = rho * dot(s, &q);
-                q.iter_mut().zip(y).for_each(|(qi, yi)| *qi -= a * yi);
+                let a = rho * dot(s, &d);
+                zip_map(&mut d, y, |qi, yi| qi - a * yi);
                 alpha.push(a);
             }
             let gamma = match hist.back() {
                 Some((s, y, _)) => dot(s, y) / dot(y, y).max(1e-300),
                 None => 1.0 / dot(&g, &g).sqrt().max(1e-300),
             };
-            q.iter_mut().for_each(|v| *v *= gamma);
+            zip_map(&mut d, &g, |qi, _| qi * gamma);
             for ((s, y, rho), a) in hist.iter().zip(alpha.iter().rev()) {
-                let b = rho * dot(y, &q);
-                q.iter_mut().zip(s).for_each(|(qi, si)| *qi += (a - b) * si);
+                let b = rho * dot(y, &d);
+                zip_map(&mut d, s, |qi, si| qi + (a - b) * si);
             }
-            let mut d: Vec<f64> = q.into_iter().map(|v| -v).collect();
+            zip_map(&mut d, &g, |qi, _| -qi);
             let mut slope = dot(&g, &d);
             if slope >= 0.0 || !slope.is_finite() {
                 // Not a descent direction: restart from steepest descent.
                 hist.clear();
                 let scale = 1.0 / dot(&g, &g).sqrt().max(1e-300);
-                d = g.iter().map(|v| -v * scale).collect();
+                zip_into(&mut d, &g, &g, |v, _| -v * scale);
                 slope = dot(&g, &d);
             }
             if slope == 0.0 {
@@ -86,31 +137,35 @@ impl Lbfgs {
             let mut step = 1.0;
             let mut accepted = None;
             for _ in 0..MAX_BACKTRACK {
-                let trial: Vec<f64> = x.iter().zip(&d).map(|(xi, di)| xi + step * di).collect();
-                let (ft, gt) = f(&trial)?;
+                zip_into(&mut trial, x, &d, |xi, di| xi + step * di);
+                let ft = f(&trial, &mut gt)?;
                 evaluations += 1;
                 if ft.is_finite() && ft <= fx + C1 * step * slope {
-                    accepted = Some((trial, ft, gt));
+                    accepted = Some(ft);
                     break;
                 }
                 step *= SHRINK;
             }
-            let Some((xt, ft, gt)) = accepted else {
+            let Some(ft) = accepted else {
                 break;
             };
-            let s: Vec<f64> = xt.iter().zip(x.iter()).map(|(a, b)| a - b).collect();
-            let y: Vec<f64> = gt.iter().zip(&g).map(|(a, b)| a - b).collect();
+            // s = trial − x and y = gt − g, in recycled storage (the pair the memory last dropped).
+            let (mut s, mut y) = spare.take().unwrap_or_else(|| (vec![0.0; n], vec![0.0; n]));
+            zip_into(&mut s, &trial, x, |a, b| a - b);
+            zip_into(&mut y, &gt, &g, |a, b| a - b);
             let sy = dot(&s, &y);
             if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
                 if hist.len() == self.memory {
-                    hist.pop_front();
+                    spare = hist.pop_front().map(|(s, y, _)| (s, y));
                 }
                 hist.push_back((s, y, 1.0 / sy));
+            } else {
+                spare = Some((s, y));
             }
             let gain = fx - ft;
-            x.copy_from_slice(&xt);
+            x.copy_from_slice(&trial);
             fx = ft;
-            g = gt;
+            std::mem::swap(&mut g, &mut gt);
             done = it + 1;
             on_iteration(it, fx);
             if gain <= self.tolerance * fx.abs().max(1.0) || n == 0 {
@@ -135,9 +190,9 @@ mod tests {
         // Σ 100 (x_{k+1} − x_k²)² + (1 − x_k)², minimum at all ones.
         let n = 20;
         let mut x = vec![-1.2; n];
-        let f = |x: &[f64]| -> Result<(f64, Vec<f64>)> {
+        let f = |x: &[f64], g: &mut [f64]| -> Result<f64> {
             let mut v = 0.0;
-            let mut g = vec![0.0; x.len()];
+            g.iter_mut().for_each(|gk| *gk = 0.0);
             for k in 0..x.len() - 1 {
                 let a = x[k + 1] - x[k] * x[k];
                 let b = 1.0 - x[k];
@@ -145,7 +200,7 @@ mod tests {
                 g[k] += -400.0 * a * x[k] - 2.0 * b;
                 g[k + 1] += 200.0 * a;
             }
-            Ok((v, g))
+            Ok(v)
         };
         let log = Lbfgs {
             iterations: 2000,

@@ -56,6 +56,11 @@ pub struct SequenceConfig {
     /// L-BFGS iterations per level (at most; a level stops earlier when an iteration gains less
     /// than `tolerance` relatively).
     pub iterations: usize,
+    /// L-BFGS iterations at most in the last level (`iterations` when smaller). The coarse levels
+    /// make the progress (a segment's distance and drift, the slow modes); the last one, with
+    /// every depth free, mostly polishes and costs the most per iteration: fewer is faster, at the
+    /// cost measured in BENCHMARKS.md, "Lift" (the default keeps `iterations`).
+    pub final_iterations: usize,
     /// Stored pairs of L-BFGS.
     pub memory: usize,
     pub tolerance: f64,
@@ -80,6 +85,7 @@ impl Default for SequenceConfig {
     fn default() -> Self {
         SequenceConfig {
             iterations: 300,
+            final_iterations: 300,
             memory: 10,
             tolerance: 1e-7,
             levels: vec![0, 64, 16, 4, 1],
@@ -99,11 +105,15 @@ impl Default for SequenceConfig {
 impl SequenceConfig {
     /// Checks ranges; errors name the key (`sequence.<key>`).
     pub fn check(&self) -> Result<()> {
-        if self.iterations > 1_000_000 {
-            return Err(Error::invalid(format!(
-                "sequence.iterations = {} must be at most 1000000",
-                self.iterations
-            )));
+        for (k, v) in [
+            ("iterations", self.iterations),
+            ("final_iterations", self.final_iterations),
+        ] {
+            if v > 1_000_000 {
+                return Err(Error::invalid(format!(
+                    "sequence.{k} = {v} must be at most 1000000"
+                )));
+            }
         }
         if self.levels.is_empty() || self.levels.len() > 16 {
             return Err(Error::invalid(format!(
@@ -368,6 +378,8 @@ pub fn segments(obs: &Observations) -> Vec<Vec<usize>> {
 /// Log-depths as linear interpolation between knots along each segment: knots every `spacing`
 /// frames from the segment's start and at its end (`spacing` 0: one knot per segment, a constant).
 struct Knots {
+    /// The first knot of each segment, and their number last.
+    first: Vec<usize>,
     k0: Vec<usize>,
     k1: Vec<usize>,
     w1: Vec<f64>,
@@ -379,8 +391,10 @@ impl Knots {
     fn new(segs: &[Vec<usize>], n: usize, spacing: usize) -> Knots {
         let (mut k0, mut k1, mut w1) = (vec![0; n], vec![0; n], vec![0.0; n]);
         let mut at = Vec::new();
+        let mut firsts = Vec::with_capacity(segs.len() + 1);
         for run in segs {
             let first = at.len();
+            firsts.push(first);
             let len = run.len();
             let pos: Vec<usize> = if spacing == 0 {
                 vec![0]
@@ -408,25 +422,56 @@ impl Knots {
                 }
             }
         }
-        Knots { k0, k1, w1, at }
+        firsts.push(at.len());
+        Knots {
+            first: firsts,
+            k0,
+            k1,
+            w1,
+            at,
+        }
     }
 
-    /// Log-depths `u` of every observation from the knots' values `x`.
+    /// Log-depths `u` of every observation from the knots' values `x` (element-wise, in parallel
+    /// chunks).
     fn interpolate(&self, x: &[f64], u: &mut [f64]) {
-        for (i, ui) in u.iter_mut().enumerate() {
-            *ui = (1.0 - self.w1[i]) * x[self.k0[i]] + self.w1[i] * x[self.k1[i]];
-        }
+        use rayon::prelude::*;
+        u.par_chunks_mut(CHUNK).enumerate().for_each(|(c, us)| {
+            for (k, ui) in us.iter_mut().enumerate() {
+                let i = c * CHUNK + k;
+                *ui = (1.0 - self.w1[i]) * x[self.k0[i]] + self.w1[i] * x[self.k1[i]];
+            }
+        });
     }
 
-    /// ∂E/∂x from ∂E/∂u (the transpose of [`Knots::interpolate`]), written into `g`.
-    fn pull_back(&self, gu: &[f64], g: &mut [f64]) {
-        g.iter_mut().for_each(|v| *v = 0.0);
-        for (i, &gi) in gu.iter().enumerate() {
-            g[self.k0[i]] += (1.0 - self.w1[i]) * gi;
-            g[self.k1[i]] += self.w1[i] * gi;
+    /// ∂E/∂x from ∂E/∂u (the transpose of [`Knots::interpolate`]), written into `g`: segment by
+    /// segment in parallel (a segment's knots take only its observations' terms, added in frame
+    /// order whatever the thread count).
+    fn pull_back(&self, segs: &[Vec<usize>], gu: &[f64], g: &mut [f64]) {
+        use rayon::prelude::*;
+        let mut parts = Vec::with_capacity(segs.len());
+        let mut rest = g;
+        for w in self.first.windows(2) {
+            let (mine, tail) = rest.split_at_mut(w[1] - w[0]);
+            parts.push((w[0], mine));
+            rest = tail;
         }
+        parts
+            .into_par_iter()
+            .zip(segs.par_iter())
+            .for_each(|((first, gs), run)| {
+                gs.iter_mut().for_each(|v| *v = 0.0);
+                for &i in run {
+                    let gi = gu[i];
+                    gs[self.k0[i] - first] += (1.0 - self.w1[i]) * gi;
+                    gs[self.k1[i] - first] += self.w1[i] * gi;
+                }
+            });
     }
 }
+
+/// Observations per chunk of the parallel element-wise passes.
+const CHUNK: usize = 16_384;
 
 /// Whole-sequence depths from `init` (the frame-by-frame depths), by L-BFGS on the energy of the
 /// module docs, its gradient by `sequence.gradient`.
@@ -461,15 +506,20 @@ pub fn whole_sequence(
         .collect();
     let start = energy.eval(&init.iter().map(|d| d.ln()).collect::<Vec<_>>(), None)?;
     let segs = segments(obs);
-    let opt = super::lbfgs::Lbfgs {
-        iterations: sc.iterations,
-        memory: sc.memory,
-        tolerance: sc.tolerance,
-    };
     let mut per_level = Vec::with_capacity(sc.levels.len());
     let mut evaluations = 0;
     let (mut ut, mut gu) = (vec![0.0; n], vec![0.0; n]);
-    for &spacing in &sc.levels {
+    for (level, &spacing) in sc.levels.iter().enumerate() {
+        let last = level + 1 == sc.levels.len();
+        let opt = super::lbfgs::Lbfgs {
+            iterations: if last {
+                sc.iterations.min(sc.final_iterations)
+            } else {
+                sc.iterations
+            },
+            memory: sc.memory,
+            tolerance: sc.tolerance,
+        };
         let knots = (spacing != 1).then(|| Knots::new(&segs, n, spacing));
         // Unknowns x: the knots' log-depths, or every log-depth.
         let mut x: Vec<f64> = match &knots {
@@ -484,17 +534,13 @@ pub fn whole_sequence(
                 .collect(),
             Some(k) => k.at.iter().map(|&i| u[i]).collect(),
         };
-        let objective = |x: &[f64]| -> Result<(f64, Vec<f64>)> {
-            let mut g = vec![0.0; x.len()];
+        let objective = |x: &[f64], g: &mut [f64]| -> Result<f64> {
             let value = match &knots {
-                None => {
-                    let e = energy.eval(x, Some(&mut g))?;
-                    e.total
-                }
+                None => energy.eval(x, Some(g))?.total,
                 Some(k) => {
                     k.interpolate(x, &mut ut);
                     let e = energy.eval(&ut, Some(&mut gu))?;
-                    k.pull_back(&gu, &mut g);
+                    k.pull_back(&segs, &gu, g);
                     e.total
                 }
             };
@@ -506,7 +552,7 @@ pub fn whole_sequence(
                 pen += weight * out * out;
                 *gk = if gk.is_finite() { *gk } else { 0.0 } - 2.0 * weight * out;
             }
-            Ok((value + pen, g))
+            Ok(value + pen)
         };
         progress.start(
             &match spacing {
@@ -514,7 +560,7 @@ pub fn whole_sequence(
                 1 => "lift: every depth".to_string(),
                 k => format!("lift: knots every {k} frames"),
             },
-            sc.iterations as u64,
+            opt.iterations as u64,
         );
         let run = opt.minimise(&mut x, objective, |_, f| {
             progress.message(&format!("E {f:.5}"));
