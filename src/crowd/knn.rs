@@ -156,9 +156,19 @@ impl<const D: usize> Tree<D> {
         let n = self.nodes[node as usize];
         if n.dim == u32::MAX {
             let (a, b) = (n.a as usize, n.b as usize);
+            // The leading (PCA: largest-variance) dimensions first; most points already lie
+            // beyond the bound on them and skip the rest (the sum's order is unchanged).
+            let head = D.min(4);
             for (pos, p) in (a..b).zip(&self.pts[a..b]) {
                 let mut d = 0.0;
-                for j in 0..D {
+                for j in 0..head {
+                    let t = p[j] - q[j];
+                    d += t * t;
+                }
+                if d > best.bound {
+                    continue;
+                }
+                for j in head..D {
                     let t = p[j] - q[j];
                     d += t * t;
                 }
