@@ -7,7 +7,10 @@
 //! rather than on (speed, angle), which has no wrap-around at ±π.
 
 use super::features::V2;
+pub use super::kmeans::kmeans;
+use super::kmeans::kmeans_into;
 use super::knn::StateTree;
+pub use super::lwr::{lwr, lwr_by, LwrScratch};
 use crate::error::{Error, Result};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -154,15 +157,6 @@ pub struct Scratch {
     polar: Vec<(f64, f64)>,
 }
 
-/// Buffers of [`lwr`]'s normal equations.
-#[derive(Default)]
-pub struct LwrScratch {
-    ata: Vec<f64>,
-    atb: Vec<f64>,
-    x: Vec<f64>,
-    w: Vec<f64>,
-}
-
 /// The outcome of one query.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Decision {
@@ -292,7 +286,8 @@ fn argmax(p: &[f64]) -> usize {
     best
 }
 
-fn d2(a: V2, b: V2) -> f64 {
+/// Squared distance of two 2-D points.
+pub(super) fn d2(a: V2, b: V2) -> f64 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
 }
 
@@ -329,296 +324,6 @@ fn cluster_probabilities_into(means: &[V2], m_prev: V2, p: &mut Vec<f64>) {
     p.iter_mut().for_each(|d| *d = 1.0 / *d);
     let s: f64 = p.iter().sum();
     p.iter_mut().for_each(|v| *v /= s);
-}
-
-/// k-means (Lloyd, k-means++ seeding from `rng`) of 2-D points into at most `k` clusters; fills
-/// `assign` with each point's cluster and returns the means. Clusters left empty are dropped.
-pub fn kmeans(
-    pts: &[V2],
-    k: usize,
-    iters: usize,
-    rng: &mut impl Rng,
-    assign: &mut Vec<usize>,
-) -> Vec<V2> {
-    let mut centres = Vec::new();
-    kmeans_into(
-        pts,
-        k,
-        iters,
-        rng,
-        assign,
-        &mut centres,
-        &mut Vec::new(),
-        &mut Vec::new(),
-    );
-    centres
-}
-
-/// [`kmeans`] with the means written to `centres` and the buffers `dmin`, `sum` reused.
-#[allow(clippy::too_many_arguments)]
-fn kmeans_into(
-    pts: &[V2],
-    k: usize,
-    iters: usize,
-    rng: &mut impl Rng,
-    assign: &mut Vec<usize>,
-    centres: &mut Vec<V2>,
-    dmin: &mut Vec<f64>,
-    sum: &mut Vec<[f64; 3]>,
-) {
-    assign.clear();
-    assign.resize(pts.len(), 0);
-    centres.clear();
-    if pts.is_empty() {
-        centres.push([0.0, 0.0]);
-        return;
-    }
-    centres.push(pts[rng.gen_range(0..pts.len())]);
-    dmin.clear();
-    dmin.extend(pts.iter().map(|p| d2(*p, centres[0])));
-    while centres.len() < k {
-        let total: f64 = dmin.iter().sum();
-        if total <= 0.0 {
-            break;
-        }
-        let u = rng.gen::<f64>() * total;
-        let mut acc = 0.0;
-        let j = dmin
-            .iter()
-            .position(|d| {
-                acc += d;
-                u < acc
-            })
-            .unwrap_or(pts.len() - 1);
-        centres.push(pts[j]);
-        for (d, p) in dmin.iter_mut().zip(pts) {
-            *d = d.min(d2(*p, pts[j]));
-        }
-    }
-    sum.clear();
-    sum.resize(centres.len(), [0.0, 0.0, 0.0]);
-    let (cs, sum, assign) = (&mut centres[..], &mut sum[..], &mut assign[..]);
-    for it in 0..iters {
-        let mut changed = it == 0;
-        for (a, p) in assign.iter_mut().zip(pts) {
-            let mut best = 0;
-            let mut best_d = d2(*p, cs[0]);
-            for (c, m) in cs.iter().enumerate().skip(1) {
-                let dc = d2(*p, *m);
-                if dc < best_d {
-                    best = c;
-                    best_d = dc;
-                }
-            }
-            changed |= *a != best;
-            *a = best;
-        }
-        if !changed {
-            break;
-        }
-        // Per cluster, a masked sum over all points: no chain of loads and stores through
-        // one accumulator in memory, and the points are still added in their order.
-        for (c, s) in sum.iter_mut().enumerate() {
-            let mut t = [0.0, 0.0, 0.0];
-            for (a, p) in assign.iter().zip(pts) {
-                let m = f64::from(u8::from(*a == c));
-                t[0] += m * p[0];
-                t[1] += m * p[1];
-                t[2] += m;
-            }
-            *s = t;
-        }
-        for (m, s) in cs.iter_mut().zip(sum.iter()) {
-            if s[2] > 0.0 {
-                *m = [s[0] / s[2], s[1] / s[2]];
-            }
-        }
-    }
-    // Drop empty clusters, renumbering the assignment (at most a handful of clusters).
-    let mut kept = 0;
-    for c in 0..centres.len() {
-        if assign.iter().any(|&a| a == c) {
-            if kept != c {
-                centres[kept] = centres[c];
-                assign
-                    .iter_mut()
-                    .filter(|a| **a == c)
-                    .for_each(|a| *a = kept);
-            }
-            kept += 1;
-        }
-    }
-    centres.truncate(kept);
-}
-
-/// Eq. 3, locally weighted linear regression at query `s`: β = (SᵀWS)⁻¹SᵀW a over the rows
-/// (state s_i, action a_i, ‖s − s_i‖²), S's rows `[1, s_i − s]`, W_ii = exp(−½ ‖s − s_i‖²/h²);
-/// the prediction at `s` is β's intercept. With too few rows or a singular system it falls back
-/// to the weighted mean (the intercept-only fit). `h2 = ∞` and `ridge = 0` give ordinary least
-/// squares; `ridge > 0` adds `ridge × (mean slope diagonal)` to the slopes' diagonal.
-pub fn lwr(
-    s: &[f64],
-    rows: &[(&[f64], V2, f64)],
-    h2: f64,
-    ridge: f64,
-    ata: &mut Vec<f64>,
-    atb: &mut Vec<f64>,
-) -> V2 {
-    let mut sc = LwrScratch {
-        ata: std::mem::take(ata),
-        atb: std::mem::take(atb),
-        ..LwrScratch::default()
-    };
-    let out = lwr_by(s, rows.len(), |r| rows[r], h2, ridge, &mut sc);
-    *ata = sc.ata;
-    *atb = sc.atb;
-    out
-}
-
-/// [`lwr`] over `n` rows given by `row(r)`, with reusable buffers.
-pub fn lwr_by<'a>(
-    s: &[f64],
-    n: usize,
-    row: impl Fn(usize) -> (&'a [f64], V2, f64),
-    h2: f64,
-    ridge: f64,
-    sc: &mut LwrScratch,
-) -> V2 {
-    let d = s.len();
-    let m = d + 1;
-    let weight = |dist2: f64| {
-        if h2.is_infinite() {
-            1.0
-        } else {
-            (-0.5 * dist2 / h2).exp()
-        }
-    };
-    // The design matrix [1, s_i − s] column by column, the weights and the actions.
-    sc.x.clear();
-    sc.x.resize(m * n, 0.0);
-    sc.w.clear();
-    sc.w.resize(4 * n, 0.0);
-    let (x, w) = (&mut sc.x[..], &mut sc.w[..]);
-    let (w, rest) = w.split_at_mut(n);
-    let (y0, rest) = rest.split_at_mut(n);
-    let (y1, wx) = rest.split_at_mut(n);
-    let (mut sw, mut mean) = (0.0, [0.0, 0.0]);
-    for r in 0..n {
-        let (si, a, dist2) = row(r);
-        let wr = weight(dist2);
-        w[r] = wr;
-        sw += wr;
-        mean[0] += wr * a[0];
-        mean[1] += wr * a[1];
-        (y0[r], y1[r]) = (a[0], a[1]);
-        x[r] = 1.0;
-        for k in 0..d {
-            x[(k + 1) * n + r] = si[k] - s[k];
-        }
-    }
-    if sw <= 1e-300 {
-        // Every weight underflowed: the nearest row's action.
-        return (0..n)
-            .map(&row)
-            .min_by(|x, y| x.2.total_cmp(&y.2))
-            .map_or([0.0, 0.0], |r| r.1);
-    }
-    let mean = [mean[0] / sw, mean[1] / sw];
-    if n < m {
-        return mean;
-    }
-    // SᵀWS (upper triangle, then mirrored) and SᵀWa as dot products of columns.
-    sc.ata.clear();
-    sc.ata.resize(m * m, 0.0);
-    sc.atb.clear();
-    sc.atb.resize(2 * m, 0.0);
-    let (ata, atb) = (&mut sc.ata[..], &mut sc.atb[..]);
-    for i in 0..m {
-        let xi = &x[i * n..(i + 1) * n];
-        for ((v, a), b) in wx.iter_mut().zip(w.iter()).zip(xi) {
-            *v = a * b;
-        }
-        for j in i..m {
-            ata[i * m + j] = dot(wx, &x[j * n..(j + 1) * n]);
-        }
-        atb[i] = dot(wx, y0);
-        atb[m + i] = dot(wx, y1);
-    }
-    for i in 0..m {
-        for j in 0..i {
-            ata[i * m + j] = ata[j * m + i];
-        }
-    }
-    if ridge > 0.0 {
-        let lam = ridge * (1..m).map(|i| ata[i * m + i]).sum::<f64>() / d.max(1) as f64;
-        for i in 1..m {
-            ata[i * m + i] += lam;
-        }
-    }
-    if cholesky_solve(&mut sc.ata, &mut sc.atb, m) {
-        [sc.atb[0], sc.atb[m]]
-    } else {
-        mean
-    }
-}
-
-/// Σ a_i b_i in four interleaved partial sums (vectorised; a fixed order, so deterministic).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (u, v) in ca.zip(cb) {
-        for l in 0..4 {
-            acc[l] += u[l] * v[l];
-        }
-    }
-    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
-    for (u, v) in ra.iter().zip(rb) {
-        s += u * v;
-    }
-    s
-}
-
-/// Solves `A [x y] = [b0 b1]` for symmetric positive definite `A` (`m × m`) in place (the
-/// solutions replace `b`); `false` when A is not (numerically) positive definite.
-fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> bool {
-    let scale = (0..m).map(|i| a[i * m + i].abs()).fold(0.0, f64::max);
-    for j in 0..m {
-        let mut diag = a[j * m + j];
-        for k in 0..j {
-            diag -= a[j * m + k] * a[j * m + k];
-        }
-        if diag <= 1e-12 * scale.max(1e-300) {
-            return false;
-        }
-        let l = diag.sqrt();
-        a[j * m + j] = l;
-        for i in j + 1..m {
-            let mut v = a[i * m + j];
-            for k in 0..j {
-                v -= a[i * m + k] * a[j * m + k];
-            }
-            a[i * m + j] = v / l;
-        }
-    }
-    for c in 0..2 {
-        let b = &mut b[c * m..(c + 1) * m];
-        for i in 0..m {
-            let mut v = b[i];
-            for k in 0..i {
-                v -= a[i * m + k] * b[k];
-            }
-            b[i] = v / a[i * m + i];
-        }
-        for i in (0..m).rev() {
-            let mut v = b[i];
-            for k in i + 1..m {
-                v -= a[k * m + i] * b[k];
-            }
-            b[i] = v / a[i * m + i];
-        }
-    }
-    true
 }
 
 /// Settings of [`attract`]: half-width `c` of the perturbation range and the output limit
