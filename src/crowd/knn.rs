@@ -82,9 +82,9 @@ impl<const D: usize> Tree<D> {
         }
         let (mut lo, mut hi) = ([f64::INFINITY; D], [f64::NEG_INFINITY; D]);
         for &i in perm.iter() {
-            for j in 0..D {
-                lo[j] = lo[j].min(pts[i as usize][j]);
-                hi[j] = hi[j].max(pts[i as usize][j]);
+            for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(&pts[i as usize]) {
+                *l = l.min(*v);
+                *h = h.max(*v);
             }
         }
         let mut dim = 0;
@@ -161,16 +161,14 @@ impl<const D: usize> Tree<D> {
             let head = D.min(4);
             for (pos, p) in (a..b).zip(&self.pts[a..b]) {
                 let mut d = 0.0;
-                for j in 0..head {
-                    let t = p[j] - q[j];
-                    d += t * t;
+                for (a, b) in p[..head].iter().zip(&q[..head]) {
+                    d += (a - b) * (a - b);
                 }
                 if d > best.bound {
                     continue;
                 }
-                for j in head..D {
-                    let t = p[j] - q[j];
-                    d += t * t;
+                for (a, b) in p[head..].iter().zip(&q[head..]) {
+                    d += (a - b) * (a - b);
                 }
                 best.offer(d, pos as u32);
             }

@@ -73,8 +73,8 @@ pub fn lwr_by<'a>(
         mean[1] += wr * a[1];
         (y0[r], y1[r]) = (a[0], a[1]);
         x[r] = 1.0;
-        for k in 0..d {
-            x[(k + 1) * n + r] = si[k] - s[k];
+        for (k, (a, b)) in si.iter().zip(s).enumerate() {
+            x[(k + 1) * n + r] = a - b;
         }
     }
     if sw <= 1e-300 {
@@ -129,8 +129,8 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     for (u, v) in ca.zip(cb) {
-        for l in 0..4 {
-            acc[l] += u[l] * v[l];
+        for ((c, x), y) in acc.iter_mut().zip(u).zip(v) {
+            *c += x * y;
         }
     }
     let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
