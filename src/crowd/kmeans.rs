@@ -112,16 +112,17 @@ pub(super) fn kmeans_into(
     // Drop empty clusters, renumbering the assignment (at most a handful of clusters).
     let mut kept = 0;
     for c in 0..centres.len() {
-        if assign.iter().any(|&a| a == c) {
-            if kept != c {
-                centres[kept] = centres[c];
-                assign
-                    .iter_mut()
-                    .filter(|a| **a == c)
-                    .for_each(|a| *a = kept);
-            }
-            kept += 1;
+        if !assign.iter().any(|&a| a == c) {
+            continue;
         }
+        if kept != c {
+            centres.swap(kept, c);
+            assign
+                .iter_mut()
+                .filter(|a| **a == c)
+                .for_each(|a| *a = kept);
+        }
+        kept += 1;
     }
     centres.truncate(kept);
 }
