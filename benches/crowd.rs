@@ -1,10 +1,11 @@
 //! Crowd simulation throughput (agent-steps per second) with k = 100 and ≥ 5,000 training samples,
-//! and its parts against peers in the same run: kiddo's kd-tree vs brute-force kNN, our 2-D
-//! k-means vs linfa-clustering's KMeans on the same 100 actions.
+//! on both cores and on one thread, and its parts against peers in the same run: our kd-tree vs
+//! kiddo's and brute-force kNN, our 2-D k-means vs linfa-clustering's KMeans on the same 100
+//! actions.
 //!
 //! `cargo bench --bench crowd`
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, Throughput};
 use herdfit::crowd::action::{kmeans, ActionModel, Scratch};
 use herdfit::crowd::knn::brute_force;
 use herdfit::crowd::model::{learn, CrowdModel, LearnConfig};
@@ -66,17 +67,38 @@ fn agents(m: &CrowdModel, n: usize) -> Vec<Agent> {
         .collect()
 }
 
+/// Steps the agents take before the measured step (so the states are mid-simulation ones).
+const WARM_UP_STEPS: usize = 10;
+
+fn step(m: &CrowdModel, a: &mut [Agent]) {
+    let p = plan(m, a);
+    advance(m, a, &p, None, 8);
+}
+
+/// One step of `n` agents from the same mid-simulation state each iteration, on the default
+/// thread pool (both cores) and on one thread (the peer: the parallel speed-up in the same run).
 fn bench_step(c: &mut Criterion) {
     let m = model();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
     let mut g = c.benchmark_group("crowd_step");
     for n in [100usize, 400] {
         let mut a = agents(&m, n);
+        for _ in 0..WARM_UP_STEPS {
+            step(&m, &mut a);
+        }
         g.throughput(Throughput::Elements(n as u64));
         g.bench_with_input(BenchmarkId::new("agents", n), &n, |b, _| {
-            b.iter(|| {
-                let p = plan(&m, &mut a);
-                advance(&m, &mut a, &p, None, 8);
-            })
+            b.iter_batched_ref(|| a.clone(), |a| step(&m, a), BatchSize::SmallInput)
+        });
+        g.bench_with_input(BenchmarkId::new("agents_1_thread", n), &n, |b, _| {
+            b.iter_batched_ref(
+                || a.clone(),
+                |a| one.install(|| step(&m, a)),
+                BatchSize::SmallInput,
+            )
         });
     }
     g.finish();
@@ -90,6 +112,11 @@ fn bench_parts(c: &mut Criterion) {
     let mut g = c.benchmark_group("crowd_parts");
     g.bench_function("knn_kdtree_k100", |b| {
         let tree = herdfit::crowd::knn::StateTree::build(&s.states, s.dims).unwrap();
+        let mut out = Vec::new();
+        b.iter(|| tree.nearest(&q, 100, &mut out))
+    });
+    g.bench_function("knn_kiddo_k100", |b| {
+        let tree = herdfit::crowd::knn::KiddoTree::build(&s.states, s.dims).unwrap();
         let mut out = Vec::new();
         b.iter(|| tree.nearest(&q, 100, &mut out))
     });

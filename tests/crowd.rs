@@ -7,7 +7,7 @@ mod common;
 use common::{fails, herdfit, ok, s};
 use herdfit::crowd::action::{cluster_probabilities, kmeans, lwr};
 use herdfit::crowd::features::{formation, SECTORS};
-use herdfit::crowd::knn::{brute_force, StateTree};
+use herdfit::crowd::knn::{brute_force, KiddoTree, StateTree};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::{Path, PathBuf};
@@ -152,21 +152,64 @@ fn kd_tree_knn_equals_brute_force() {
             .map(|i| rng.gen_range(-1.0..1.0) * (1.0 + (i % dims) as f64))
             .collect();
         let tree = StateTree::build(&pts, dims).unwrap();
-        let mut got = Vec::new();
-        for _ in 0..40 {
+        let kiddo = KiddoTree::build(&pts, dims).unwrap();
+        let (mut got, mut peer) = (Vec::new(), Vec::new());
+        for i in 0..40 {
+            // Queries far outside the samples too (a simulated agent in an unseen situation).
+            let spread = if i % 4 == 0 { 20.0 } else { 2.0 };
             let q: Vec<f64> = (0..dims)
-                .map(|k| rng.gen_range(-2.0..2.0) * (1.0 + k as f64))
+                .map(|k| rng.gen_range(-spread..spread) * (1.0 + k as f64))
                 .collect();
-            tree.nearest(&q, 100, &mut got);
-            let want = brute_force(&pts, dims, &q, 100);
-            assert_eq!(got.len(), 100);
-            for (g, w) in got.iter().zip(&want) {
-                assert_eq!(g.1, w.1, "dims {dims}");
-                assert!((g.0 - w.0).abs() <= 1e-9 * w.0.max(1.0));
+            for k in [1, 5, 100] {
+                tree.nearest(&q, k, &mut got);
+                kiddo.nearest(&q, k, &mut peer);
+                let want = brute_force(&pts, dims, &q, k);
+                assert_eq!(got.len(), k);
+                assert_eq!(got, want, "dims {dims}, k {k}: the same rows and distances");
+                for (g, w) in peer.iter().zip(&want) {
+                    assert_eq!(g.1, w.1, "kiddo, dims {dims}");
+                    assert!((g.0 - w.0).abs() <= 1e-9 * w.0.max(1.0));
+                }
             }
         }
     }
+    // Ties: a lattice with many equal distances; rows of equal distance come in row order.
+    let lattice: Vec<f64> = (0..400)
+        .flat_map(|i| [(i % 20) as f64, (i / 20) as f64])
+        .collect();
+    let tree = StateTree::build(&lattice, 2).unwrap();
+    let mut got = Vec::new();
+    for q in [[5.0, 5.0], [5.5, 5.5], [0.0, 0.0], [-3.0, 30.0]] {
+        for k in [4, 9, 37, 400] {
+            tree.nearest(&q, k, &mut got);
+            assert_eq!(got, brute_force(&lattice, 2, &q, k), "{q:?} {k}");
+        }
+    }
+    // More than the samples: all of them.
+    tree.nearest(&[1.0, 1.0], 1000, &mut got);
+    assert_eq!(got.len(), 400);
     assert!(StateTree::build(&[0.0; 26], 13).is_err());
+    assert!(StateTree::build(&[0.0; 26], 0).is_err());
+}
+
+#[test]
+fn tree_memory_is_linear_in_the_samples() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let bytes = |n: usize, rng: &mut ChaCha8Rng| {
+        let pts: Vec<f64> = (0..n * 10).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        StateTree::build(&pts, 10).unwrap().bytes()
+    };
+    let (a, b) = (bytes(5000, &mut rng), bytes(20000, &mut rng));
+    let per = a as f64 / 5000.0;
+    assert!(
+        per < 100.0,
+        "{per} bytes per 10-D sample (80 for the point)"
+    );
+    let ratio = b as f64 / a as f64;
+    assert!(
+        (3.9..4.1).contains(&ratio),
+        "4× the samples, {ratio}× the bytes"
+    );
 }
 
 #[test]

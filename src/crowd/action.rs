@@ -7,7 +7,10 @@
 //! rather than on (speed, angle), which has no wrap-around at ±π.
 
 use super::features::V2;
+pub use super::kmeans::kmeans;
+use super::kmeans::kmeans_into;
 use super::knn::StateTree;
+pub use super::lwr::{lwr, lwr_by, LwrScratch};
 use crate::error::{Error, Result};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -127,25 +130,31 @@ impl ActionSamples {
     pub fn is_empty(&self) -> bool {
         self.actions.is_empty()
     }
-    fn state(&self, i: usize) -> &[f64] {
-        &self.states[i * self.dims..(i + 1) * self.dims]
-    }
 }
 
 /// Samples and their kd-tree.
 pub struct ActionModel {
     pub samples: ActionSamples,
     tree: StateTree,
+    /// The samples' actions in the tree's order: a query reads the states and actions of its
+    /// neighbours from memory the search has just touched.
+    tree_actions: Vec<V2>,
 }
 
-/// Scratch buffers of one query (reused across queries of a thread).
+/// Scratch buffers of one query (reused across queries of a thread: a query allocates nothing
+/// once they have grown).
 #[derive(Default)]
 pub struct Scratch {
     nn: Vec<(f64, u32)>,
+    acts: Vec<V2>,
     assign: Vec<usize>,
     members: Vec<usize>,
-    ata: Vec<f64>,
-    atb: Vec<f64>,
+    centres: Vec<V2>,
+    dmin: Vec<f64>,
+    sums: Vec<[f64; 3]>,
+    probs: Vec<f64>,
+    lwr: LwrScratch,
+    polar: Vec<(f64, f64)>,
 }
 
 /// The outcome of one query.
@@ -180,7 +189,16 @@ impl ActionModel {
             return Err(Error::invalid("samples: values are not finite"));
         }
         let tree = StateTree::build(&samples.states, samples.dims)?;
-        Ok(ActionModel { samples, tree })
+        let tree_actions = tree
+            .order()
+            .iter()
+            .map(|&i| samples.actions[i as usize])
+            .collect();
+        Ok(ActionModel {
+            samples,
+            tree,
+            tree_actions,
+        })
     }
 
     /// The action for PCA state `s` given the previously chosen cluster's mean `m_prev`.
@@ -193,22 +211,24 @@ impl ActionModel {
         sc: &mut Scratch,
     ) -> Decision {
         let k = cfg.k.min(self.samples.len());
-        self.tree.nearest(s, k, &mut sc.nn);
-        let acts: Vec<V2> = sc
-            .nn
-            .iter()
-            .map(|&(_, i)| self.samples.actions[i as usize])
-            .collect();
-        let centres = kmeans(
-            &acts,
+        self.tree.nearest_pos(s, k, &mut sc.nn);
+        sc.acts.clear();
+        sc.acts
+            .extend(sc.nn.iter().map(|&(_, i)| self.tree_actions[i as usize]));
+        kmeans_into(
+            &sc.acts,
             cfg.clusters,
             cfg.kmeans_iterations,
             rng,
             &mut sc.assign,
+            &mut sc.centres,
+            &mut sc.dmin,
+            &mut sc.sums,
         );
-        let probs = cluster_probabilities(&centres, m_prev);
+        cluster_probabilities_into(&sc.centres, m_prev, &mut sc.probs);
+        let probs = &sc.probs;
         let c = match cfg.choice {
-            ClusterChoice::Nearest => argmax(&probs),
+            ClusterChoice::Nearest => argmax(probs),
             ClusterChoice::Sample => {
                 let u: f64 = rng.gen();
                 let mut acc = 0.0;
@@ -225,23 +245,33 @@ impl ActionModel {
         sc.members
             .extend((0..sc.nn.len()).filter(|&j| sc.assign[j] == c));
         let h2 = bandwidth2(&sc.nn, cfg.bandwidth_neighbour) * cfg.bandwidth_scale.powi(2);
-        let mut rows = Vec::with_capacity(sc.members.len());
-        for &j in &sc.members {
-            let (d2, i) = sc.nn[j];
-            rows.push((self.samples.state(i as usize), acts[j], d2));
-        }
-        let lwr_out = lwr(s, &rows, h2, cfg.ridge, &mut sc.ata, &mut sc.atb);
-        let action = attract(
+        let (nn, acts, members) = (&sc.nn, &sc.acts, &sc.members);
+        let (points, dims) = (self.tree.points(), self.samples.dims);
+        let row = |r: usize| {
+            let j = members[r];
+            let (d2, i) = nn[j];
+            let i = i as usize;
+            (&points[i * dims..(i + 1) * dims], acts[j], d2)
+        };
+        let lwr_out = lwr_by(s, members.len(), row, h2, cfg.ridge, &mut sc.lwr);
+        let action = attract_by(
             lwr_out,
-            &rows,
+            members.len(),
+            |r| {
+                let (_, a, d2) = row(r);
+                (a, d2)
+            },
             h2,
-            cfg.attraction,
-            cfg.attraction_grid,
-            cfg.max_deviation,
+            &AttractConfig {
+                c: cfg.attraction,
+                grid: cfg.attraction_grid,
+                limit: cfg.max_deviation,
+            },
+            &mut sc.polar,
         );
         Decision {
             action,
-            cluster_mean: centres[c],
+            cluster_mean: sc.centres[c],
         }
     }
 }
@@ -256,7 +286,8 @@ fn argmax(p: &[f64]) -> usize {
     best
 }
 
-fn d2(a: V2, b: V2) -> f64 {
+/// Squared distance of two 2-D points.
+pub(super) fn d2(a: V2, b: V2) -> f64 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
 }
 
@@ -275,213 +306,32 @@ fn bandwidth2(nn: &[(f64, u32)], nth: usize) -> f64 {
 /// Eq. 2: p_i = (1/‖m_i − m_prev‖) / Σ_j 1/‖m_j − m_prev‖. A cluster whose mean is m_prev gets
 /// probability 1 (shared when several do).
 pub fn cluster_probabilities(means: &[V2], m_prev: V2) -> Vec<f64> {
-    let dist: Vec<f64> = means.iter().map(|m| d2(*m, m_prev).sqrt()).collect();
-    let zero = dist.iter().filter(|&&d| d <= 1e-12).count();
+    let mut p = Vec::with_capacity(means.len());
+    cluster_probabilities_into(means, m_prev, &mut p);
+    p
+}
+
+/// [`cluster_probabilities`] into `p`.
+fn cluster_probabilities_into(means: &[V2], m_prev: V2, p: &mut Vec<f64>) {
+    p.clear();
+    p.extend(means.iter().map(|m| d2(*m, m_prev).sqrt()));
+    let zero = p.iter().filter(|&&d| d <= 1e-12).count();
     if zero > 0 {
-        return dist
-            .iter()
-            .map(|&d| if d <= 1e-12 { 1.0 / zero as f64 } else { 0.0 })
-            .collect();
+        p.iter_mut()
+            .for_each(|d| *d = if *d <= 1e-12 { 1.0 / zero as f64 } else { 0.0 });
+        return;
     }
-    let inv: Vec<f64> = dist.iter().map(|d| 1.0 / d).collect();
-    let s: f64 = inv.iter().sum();
-    inv.iter().map(|v| v / s).collect()
+    p.iter_mut().for_each(|d| *d = 1.0 / *d);
+    let s: f64 = p.iter().sum();
+    p.iter_mut().for_each(|v| *v /= s);
 }
 
-/// k-means (Lloyd, k-means++ seeding from `rng`) of 2-D points into at most `k` clusters; fills
-/// `assign` with each point's cluster and returns the means. Clusters left empty are dropped.
-pub fn kmeans(
-    pts: &[V2],
-    k: usize,
-    iters: usize,
-    rng: &mut impl Rng,
-    assign: &mut Vec<usize>,
-) -> Vec<V2> {
-    assign.clear();
-    assign.resize(pts.len(), 0);
-    if pts.is_empty() {
-        return vec![[0.0, 0.0]];
-    }
-    let mut centres = vec![pts[rng.gen_range(0..pts.len())]];
-    let mut dmin: Vec<f64> = pts.iter().map(|p| d2(*p, centres[0])).collect();
-    while centres.len() < k {
-        let total: f64 = dmin.iter().sum();
-        if total <= 0.0 {
-            break;
-        }
-        let u = rng.gen::<f64>() * total;
-        let mut acc = 0.0;
-        let j = dmin
-            .iter()
-            .position(|d| {
-                acc += d;
-                u < acc
-            })
-            .unwrap_or(pts.len() - 1);
-        centres.push(pts[j]);
-        for (d, p) in dmin.iter_mut().zip(pts) {
-            *d = d.min(d2(*p, pts[j]));
-        }
-    }
-    for it in 0..iters {
-        let mut changed = it == 0;
-        for (a, p) in assign.iter_mut().zip(pts) {
-            let mut best = 0;
-            for (c, m) in centres.iter().enumerate() {
-                if d2(*p, *m) < d2(*p, centres[best]) {
-                    best = c;
-                }
-            }
-            changed |= *a != best;
-            *a = best;
-        }
-        if !changed {
-            break;
-        }
-        let mut sum = vec![[0.0, 0.0, 0.0]; centres.len()];
-        for (a, p) in assign.iter().zip(pts) {
-            sum[*a][0] += p[0];
-            sum[*a][1] += p[1];
-            sum[*a][2] += 1.0;
-        }
-        for (m, s) in centres.iter_mut().zip(&sum) {
-            if s[2] > 0.0 {
-                *m = [s[0] / s[2], s[1] / s[2]];
-            }
-        }
-    }
-    // Drop empty clusters, renumbering the assignment.
-    let mut count = vec![0usize; centres.len()];
-    assign.iter().for_each(|&a| count[a] += 1);
-    let mut map = vec![usize::MAX; centres.len()];
-    let mut kept = Vec::new();
-    for (c, m) in centres.iter().enumerate() {
-        if count[c] > 0 {
-            map[c] = kept.len();
-            kept.push(*m);
-        }
-    }
-    assign.iter_mut().for_each(|a| *a = map[*a]);
-    kept
-}
-
-/// Eq. 3, locally weighted linear regression at query `s`: β = (SᵀWS)⁻¹SᵀW a over the rows
-/// (state s_i, action a_i, ‖s − s_i‖²), S's rows `[1, s_i − s]`, W_ii = exp(−½ ‖s − s_i‖²/h²);
-/// the prediction at `s` is β's intercept. With too few rows or a singular system it falls back
-/// to the weighted mean (the intercept-only fit). `h2 = ∞` and `ridge = 0` give ordinary least
-/// squares; `ridge > 0` adds `ridge × (mean slope diagonal)` to the slopes' diagonal.
-pub fn lwr(
-    s: &[f64],
-    rows: &[(&[f64], V2, f64)],
-    h2: f64,
-    ridge: f64,
-    ata: &mut Vec<f64>,
-    atb: &mut Vec<f64>,
-) -> V2 {
-    let d = s.len();
-    let m = d + 1;
-    let weight = |dist2: f64| {
-        if h2.is_infinite() {
-            1.0
-        } else {
-            (-0.5 * dist2 / h2).exp()
-        }
-    };
-    let (mut sw, mut mean) = (0.0, [0.0, 0.0]);
-    for &(_, a, dist2) in rows {
-        let w = weight(dist2);
-        sw += w;
-        mean[0] += w * a[0];
-        mean[1] += w * a[1];
-    }
-    if sw <= 1e-300 {
-        // Every weight underflowed: the nearest row's action.
-        return rows
-            .iter()
-            .min_by(|x, y| x.2.total_cmp(&y.2))
-            .map_or([0.0, 0.0], |r| r.1);
-    }
-    let mean = [mean[0] / sw, mean[1] / sw];
-    if rows.len() < m {
-        return mean;
-    }
-    ata.clear();
-    ata.resize(m * m, 0.0);
-    atb.clear();
-    atb.resize(2 * m, 0.0);
-    let mut x = vec![0.0; m];
-    for &(si, a, dist2) in rows {
-        let w = weight(dist2);
-        x[0] = 1.0;
-        for k in 0..d {
-            x[k + 1] = si[k] - s[k];
-        }
-        for i in 0..m {
-            let wxi = w * x[i];
-            for j in i..m {
-                ata[i * m + j] += wxi * x[j];
-            }
-            atb[i] += wxi * a[0];
-            atb[m + i] += wxi * a[1];
-        }
-    }
-    for i in 0..m {
-        for j in 0..i {
-            ata[i * m + j] = ata[j * m + i];
-        }
-    }
-    if ridge > 0.0 {
-        let lam = ridge * (1..m).map(|i| ata[i * m + i]).sum::<f64>() / d.max(1) as f64;
-        for i in 1..m {
-            ata[i * m + i] += lam;
-        }
-    }
-    match cholesky_solve(ata, atb, m) {
-        Some(beta) => [beta[0], beta[m]],
-        None => mean,
-    }
-}
-
-/// Solves `A [x y] = [b0 b1]` for symmetric positive definite `A` (`m × m`) in place; `None`
-/// when A is not (numerically) positive definite.
-fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
-    let scale = (0..m).map(|i| a[i * m + i].abs()).fold(0.0, f64::max);
-    for j in 0..m {
-        let mut diag = a[j * m + j];
-        for k in 0..j {
-            diag -= a[j * m + k] * a[j * m + k];
-        }
-        if diag <= 1e-12 * scale.max(1e-300) {
-            return None;
-        }
-        let l = diag.sqrt();
-        a[j * m + j] = l;
-        for i in j + 1..m {
-            let mut v = a[i * m + j];
-            for k in 0..j {
-                v -= a[i * m + k] * a[j * m + k];
-            }
-            a[i * m + j] = v / l;
-        }
-    }
-    for c in 0..2 {
-        let b = &mut b[c * m..(c + 1) * m];
-        for i in 0..m {
-            let mut v = b[i];
-            for k in 0..i {
-                v -= a[i * m + k] * b[k];
-            }
-            b[i] = v / a[i * m + i];
-        }
-        for i in (0..m).rev() {
-            let mut v = b[i];
-            for k in i + 1..m {
-                v -= a[k * m + i] * b[k];
-            }
-            b[i] = v / a[i * m + i];
-        }
-    }
-    Some(b.to_vec())
+/// Settings of [`attract`]: half-width `c` of the perturbation range and the output limit
+/// `limit`, both in standard deviations, and `grid` candidates per axis.
+pub struct AttractConfig {
+    pub c: f64,
+    pub grid: usize,
+    pub limit: f64,
 }
 
 /// §5.3 attraction: the regression output is first kept within the cluster's mean speed and
@@ -497,20 +347,49 @@ pub fn attract(
     grid: usize,
     limit: f64,
 ) -> V2 {
-    if rows.len() < 2 {
-        return rows.first().map_or(out, |r| r.1);
+    attract_by(
+        out,
+        rows.len(),
+        |r| (rows[r].1, rows[r].2),
+        h2,
+        &AttractConfig { c, grid, limit },
+        &mut Vec::new(),
+    )
+}
+
+/// [`attract`] over `n` rows given by `row(r) = (action, squared state distance)`; `polar` is a
+/// reusable buffer.
+pub fn attract_by(
+    out: V2,
+    n: usize,
+    row: impl Fn(usize) -> (V2, f64),
+    h2: f64,
+    cfg: &AttractConfig,
+    polar: &mut Vec<(f64, f64)>,
+) -> V2 {
+    let (c, grid, limit) = (cfg.c, cfg.grid, cfg.limit);
+    if n < 2 {
+        return if n == 1 { row(0).0 } else { out };
     }
-    let n = rows.len() as f64;
-    let speeds: Vec<f64> = rows.iter().map(|r| r.1[0].hypot(r.1[1])).collect();
-    let angles: Vec<f64> = rows.iter().map(|r| r.1[1].atan2(r.1[0])).collect();
-    let mean_v = speeds.iter().sum::<f64>() / n;
-    let sd_v = (speeds.iter().map(|v| (v - mean_v).powi(2)).sum::<f64>() / n).sqrt();
+    polar.clear();
+    polar.extend((0..n).map(|r| {
+        let a = row(r).0;
+        (a[0].hypot(a[1]), a[1].atan2(a[0]))
+    }));
+    let nf = n as f64;
+    let mean_v = polar.iter().map(|p| p.0).sum::<f64>() / nf;
+    let sd_v = (polar.iter().map(|p| (p.0 - mean_v).powi(2)).sum::<f64>() / nf).sqrt();
     // Circular spread of the directions about their mean.
-    let (cs, sn) = angles
+    let (cs, sn) = polar
         .iter()
-        .fold((0.0, 0.0), |(c, s), a| (c + a.cos(), s + a.sin()));
+        .fold((0.0, 0.0), |(c, s), p| (c + p.1.cos(), s + p.1.sin()));
     let mean_a = sn.atan2(cs);
-    let sd_a = (angles.iter().map(|a| wrap(a - mean_a).powi(2)).sum::<f64>() / n).sqrt();
+    let sd_a = (polar
+        .iter()
+        .map(|p| wrap(p.1 - mean_a).powi(2))
+        .sum::<f64>()
+        / nf)
+        .sqrt();
     let (lo_v, hi_v) = ((mean_v - limit * sd_v).max(0.0), mean_v + limit * sd_v);
     let clamp_a = |a: f64| mean_a + wrap(a - mean_a).clamp(-limit * sd_a, limit * sd_a);
     let v0 = out[0].hypot(out[1]).clamp(lo_v, hi_v);
@@ -519,17 +398,28 @@ pub fn attract(
     if c <= 0.0 {
         return out;
     }
-    let mean_act = rows
-        .iter()
-        .fold([0.0, 0.0], |m, r| [m[0] + r.1[0] / n, m[1] + r.1[1] / n]);
-    let var_a = rows.iter().map(|r| d2(r.1, mean_act)).sum::<f64>() / n + 1e-12;
+    let mean_act = (0..n).fold([0.0, 0.0], |m, r| {
+        let a = row(r).0;
+        [m[0] + a[0] / nf, m[1] + a[1] / nf]
+    });
+    let var_a = (0..n).map(|r| d2(row(r).0, mean_act)).sum::<f64>() / nf + 1e-12;
     let h2 = if h2.is_finite() && h2 > 0.0 { h2 } else { 1.0 };
-    let score = |cand: V2| {
-        rows.iter()
-            .map(|r| r.2 / h2 + d2(cand, r.1) / var_a)
-            .fold(f64::INFINITY, f64::min)
+    // Rows come nearest first from the k-nearest query: once a row's state term alone reaches
+    // the best score so far, no later row can lower it (an early exit, same result).
+    let sorted = (1..n).all(|r| row(r - 1).1 <= row(r).1);
+    let score = |cand: V2, bound: f64| {
+        let mut best = f64::INFINITY;
+        for r in 0..n {
+            let (a, dist2) = row(r);
+            let e = dist2 / h2;
+            if sorted && e >= best.min(bound) {
+                break;
+            }
+            best = best.min(e + d2(cand, a) / var_a);
+        }
+        best
     };
-    let mut best = (score(out), out);
+    let mut best = (score(out, f64::INFINITY), out);
     let steps = grid.max(1);
     for iv in 0..steps {
         for ia in 0..steps {
@@ -543,7 +433,7 @@ pub fn attract(
             let v = (v0 + c * sd_v * t(iv)).clamp(lo_v, hi_v);
             let a = clamp_a(a0 + c * sd_a * t(ia));
             let cand = [v * a.cos(), v * a.sin()];
-            let sc = score(cand);
+            let sc = score(cand, best.0);
             if sc < best.0 {
                 best = (sc, cand);
             }

@@ -1,55 +1,320 @@
-//! k nearest samples in the PCA state space (§5.1), with `kiddo`'s immutable kd-tree (the paper
-//! keeps its samples in kd-trees, §8) and an exact brute-force search to check it against.
+//! k nearest samples in the PCA state space (§5.1; the paper keeps its samples in kd-trees, §8),
+//! an exact brute-force search to check against, and `kiddo`'s immutable kd-tree as the peer the
+//! benchmark compares with.
 //!
-//! kiddo's trees take their dimension as a const generic; [`StateTree`] picks one of the
-//! dimensions 1–12 at run time (the paper's PCA keeps 8–12).
+//! [`StateTree`] is a bucketed kd-tree that splits each node at the median of its widest
+//! dimension. The PCA states have most of their variance in the leading components, so splitting
+//! the widest dimension prunes far more than the round-robin splits of kiddo's trees (which, at
+//! ~9 levels over 10–12 dimensions, split each dimension about once); the query keeps the k best
+//! in a binary heap held in the caller's buffer and allocates nothing. The dimension is a const
+//! generic; [`StateTree`] picks one of 1–12 at run time (the paper's PCA keeps 8–12). Ties in
+//! distance are ordered by row, so the result equals [`brute_force`]'s exactly.
 
 use crate::error::{Error, Result};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use kiddo::SquaredEuclidean;
+use std::cmp::Ordering;
 use std::num::NonZeroUsize;
 
 /// Largest PCA dimension a tree supports.
 pub const MAX_DIMS: usize = 12;
 
-/// Leaf size of the trees.
-const BUCKET: usize = 32;
+/// Most points in a leaf.
+const LEAF: usize = 12;
+
+/// A node: inner (`dim` < D, children `a`, `b` holding coordinates ≤ / ≥ `split`) or leaf
+/// (`dim` = u32::MAX, points `a..b`).
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    dim: u32,
+    split: f64,
+    a: u32,
+    b: u32,
+}
+
+/// A kd-tree over points of dimension `D` (split on the widest dimension, median split).
+pub struct Tree<const D: usize> {
+    /// Points in tree order.
+    pts: Vec<[f64; D]>,
+    /// Row of each point in the input.
+    rows: Vec<u32>,
+    nodes: Vec<Node>,
+}
+
+/// (squared distance, position) ordered by distance, then the row `rows[position]`.
+#[inline]
+fn cmp(rows: &[u32], a: &(f64, u32), b: &(f64, u32)) -> Ordering {
+    a.0.total_cmp(&b.0)
+        .then_with(|| rows[a.1 as usize].cmp(&rows[b.1 as usize]))
+}
+
+/// (squared distance, row) ordered by distance, then row.
+fn cmp_rows(a: &(f64, u32), b: &(f64, u32)) -> Ordering {
+    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
+}
+
+impl<const D: usize> Tree<D> {
+    /// A tree over `pts`; items are indices into `pts`.
+    pub fn new(pts: &[[f64; D]]) -> Tree<D> {
+        let mut perm: Vec<u32> = (0..pts.len() as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * pts.len() / LEAF + 1);
+        if !pts.is_empty() {
+            Self::build(pts, &mut perm, 0, &mut nodes);
+        }
+        Tree {
+            pts: perm.iter().map(|&i| pts[i as usize]).collect(),
+            rows: perm,
+            nodes,
+        }
+    }
+
+    /// Builds the subtree of `perm` (which starts at tree position `at`); returns its node.
+    fn build(pts: &[[f64; D]], perm: &mut [u32], at: usize, nodes: &mut Vec<Node>) -> u32 {
+        let me = nodes.len();
+        nodes.push(Node {
+            dim: u32::MAX,
+            split: 0.0,
+            a: at as u32,
+            b: (at + perm.len()) as u32,
+        });
+        if perm.len() <= LEAF {
+            return me as u32;
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; D], [f64::NEG_INFINITY; D]);
+        for &i in perm.iter() {
+            for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(&pts[i as usize]) {
+                *l = l.min(*v);
+                *h = h.max(*v);
+            }
+        }
+        let mut dim = 0;
+        for j in 1..D {
+            if hi[j] - lo[j] > hi[dim] - lo[dim] {
+                dim = j;
+            }
+        }
+        if hi[dim] - lo[dim] <= 0.0 {
+            return me as u32; // all points coincide: one (large) leaf
+        }
+        let mid = perm.len() / 2;
+        perm.select_nth_unstable_by(mid, |&x, &y| {
+            pts[x as usize][dim]
+                .total_cmp(&pts[y as usize][dim])
+                .then(x.cmp(&y))
+        });
+        let split = pts[perm[mid] as usize][dim];
+        let (l, r) = perm.split_at_mut(mid);
+        let a = Self::build(pts, l, at, nodes);
+        let b = Self::build(pts, r, at + mid, nodes);
+        nodes[me] = Node {
+            dim: dim as u32,
+            split,
+            a,
+            b,
+        };
+        me as u32
+    }
+
+    /// The `k` nearest points to `q` as (squared distance, index), nearest first, ties by index.
+    pub fn nearest(&self, q: &[f64; D], k: usize, out: &mut Vec<(f64, u32)>) {
+        self.nearest_pos(q, k, out);
+        out.iter_mut().for_each(|h| h.1 = self.rows[h.1 as usize]);
+    }
+
+    /// As [`Tree::nearest`] with each point given by its position in tree order (see
+    /// [`Tree::points`]); the order is still by distance, then index.
+    pub fn nearest_pos(&self, q: &[f64; D], k: usize, out: &mut Vec<(f64, u32)>) {
+        out.clear();
+        if k == 0 || self.nodes.is_empty() {
+            return;
+        }
+        let k = k.min(self.pts.len());
+        let mut off = [0.0; D];
+        let mut best = Best {
+            k,
+            bound: f64::INFINITY,
+            buf: out,
+            rows: &self.rows,
+        };
+        self.search(0, q, &mut off, 0.0, &mut best);
+        best.cut();
+        let rows = &self.rows;
+        out.sort_unstable_by(|a, b| cmp(rows, a, b));
+    }
+
+    /// The points in tree order, row-major.
+    pub fn points(&self) -> &[f64] {
+        self.pts.as_flattened()
+    }
+
+    /// The input index of each point in tree order.
+    pub fn order(&self) -> &[u32] {
+        &self.rows
+    }
+
+    fn search(&self, node: u32, q: &[f64; D], off: &mut [f64; D], rd: f64, best: &mut Best) {
+        let n = self.nodes[node as usize];
+        if n.dim == u32::MAX {
+            let (a, b) = (n.a as usize, n.b as usize);
+            // The leading (PCA: largest-variance) dimensions first; most points already lie
+            // beyond the bound on them and skip the rest (the sum's order is unchanged).
+            let head = D.min(4);
+            for (pos, p) in (a..b).zip(&self.pts[a..b]) {
+                let mut d = 0.0;
+                for (a, b) in p[..head].iter().zip(&q[..head]) {
+                    d += (a - b) * (a - b);
+                }
+                if d > best.bound {
+                    continue;
+                }
+                for (a, b) in p[head..].iter().zip(&q[head..]) {
+                    d += (a - b) * (a - b);
+                }
+                best.offer(d, pos as u32);
+            }
+            return;
+        }
+        let dim = n.dim as usize;
+        let diff = q[dim] - n.split;
+        let (near, far) = if diff < 0.0 { (n.a, n.b) } else { (n.b, n.a) };
+        self.search(near, q, off, rd, best);
+        let old = off[dim];
+        let far_rd = rd - old * old + diff * diff;
+        // A little slack keeps a point tied with the k-th at equal distance despite rounding.
+        if far_rd <= best.bound * (1.0 + 1e-12) {
+            off[dim] = diff;
+            self.search(far, q, off, far_rd, best);
+            off[dim] = old;
+        }
+    }
+
+    /// Memory held by the tree, in bytes (linear in the number of points).
+    pub fn bytes(&self) -> usize {
+        self.pts.len() * std::mem::size_of::<[f64; D]>()
+            + self.rows.len() * 4
+            + self.nodes.len() * std::mem::size_of::<Node>()
+    }
+}
+
+/// The candidates of one query: every point offered no farther than `bound` is kept in `buf`;
+/// when `buf` holds `3k`, a selection cuts it to the `k` best (by [`cmp`]) and `bound` becomes
+/// the k-th distance. Cheaper than a heap when many candidates arrive (a query outside the
+/// samples' range), and exact: a point beyond the k-th distance cannot be among the k best.
+struct Best<'a> {
+    k: usize,
+    bound: f64,
+    buf: &'a mut Vec<(f64, u32)>,
+    rows: &'a [u32],
+}
+
+impl Best<'_> {
+    #[inline]
+    fn offer(&mut self, d: f64, pos: u32) {
+        if d <= self.bound {
+            self.buf.push((d, pos));
+            if self.buf.len() >= 3 * self.k {
+                self.cut();
+            }
+        }
+    }
+
+    /// Keeps the `k` best and tightens the bound (once `k` are known).
+    fn cut(&mut self) {
+        let (k, rows) = (self.k, self.rows);
+        if self.buf.len() > k {
+            self.buf
+                .select_nth_unstable_by(k - 1, |a, b| cmp(rows, a, b));
+            self.buf.truncate(k);
+        }
+        if self.buf.len() == k {
+            self.bound = self.buf.iter().map(|h| h.0).fold(0.0, f64::max);
+        }
+    }
+}
 
 macro_rules! state_tree {
     ($($v:ident => $k:literal),*) => {
-        /// A kd-tree over points of one of the supported dimensions.
-        #[allow(clippy::large_enum_variant)]
+        /// A [`Tree`] over points of one of the supported dimensions.
         pub enum StateTree {
-            $($v(ImmutableKdTree<f64, u32, $k, BUCKET>),)*
+            $($v(Tree<$k>),)*
+        }
+
+        /// kiddo's immutable kd-tree over points of one of the supported dimensions (the
+        /// benchmark's and the tests' peer).
+        #[allow(clippy::large_enum_variant)]
+        pub enum KiddoTree {
+            $($v(ImmutableKdTree<f64, u32, $k, 32>),)*
         }
 
         impl StateTree {
             /// A tree over `points` (row-major, `dims` columns); items are row indices.
             pub fn build(points: &[f64], dims: usize) -> Result<StateTree> {
-                if points.len() / dims.max(1) > u32::MAX as usize {
-                    return Err(Error::invalid("too many samples for one tree"));
-                }
+                check(points, dims)?;
                 match dims {
-                    $($k => {
-                        let rows: Vec<[f64; $k]> = points
-                            .chunks_exact($k)
-                            .map(|c| c.try_into().expect("chunk of the tree's dimension"))
-                            .collect();
-                        Ok(StateTree::$v(ImmutableKdTree::new_from_slice(&rows)))
-                    })*
-                    d => Err(Error::invalid(format!(
-                        "pca_dims = {d} must be in 1..={MAX_DIMS}"
-                    ))),
+                    $($k => Ok(StateTree::$v(Tree::new(&rows::<$k>(points)))),)*
+                    _ => unreachable!("checked"),
                 }
             }
 
             /// The `k` nearest rows to `q` as (squared distance, row), nearest first; ties in
-            /// distance are ordered by row.
+            /// distance are ordered by row. Allocates nothing once `out` holds `k`.
+            pub fn nearest(&self, q: &[f64], k: usize, out: &mut Vec<(f64, u32)>) {
+                match self {
+                    $(StateTree::$v(t) => {
+                        let q: &[f64; $k] = q.try_into().expect("query of the tree's dimension");
+                        t.nearest(q, k, out);
+                    })*
+                }
+            }
+
+            /// As [`Tree::nearest_pos`].
+            pub fn nearest_pos(&self, q: &[f64], k: usize, out: &mut Vec<(f64, u32)>) {
+                match self {
+                    $(StateTree::$v(t) => {
+                        let q: &[f64; $k] = q.try_into().expect("query of the tree's dimension");
+                        t.nearest_pos(q, k, out);
+                    })*
+                }
+            }
+
+            /// As [`Tree::points`].
+            pub fn points(&self) -> &[f64] {
+                match self {
+                    $(StateTree::$v(t) => t.points(),)*
+                }
+            }
+
+            /// As [`Tree::order`].
+            pub fn order(&self) -> &[u32] {
+                match self {
+                    $(StateTree::$v(t) => t.order(),)*
+                }
+            }
+
+            /// Memory held by the tree, in bytes.
+            pub fn bytes(&self) -> usize {
+                match self {
+                    $(StateTree::$v(t) => t.bytes(),)*
+                }
+            }
+        }
+
+        impl KiddoTree {
+            /// As [`StateTree::build`].
+            pub fn build(points: &[f64], dims: usize) -> Result<KiddoTree> {
+                check(points, dims)?;
+                match dims {
+                    $($k => Ok(KiddoTree::$v(ImmutableKdTree::new_from_slice(&rows::<$k>(points)))),)*
+                    _ => unreachable!("checked"),
+                }
+            }
+
+            /// As [`StateTree::nearest`].
             pub fn nearest(&self, q: &[f64], k: usize, out: &mut Vec<(f64, u32)>) {
                 out.clear();
                 let Some(k) = NonZeroUsize::new(k) else { return };
                 match self {
-                    $(StateTree::$v(t) => {
+                    $(KiddoTree::$v(t) => {
                         let q: &[f64; $k] = q.try_into().expect("query of the tree's dimension");
                         out.extend(
                             t.nearest_n::<SquaredEuclidean>(q, k)
@@ -58,7 +323,7 @@ macro_rules! state_tree {
                         );
                     })*
                 }
-                out.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                out.sort_by(cmp_rows);
             }
         }
     };
@@ -66,6 +331,25 @@ macro_rules! state_tree {
 
 state_tree!(D1 => 1, D2 => 2, D3 => 3, D4 => 4, D5 => 5, D6 => 6, D7 => 7, D8 => 8, D9 => 9,
     D10 => 10, D11 => 11, D12 => 12);
+
+fn check(points: &[f64], dims: usize) -> Result<()> {
+    if dims == 0 || dims > MAX_DIMS {
+        return Err(Error::invalid(format!(
+            "pca_dims = {dims} must be in 1..={MAX_DIMS}"
+        )));
+    }
+    if points.len() / dims > u32::MAX as usize {
+        return Err(Error::invalid("too many samples for one tree"));
+    }
+    Ok(())
+}
+
+fn rows<const D: usize>(points: &[f64]) -> Vec<[f64; D]> {
+    points
+        .chunks_exact(D)
+        .map(|c| c.try_into().expect("chunk of the tree's dimension"))
+        .collect()
+}
 
 /// The `k` nearest rows to `q` by exhaustive search, as [`StateTree::nearest`] returns them.
 pub fn brute_force(points: &[f64], dims: usize, q: &[f64], k: usize) -> Vec<(f64, u32)> {
@@ -79,7 +363,7 @@ pub fn brute_force(points: &[f64], dims: usize, q: &[f64], k: usize) -> Vec<(f64
             )
         })
         .collect();
-    all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    all.sort_by(cmp_rows);
     all.truncate(k);
     all
 }

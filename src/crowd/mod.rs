@@ -6,8 +6,10 @@
 //! - [`features`]: tracks as segments, Gaussian smoothing (§3), the state of §4 (speed, eq. 1
 //!   formation now and before, pivot, intended direction; Table 1 weights);
 //! - [`pca`]: the state's principal components (§4);
-//! - [`knn`]: kd-tree (kiddo) and brute-force k nearest samples (§5.1);
-//! - [`action`]: k-means output possibilities, eq. 2 choice, eq. 3 regression, §5.3 attraction;
+//! - [`knn`]: kd-tree (own, widest-dimension splits; kiddo's as the peer) and brute-force k
+//!   nearest samples (§5.1);
+//! - [`action`]: the query: k-means output possibilities ([`kmeans`]), eq. 2 choice, eq. 3
+//!   regression ([`lwr`]), §5.3 attraction;
 //! - [`behaviour`]: rule-based labels and the behaviour machine's statistics (§6.1);
 //! - [`model`]: learning and the `herdfit.crowd-model/1` file;
 //! - [`layout`]: walls, obstacles, pivots, regions, spawns (`herdfit.crowd-layout/1`);
@@ -20,8 +22,10 @@ pub mod action;
 pub mod behaviour;
 pub mod eval;
 pub mod features;
+pub mod kmeans;
 pub mod knn;
 pub mod layout;
+pub mod lwr;
 pub mod measure;
 pub mod model;
 pub mod pca;

@@ -141,6 +141,10 @@ pub struct SimulateArgs {
     /// Every agent uses locomotion (no groups or lines).
     #[arg(long)]
     pub no_behaviours: bool,
+    /// An agent with a goal never walks more than this many degrees away from the direction to
+    /// it (its learnt step is turned to the edge of the cone; 180: off).
+    #[arg(long, value_name = "DEG", default_value_t = SimConfig::default().goal_cone_deg)]
+    pub goal_cone: f64,
     /// Top-view PNG of the middle frame.
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<PathBuf>,
@@ -299,6 +303,7 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
         steps,
         seed: a.seed,
         behaviours: !a.no_behaviours,
+        goal_cone_deg: a.goal_cone,
         ..SimConfig::default()
     };
     let mut bars = crate::cli::Bars::default();
