@@ -107,6 +107,17 @@ pub struct FitArgs {
     /// Seeds of the identifiability estimate (each probes the objective at 1 + 2×12 points).
     #[arg(long, value_name = "K", default_value_t = UncertaintyConfig::default().seeds)]
     pub uncertainty_seeds: usize,
+    /// Parameters held at their start value (comma-separated names, e.g. cohesion.angular).
+    #[arg(long, value_name = "NAME,…", value_delimiter = ',')]
+    pub freeze: Vec<String>,
+    /// Weight of the density term of the field-matching and ensemble objectives.
+    #[arg(long, value_name = "W", default_value_t = 1.0)]
+    pub density_weight: f64,
+    /// One parameter set per zone (herdfit.zones/1: named polygons in the clip's coordinates
+    /// covering every accessible cell once), learnt jointly; --out is then a parameter-set
+    /// bundle (herdfit.param-sets/1) that author scenes' regions name sets of.
+    #[arg(long, value_name = "ZONES.json")]
+    pub zones: Option<PathBuf>,
     /// Finite-difference step of the identifiability estimate.
     #[arg(long, value_name = "H", default_value_t = UncertaintyConfig::default().step)]
     pub uncertainty_step: f64,
@@ -141,6 +152,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
                 starts: a.starts,
                 holdout: a.holdout,
             },
+            frozen: a.freeze,
+            density_weight: a.density_weight,
         },
         eval_seeds: a.eval_seeds,
         checkpoint: a.checkpoint,
@@ -154,7 +167,14 @@ pub fn exec(a: FitArgs) -> Result<()> {
             step: a.uncertainty_step,
             ..UncertaintyConfig::default()
         },
+        zones: a.zones,
     };
+    if job.zones.is_some() {
+        let s = crate::herd::fit::zone_job::run_zones(&job, &mut Bars::default())
+            .map_err(|e| with_flags(e, &[("global.starts", "--starts")]))?;
+        print!("{s}");
+        return Ok(());
+    }
     let summary = run(&job, &mut Bars::default()).map_err(|e| {
         with_flags(
             e,
@@ -164,6 +184,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
                 ("uncertainty.step", "--uncertainty-step"),
                 ("global.starts", "--starts"),
                 ("global.holdout", "--holdout"),
+                ("frozen", "--freeze"),
             ],
         )
     })?;
