@@ -127,7 +127,10 @@ fn frozen_parameters_keep_their_start_and_bad_keys_are_named() {
         ..cfg.clone()
     };
     let e = bad.check().unwrap_err().to_string();
-    assert!(e.starts_with("frozen: 'cohesion.colour' is not a parameter"), "{e}");
+    assert!(
+        e.starts_with("frozen: 'cohesion.colour' is not a parameter"),
+        "{e}"
+    );
     let bad = FitConfig {
         density_weight: -1.0,
         ..cfg

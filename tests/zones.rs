@@ -13,7 +13,12 @@ use herdfit::herd::sim::{
 };
 use rand::{Rng, SeedableRng};
 
-fn sum_forces(m: &Model, f: &ForceTensors, s: &HerdState, dec: &herdfit::herd::sim::StepDecisions) -> Tensor<1> {
+fn sum_forces(
+    m: &Model,
+    f: &ForceTensors,
+    s: &HerdState,
+    dec: &herdfit::herd::sim::StepDecisions,
+) -> Tensor<1> {
     let (fx, fy) = match m.force_kernel {
         ForceKernel::Fused => fused_forces(f, s, dec).expect("fused op"),
         _ => Model::reference_forces(f, s, dec),
@@ -21,7 +26,8 @@ fn sum_forces(m: &Model, f: &ForceTensors, s: &HerdState, dec: &herdfit::herd::s
     // A weighted sum so that both components and every agent matter.
     let n = fx.dims()[0];
     let w: Vec<f64> = (0..n).map(|i| 1.0 + (i % 7) as f64 * 0.1).collect();
-    let w = Tensor::<1>::from_data(burn::tensor::TensorData::new(w, [n]), &fx.device()).reshape([n, 1]);
+    let w =
+        Tensor::<1>::from_data(burn::tensor::TensorData::new(w, [n]), &fx.device()).reshape([n, 1]);
     ((fx * w.clone()).sum() + (fy * w).sum().mul_scalar(0.5)).reshape([1])
 }
 
@@ -51,8 +57,14 @@ fn zoned_forces_equal_per_agent_ones_and_their_gradients_split_the_shared_gradie
         let per = ForceTensors::per_agent(&thetas, &c, &ad);
         let lz = sum_forces(&model, &zoned, &state, &dec);
         let lp = sum_forces(&model, &per, &state, &dec);
-        let (vz, vp) = (read_vec(&lz.clone().detach()).unwrap()[0], read_vec(&lp).unwrap()[0]);
-        assert!((vz - vp).abs() <= 1e-10 * (1.0 + vp.abs()), "{kernel:?}: {vz} vs {vp}");
+        let (vz, vp) = (
+            read_vec(&lz.clone().detach()).unwrap()[0],
+            read_vec(&lp).unwrap()[0],
+        );
+        assert!(
+            (vz - vp).abs() <= 1e-10 * (1.0 + vp.abs()),
+            "{kernel:?}: {vz} vs {vp}"
+        );
         // Gradients: with both zones at the same set a, zone 0's and zone 1's gradients add up
         // to the shared set's (each agent contributes through its own zone's copy), and each
         // part is non-zero.
@@ -82,8 +94,19 @@ fn zoned_forces_equal_per_agent_ones_and_their_gradients_split_the_shared_gradie
 fn small_clip(dir: &std::path::Path) -> std::path::PathBuf {
     let clip = dir.join("clip");
     ok(&[
-        "synth", "--agents", "60", "--frame-count", "12", "--grid-size", "8x6", "--cell-size", "3",
-        "--seed", "2", "--out", s(&clip),
+        "synth",
+        "--agents",
+        "60",
+        "--frame-count",
+        "12",
+        "--grid-size",
+        "8x6",
+        "--cell-size",
+        "3",
+        "--seed",
+        "2",
+        "--out",
+        s(&clip),
     ]);
     clip
 }
@@ -111,8 +134,20 @@ fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
     );
     let out = dir.path().join("sets.json");
     let printed = ok(&[
-        "fit", s(&clip), "--zones", s(&zones), "--out", s(&out), "--epochs", "2", "--window",
-        "3", "--eval-seeds", "1", "--loss", "fields",
+        "fit",
+        s(&clip),
+        "--zones",
+        s(&zones),
+        "--out",
+        s(&out),
+        "--epochs",
+        "2",
+        "--window",
+        "3",
+        "--eval-seeds",
+        "1",
+        "--loss",
+        "fields",
     ]);
     assert!(printed.contains("fit --zones: 2 zones"), "{printed}");
     let b: serde_json::Value =
@@ -141,12 +176,27 @@ fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
         "duration": 2, "fps": 10, "seed": 1
     });
     std::fs::write(&scene, v.to_string()).unwrap();
-    ok(&["author", s(&scene), "--out", s(&dir.path().join("authored"))]);
+    ok(&[
+        "author",
+        s(&scene),
+        "--out",
+        s(&dir.path().join("authored")),
+    ]);
     // A set the bundle does not hold is refused, naming the key.
-    let bad = std::fs::read_to_string(&scene).unwrap().replace("\"east\"", "\"north\"");
+    let bad = std::fs::read_to_string(&scene)
+        .unwrap()
+        .replace("\"east\"", "\"north\"");
     std::fs::write(&scene, bad).unwrap();
-    let e = fails(&["author", s(&scene), "--out", s(&dir.path().join("authored2"))]);
-    assert!(e.contains("regions[0].set") && e.contains("'north' is not in the bundle (west, east)"), "{e}");
+    let e = fails(&[
+        "author",
+        s(&scene),
+        "--out",
+        s(&dir.path().join("authored2")),
+    ]);
+    assert!(
+        e.contains("regions[0].set") && e.contains("'north' is not in the bundle (west, east)"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -155,7 +205,18 @@ fn bad_zones_are_one_line_errors_and_write_nothing() {
     let clip = small_clip(dir.path());
     let out = dir.path().join("sets.json");
     let run = |z: &std::path::Path| {
-        fails(&["fit", s(&clip), "--zones", s(z), "--out", s(&out), "--epochs", "1", "--window", "3"])
+        fails(&[
+            "fit",
+            s(&clip),
+            "--zones",
+            s(z),
+            "--out",
+            s(&out),
+            "--epochs",
+            "1",
+            "--window",
+            "3",
+        ])
     };
     let overlap = zones_file(
         dir.path(),
@@ -164,7 +225,10 @@ fn bad_zones_are_one_line_errors_and_write_nothing() {
                            {"name": "b", "polygon": rect(9.0, 24.0)}]),
     );
     let e = run(&overlap);
-    assert!(e.contains("zones 'a' and 'b' overlap at cell (3, 0)"), "{e}");
+    assert!(
+        e.contains("zones 'a' and 'b' overlap at cell (3, 0)"),
+        "{e}"
+    );
     let gap = zones_file(
         dir.path(),
         "gap.json",
@@ -172,7 +236,10 @@ fn bad_zones_are_one_line_errors_and_write_nothing() {
                            {"name": "b", "polygon": rect(12.0, 24.0)}]),
     );
     let e = run(&gap);
-    assert!(e.contains("cell (3, 0), centre (10.500, 1.500), is in no zone"), "{e}");
+    assert!(
+        e.contains("cell (3, 0), centre (10.500, 1.500), is in no zone"),
+        "{e}"
+    );
     // The herd starts upstream of the centre and never reaches the eastern strip in 12 frames.
     let empty = zones_file(
         dir.path(),
@@ -181,7 +248,10 @@ fn bad_zones_are_one_line_errors_and_write_nothing() {
                            {"name": "far", "polygon": rect(21.0, 24.0)}]),
     );
     let e = run(&empty);
-    assert!(e.contains("zone 'far' holds no agents in frames 0..12"), "{e}");
+    assert!(
+        e.contains("zone 'far' holds no agents in frames 0..12"),
+        "{e}"
+    );
     let twice = zones_file(
         dir.path(),
         "twice.json",
@@ -190,6 +260,14 @@ fn bad_zones_are_one_line_errors_and_write_nothing() {
     );
     assert!(run(&twice).contains("zones[1].name: 'a' is used twice"));
     assert!(!out.exists(), "a failed zone fit wrote {out:?}");
-    let e = fails(&["fit", s(&clip), s(&clip), "--zones", s(&twice), "--out", s(&out)]);
+    let e = fails(&[
+        "fit",
+        s(&clip),
+        s(&clip),
+        "--zones",
+        s(&twice),
+        "--out",
+        s(&out),
+    ]);
     assert!(e.contains("--zones: a zone fit takes one clip"), "{e}");
 }

@@ -47,7 +47,9 @@ pub fn run_from_fields(
     device: &Device,
     observe: impl FnMut(usize, &HerdState, &[u64]) -> Result<()>,
 ) -> Result<Vec<AgentRow>> {
-    run_from_fields_zoned(clip, params, None, range, seed, settle, guidance, device, observe)
+    run_from_fields_zoned(
+        clip, params, None, range, seed, settle, guidance, device, observe,
+    )
 }
 
 /// [`run_from_fields`], with each agent's forces from its zone's set when `zones` is given
@@ -84,10 +86,7 @@ pub fn run_from_fields_zoned(
     match zones {
         None => model.run_live(&theta, &rows, steps, &mut rng, &mut hooks)?,
         Some(sets) => {
-            let mut z = crate::herd::zoned::Zoned {
-                inner: hooks,
-                sets,
-            };
+            let mut z = crate::herd::zoned::Zoned { inner: hooks, sets };
             model.run_live(&theta, &rows, steps, &mut rng, &mut z)?
         }
     };

@@ -335,8 +335,14 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
     if let Some((_, bundle)) = &zones {
         let json = serde_json::to_string_pretty(bundle)
             .map_err(|e| Error::Internal(format!("serialising the sets: {e}")))?;
-        extra.push(("truth-sets.json", format!("{json}
-").into_bytes()));
+        extra.push((
+            "truth-sets.json",
+            format!(
+                "{json}
+"
+            )
+            .into_bytes(),
+        ));
     }
     let pending = match &job.video {
         None => None,

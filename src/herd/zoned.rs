@@ -4,7 +4,9 @@
 
 use crate::data::Grid;
 use crate::error::Result;
-use crate::herd::fit::zones::{NamedSet, ParamSets, Zones, ZonesFile, PARAM_SETS_SCHEMA, ZONES_SCHEMA};
+use crate::herd::fit::zones::{
+    NamedSet, ParamSets, Zones, ZonesFile, PARAM_SETS_SCHEMA, ZONES_SCHEMA,
+};
 use crate::herd::params::{Params, N_PARAMS};
 use crate::herd::sim::{ForceTensors, HerdState, Model, StepDecisions, StepHooks};
 use herdfit_kernels::P2;

@@ -237,8 +237,8 @@ pub fn run(job: &AblateJob, progress: &mut dyn Progress) -> Result<(AblationRepo
     };
     let dir = crate::data::atomic::AtomicDir::create(&job.out)?;
     let name = job.clip.display().to_string();
-    let (variants, validation) = ablate(&clip, &name, &start, &job.config, progress)
-        .map_err(|e| e.in_file(&job.clip))?;
+    let (variants, validation) =
+        ablate(&clip, &name, &start, &job.config, progress).map_err(|e| e.in_file(&job.clip))?;
     let report = AblationReport::new(&name, &job.config, &variants, &validation);
     report::write(&report, &variants, &dir)?;
     let md = markdown(&report);

@@ -219,7 +219,8 @@ pub(super) fn write(r: &AblationReport, variants: &[Variant], dir: &AtomicDir) -
     let json = serde_json::to_string_pretty(r).map_err(|e| Error::Internal(e.to_string()))?;
     dir.write("ablation.json", format!("{json}\n").as_bytes())?;
     for v in variants {
-        v.params.save(&dir.path(&format!("params-{}.json", v.name)))?;
+        v.params
+            .save(&dir.path(&format!("params-{}.json", v.name)))?;
     }
     let at = |k: usize| (r.heldout_frames[0] + k) as f64;
     let lines = |m: usize| -> Vec<(String, Vec<(f64, f64)>)> {
@@ -257,7 +258,9 @@ pub(super) fn write(r: &AblationReport, variants: &[Variant], dir: &AtomicDir) -
     // The errors of every measure, one line per variant over the measures (x = measure index).
     let table: Vec<(String, Vec<(f64, f64)>)> = (0..r.variants.len())
         .map(|v| {
-            let pts = (0..MEASURES.len()).map(|m| (m as f64, r.error(v, m))).collect();
+            let pts = (0..MEASURES.len())
+                .map(|m| (m as f64, r.error(v, m)))
+                .collect();
             (r.variants[v].name.clone(), pts)
         })
         .collect();

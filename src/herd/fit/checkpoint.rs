@@ -94,13 +94,7 @@ impl Learnt {
     }
 
     /// One optimiser step on every parameter set with its part of the gradient `g` (`[12·Z]`).
-    pub(super) fn update(
-        &mut self,
-        g: &[f64],
-        cfg: &FitConfig,
-        lr: f64,
-        rng: &mut impl rand::Rng,
-    ) {
+    pub(super) fn update(&mut self, g: &[f64], cfg: &FitConfig, lr: f64, rng: &mut impl rand::Rng) {
         let part = |k: usize| -> [f64; N_PARAMS] {
             let mut p = [0.0; N_PARAMS];
             p.copy_from_slice(&g[k * N_PARAMS..(k + 1) * N_PARAMS]);

@@ -64,7 +64,13 @@ pub(super) fn grad_of(loss: Tensor<1>, theta: &Tensor<1>) -> Result<Vec<f64>> {
 
 impl Herds {
     /// A replica that lost every agent is restarted from the fields of frame `f`.
-    pub(super) fn refill_empty(&mut self, clip: &ClipFields, f: usize, model: &Model, rng: &mut ChaCha8Rng) {
+    pub(super) fn refill_empty(
+        &mut self,
+        clip: &ClipFields,
+        f: usize,
+        model: &Model,
+        rng: &mut ChaCha8Rng,
+    ) {
         for (rows, next_id) in self.rows.iter_mut().zip(self.next_ids.iter_mut()) {
             if rows.is_empty() {
                 *rows = population_control(

@@ -4,12 +4,12 @@
 use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt};
 use super::config::{FitConfig, LossKind};
 use super::herds::{check_finite_step, grad_of, Herds};
-use super::zones::Zones;
 use super::log::LogRow;
 use super::loss::StepTarget;
 use super::loss::{add, ensemble_loss_weighted, fields_loss_weighted, step_loss};
 use super::plan::{plan_step, window_loss};
 use super::target::Stencil;
+use super::zones::Zones;
 use crate::backend::cpu_device;
 use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
@@ -201,7 +201,6 @@ struct FitRun<'a> {
     /// A zone fit's zones: each agent uses its cell's zone's parameter set ([`fit_zones`]).
     zones: Option<&'a Zones>,
 }
-
 
 /// The forward pass over one window besides its loss: the logged loss values, and each live
 /// replica's plans and end state.

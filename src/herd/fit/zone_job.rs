@@ -52,7 +52,8 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         frames: frames.clone(),
         ..job.config.clone()
     };
-    cfg.check_clip(&clip).map_err(|e| e.in_file(&job.clips[0]))?;
+    cfg.check_clip(&clip)
+        .map_err(|e| e.in_file(&job.clips[0]))?;
     zones.check_agents(&clip, frames.clone())?;
     let (log_path, plot_path) = (job.log_path(), job.plot_path());
     for p in [&job.out, &log_path, &plot_path] {

@@ -280,10 +280,8 @@ impl ForceTensors {
             .collect();
         let device = theta.device();
         let idx: Vec<i64> = zone.iter().map(|&k| k.min(z - 1) as i64).collect();
-        let idx = Tensor::<1, burn::tensor::Int>::from_data(
-            TensorData::new(idx, [zone.len()]),
-            &device,
-        );
+        let idx =
+            Tensor::<1, burn::tensor::Int>::from_data(TensorData::new(idx, [zone.len()]), &device);
         let rows = |pick: &dyn Fn(&ForceTensors) -> Tensor<2>| {
             Tensor::cat(sets.iter().map(pick).collect::<Vec<_>>(), 0).select(0, idx.clone())
         };

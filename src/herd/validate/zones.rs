@@ -55,7 +55,13 @@ fn inside(c: &ClipFields, f: usize, cells: &[bool]) -> ClipFields {
 }
 
 /// Σ_cells |ρ'_f' − ρ_f| / Σ_cells ρ_f over the `cells` of the grid.
-fn zone_density_error(clip: &ClipFields, f: usize, sim: &ClipFields, k: usize, cells: &[bool]) -> f64 {
+fn zone_density_error(
+    clip: &ClipFields,
+    f: usize,
+    sim: &ClipFields,
+    k: usize,
+    cells: &[bool],
+) -> f64 {
     let nx = clip.meta.nx;
     let (mut d, mut n) = (0.0f64, 0.0f64);
     for (c, _) in cells.iter().enumerate().filter(|(_, &x)| x) {
@@ -121,7 +127,13 @@ pub fn validate_zones(
                 frames.insert(0, rows);
             }
             let prov = serde_json::json!({"source": "zone validation", "seed": seed});
-            let mut sim = rasterise(&frames, clip.grid(), clip.meta.fps, clip.obstacles.clone(), prov)?;
+            let mut sim = rasterise(
+                &frames,
+                clip.grid(),
+                clip.meta.fps,
+                clip.obstacles.clone(),
+                prov,
+            )?;
             smooth_velocity(&mut sim, clip.meta.velocity_window());
             for k in 0..nf - start {
                 let f = start + k;
