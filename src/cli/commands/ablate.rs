@@ -1,10 +1,11 @@
 //! `herdfit ablate`: flags → [`AblateJob`] → [`run`] → the report's Markdown.
 
-use crate::cli::args::{choice, with_flags, LOSSES, OPTIMIZERS};
+use crate::cli::args::{choice, with_flags, LOSSES};
+use crate::cli::commands::fit::StepFlags;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::ablate::{run, AblateConfig, AblateJob, Switch, SWITCHES};
-use crate::herd::fit::{FitConfig, LossKind, Optimizer, Settle, GUIDANCE_SCALE};
+use crate::herd::fit::{FitConfig, LossKind, Settle, GUIDANCE_SCALE};
 use crate::herd::validate::ValidateConfig;
 use clap::Args;
 use std::path::PathBuf;
@@ -26,21 +27,9 @@ pub struct AblateArgs {
     /// Fraction of the clip fitted; the rest is held out for validation.
     #[arg(long, value_name = "S", default_value_t = 0.5)]
     pub split: f64,
-    /// Unrolled steps per update.
-    #[arg(long, value_name = "W", default_value_t = 4)]
-    pub window: usize,
-    #[arg(long, value_name = "E", default_value_t = 8)]
-    pub epochs: usize,
-    /// β of eq. 11 (density vs velocity in the target) of the full model.
-    #[arg(long, value_name = "B", default_value_t = 0.7)]
-    pub beta: f64,
-    /// λ_var, the weight of E_var, of the full model.
-    #[arg(long, value_name = "L", default_value_t = 1.0)]
-    pub var_weight: f64,
-    #[arg(long, value_name = "X", default_value_t = 0.02)]
-    pub lr: f64,
-    #[arg(long, value_parser = choice::<Optimizer>(OPTIMIZERS), default_value_t = Optimizer::Adam)]
-    pub optimizer: Optimizer,
+    /// The full model's settings (β, λ_var as the switches leave them).
+    #[command(flatten)]
+    pub steps: StepFlags,
     /// Objective of every fit.
     #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Paper)]
     pub loss: LossKind,
@@ -83,20 +72,14 @@ pub fn exec(a: AblateArgs) -> Result<()> {
         start: a.start,
         out: a.out,
         config: AblateConfig {
-            fit: FitConfig {
-                window: a.window,
-                epochs: a.epochs,
-                beta: a.beta,
-                var_weight: a.var_weight,
-                lr: a.lr,
-                optimizer: a.optimizer,
+            fit: a.steps.apply(FitConfig {
                 seed: a.seed,
                 loss: a.loss,
                 replicas: a.replicas,
                 guidance_scale: a.guidance_scale,
-                settle: settle.clone(),
+                settle,
                 ..FitConfig::default()
-            },
+            }),
             validate: ValidateConfig {
                 split: a.split,
                 coarse_grid: a.coarse_grid,

@@ -11,17 +11,9 @@ use crate::herd::fit::{
 use clap::Args;
 use std::path::PathBuf;
 
+/// The gradient descent's flags, shared by `fit` and `ablate`.
 #[derive(Args, Debug)]
-pub struct FitArgs {
-    /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
-    #[arg(value_name = "CLIP/", num_args = 1.., required = true)]
-    pub clips: Vec<PathBuf>,
-    /// Output parameter set (herdfit.params/1).
-    #[arg(long, value_name = "PARAMS.json")]
-    pub out: PathBuf,
-    /// Starting parameters; a generic start (every value 0.5) when omitted.
-    #[arg(long, alias = "init", value_name = "P.json")]
-    pub start: Option<PathBuf>,
+pub struct StepFlags {
     /// Unrolled steps per update (1 = the paper's greedy per-frame scheme).
     #[arg(long, value_name = "W", default_value_t = 4)]
     pub window: usize,
@@ -37,6 +29,36 @@ pub struct FitArgs {
     pub lr: f64,
     #[arg(long, value_parser = choice::<Optimizer>(OPTIMIZERS), default_value_t = Optimizer::Adam)]
     pub optimizer: Optimizer,
+}
+
+impl StepFlags {
+    /// `cfg` with these settings.
+    pub fn apply(&self, cfg: FitConfig) -> FitConfig {
+        FitConfig {
+            window: self.window,
+            epochs: self.epochs,
+            beta: self.beta,
+            var_weight: self.var_weight,
+            lr: self.lr,
+            optimizer: self.optimizer,
+            ..cfg
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
+    #[arg(value_name = "CLIP/", num_args = 1.., required = true)]
+    pub clips: Vec<PathBuf>,
+    /// Output parameter set (herdfit.params/1).
+    #[arg(long, value_name = "PARAMS.json")]
+    pub out: PathBuf,
+    /// Starting parameters; a generic start (every value 0.5) when omitted.
+    #[arg(long, alias = "init", value_name = "P.json")]
+    pub start: Option<PathBuf>,
+    #[command(flatten)]
+    pub steps: StepFlags,
     /// Frames used, a..b (b exclusive); all frames when omitted.
     #[arg(long, value_name = "a..b", value_parser = parse_range)]
     pub frames: Option<(usize, usize)>,
@@ -128,13 +150,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
         clips: a.clips,
         start: a.start,
         frames: a.frames.map(|(x, y)| x..y),
-        config: FitConfig {
-            window: a.window,
-            epochs: a.epochs,
-            beta: a.beta,
-            var_weight: a.var_weight,
-            lr: a.lr,
-            optimizer: a.optimizer,
+        config: a.steps.apply(FitConfig {
             frames: 0..0,
             seed: a.seed,
             density_threshold: a.density_threshold,
@@ -154,7 +170,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
             },
             frozen: a.freeze,
             density_weight: a.density_weight,
-        },
+            ..FitConfig::default()
+        }),
         eval_seeds: a.eval_seeds,
         checkpoint: a.checkpoint,
         resume: a.resume,

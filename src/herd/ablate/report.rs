@@ -255,19 +255,21 @@ pub(super) fn write(r: &AblationReport, variants: &[Variant], dir: &AtomicDir) -
         &polar,
         true,
     )?;
-    // The errors of every measure, one line per variant over the measures (x = measure index).
+    // Every variant's error of each measure relative to the full model's (1 = the same; x =
+    // measure index), so that differences of a few per cent show.
     let table: Vec<(String, Vec<(f64, f64)>)> = (0..r.variants.len())
         .map(|v| {
             let pts = (0..MEASURES.len())
-                .map(|m| (m as f64, r.error(v, m)))
+                .map(|m| (m as f64, r.error(v, m) / r.error(0, m)))
+                .filter(|p| p.1.is_finite())
                 .collect();
             (r.variants[v].name.clone(), pts)
         })
         .collect();
     chart(
         &dir.path("errors.png"),
-        "held-out error per measure",
-        "error",
+        "held-out error relative to the full model",
+        "error / full model's error",
         "measure (0 density, 1 velocity, 2 polarization, 3-4 ang. momentum, 5 aspect ratio)",
         &table,
         false,
