@@ -30,6 +30,7 @@ fn main() -> herdfit::Result<()> {
         precision: Precision::F32,
         out: out.join("clip"),
         video: None,
+        zone_sets: None,
     };
     write_clip(&synth, &mut NoProgress)?;
     let job = FitJob {

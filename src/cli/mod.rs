@@ -35,6 +35,9 @@ pub enum Command {
     /// Validate parameter sets on the held-out part of a clip (errors, polarization, angular
     /// momentum, aspect ratio) and write a report folder.
     Validate(validate::ValidateArgs),
+    /// Fit and validate a clip with each of the paper's switches off in turn (occlusion, angular
+    /// perception, density term, direction-variance matching, speed–density table): Table 4.
+    Ablate(ablate::AblateArgs),
     /// Simulate a herd in an authored scene (arrows, destination, obstacles, behaviour regions).
     Author(author::AuthorArgs),
     /// Make a synthetic clip with known parameters (fields, truth.json, trajectories.csv).
@@ -71,6 +74,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Fit(a) => fit::exec(a),
         Command::Extract(a) => extract::exec(a),
         Command::Validate(a) => validate::exec(a),
+        Command::Ablate(a) => ablate::exec(a),
         Command::Author(a) => author::exec(a),
         Command::Synth(a) => synth::exec(a),
         Command::ImportReference(a) => import_reference::exec(a),

@@ -192,14 +192,15 @@ impl AtomicFile {
 
 /// A folder written all-or-nothing: files go into a hidden temporary sibling, and
 /// [`AtomicDir::commit`] renames it into place. An existing target is replaced only if it is empty
-/// or holds a previous herdfit output (`clip.json`, `report.json` or `params.json`); anything else
+/// or holds a previous herdfit output (`clip.json`, `report.json`, `params.json` or
+/// `ablation.json`); anything else
 /// is refused, so a mistyped `--out` never deletes a user's folder.
 pub struct AtomicDir {
     target: std::path::PathBuf,
     tmp: tempfile::TempDir,
 }
 
-const OUTPUT_MARKERS: [&str; 3] = ["clip.json", "report.json", "params.json"];
+const OUTPUT_MARKERS: [&str; 4] = ["clip.json", "report.json", "params.json", "ablation.json"];
 
 fn replaceable(dir: &Path) -> Result<bool> {
     check_target(dir)?;

@@ -40,6 +40,25 @@ pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
 pub fn run_from_fields(
     clip: &ClipFields,
     params: &Params,
+    range: (usize, usize),
+    seed: u64,
+    settle: &Settle,
+    guidance: &[Guidance],
+    device: &Device,
+    observe: impl FnMut(usize, &HerdState, &[u64]) -> Result<()>,
+) -> Result<Vec<AgentRow>> {
+    run_from_fields_zoned(
+        clip, params, None, range, seed, settle, guidance, device, observe,
+    )
+}
+
+/// [`run_from_fields`], with each agent's forces from its zone's set when `zones` is given
+/// (`params` still gives the speed model and the constants).
+#[allow(clippy::too_many_arguments)]
+pub fn run_from_fields_zoned(
+    clip: &ClipFields,
+    params: &Params,
+    zones: Option<&crate::herd::zoned::ZoneSets>,
     (first, last): (usize, usize),
     seed: u64,
     settle: &Settle,
@@ -64,7 +83,13 @@ pub fn run_from_fields(
         guidance: &guidance[first.min(guidance.len())..],
         observe: |t: usize, _: &StepDecisions, next: &HerdState| observe(first + t + 1, next, &ids),
     };
-    model.run_live(&theta, &rows, steps, &mut rng, &mut hooks)?;
+    match zones {
+        None => model.run_live(&theta, &rows, steps, &mut rng, &mut hooks)?,
+        Some(sets) => {
+            let mut z = crate::herd::zoned::Zoned { inner: hooks, sets };
+            model.run_live(&theta, &rows, steps, &mut rng, &mut z)?
+        }
+    };
     Ok(rows)
 }
 

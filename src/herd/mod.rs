@@ -7,6 +7,7 @@
 //! This folder imports no other subsystem; it builds on the shared layers `data`, `measure`,
 //! `optim`, `video` and the `herdfit-kernels` crate.
 
+pub mod ablate;
 pub mod author;
 pub mod bench;
 pub mod demo;
@@ -22,3 +23,4 @@ pub mod simulate;
 pub mod start;
 pub mod synth;
 pub mod validate;
+pub mod zoned;

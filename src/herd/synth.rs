@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::herd::params::Params;
 use crate::herd::sim::obstacle_map;
 use crate::herd::sim::{
-    random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, World,
+    random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, StepDecisions, World,
 };
 use crate::herd::simulate::load_params;
 use crate::measure::rasterise;
@@ -87,6 +87,18 @@ pub struct Synth {
 pub fn synthesise(
     cfg: &SynthConfig,
     device: &burn::tensor::Device,
+    progress: impl FnMut(),
+) -> Result<Synth> {
+    synthesise_zoned(cfg, None, device, progress)
+}
+
+/// [`synthesise`], with one parameter set per zone when `zones` is given (each agent takes its
+/// zone's set every step, [`crate::herd::zoned`]; `cfg.params` gives the speed model and the
+/// constants).
+pub fn synthesise_zoned(
+    cfg: &SynthConfig,
+    zones: Option<&crate::herd::zoned::ZoneSets>,
+    device: &burn::tensor::Device,
     mut progress: impl FnMut(),
 ) -> Result<Synth> {
     cfg.check()?;
@@ -121,21 +133,30 @@ pub fn synthesise(
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005e_ed0f_5eed);
     let mut frames = vec![init.clone()];
     let mut roles = Vec::with_capacity(cfg.frame_count);
-    let end = model.rollout(
-        &theta,
-        HerdState::from_rows(&init, device),
-        cfg.frame_count - 1,
-        Decide::Live {
-            rng: &mut rng,
-            record: None,
-        },
-        |_, dec, next| {
-            roles.push(dec.leader.clone());
-            frames.push(next.rows(&ids)?);
-            progress();
-            Ok(())
-        },
-    )?;
+    let decide = Decide::Live {
+        rng: &mut rng,
+        record: None,
+    };
+    let state = HerdState::from_rows(&init, device);
+    let observe = |_: usize, dec: &StepDecisions, next: &HerdState| -> Result<()> {
+        roles.push(dec.leader.clone());
+        frames.push(next.rows(&ids)?);
+        progress();
+        Ok(())
+    };
+    let steps = cfg.frame_count - 1;
+    let end = match zones {
+        None => model.rollout(&theta, state, steps, decide, observe)?,
+        Some(z) => {
+            let guidance = vec![model.world.guidance.clone(); steps];
+            let inner = crate::herd::sim::Guided {
+                guidance: &guidance,
+                observe,
+            };
+            let mut hooks = crate::herd::zoned::Zoned { inner, sets: z };
+            model.run(&theta, state, steps, decide, &mut hooks)?
+        }
+    };
     roles.push(model.decide(&end.snapshot()?, &mut rng).leader);
     let provenance = serde_json::json!({
         "source": "synth",
@@ -191,6 +212,10 @@ pub struct SynthJob {
     pub out: PathBuf,
     /// An overhead MJPG video of the run, and how it is rendered (`seed` is taken from the job).
     pub video: Option<(PathBuf, SynthVideo)>,
+    /// A parameter-set bundle (`herdfit.param-sets/1`) whose sets' polygons are zones of the
+    /// grid: each agent takes its zone's set every step (`params` still gives the speed model
+    /// and the constants); written into the clip as `truth-sets.json`.
+    pub zone_sets: Option<PathBuf>,
 }
 
 /// How `synth` renders its video.
@@ -220,6 +245,7 @@ impl Default for SynthJob {
             precision: Precision::F32,
             out: PathBuf::from("clip"),
             video: None,
+            zone_sets: None,
         }
     }
 }
@@ -282,8 +308,18 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         heading_deg: job.heading_deg,
         precision: job.precision,
     };
+    let zones = match &job.zone_sets {
+        None => None,
+        Some(p) => {
+            let bundle = crate::herd::fit::zones::ParamSets::load(p)?;
+            let z = crate::herd::zoned::ZoneSets::of_bundle(&bundle, p, &grid, &cfg.obstacles)?;
+            Some((z, bundle))
+        }
+    };
     progress.start("synth", job.frame_count.saturating_sub(1) as u64);
-    let syn = synthesise(&cfg, &device, || progress.inc(1))?;
+    let syn = synthesise_zoned(&cfg, zones.as_ref().map(|z| &z.0), &device, || {
+        progress.inc(1)
+    })?;
     progress.finish();
     let mut truth = params.clone();
     truth.physical = Some(params.physical_values());
@@ -296,6 +332,18 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         ("truth.json", format!("{truth}\n").into_bytes()),
         ("trajectories.csv", traj.into_bytes()),
     ];
+    if let Some((_, bundle)) = &zones {
+        let json = serde_json::to_string_pretty(bundle)
+            .map_err(|e| Error::Internal(format!("serialising the sets: {e}")))?;
+        extra.push((
+            "truth-sets.json",
+            format!(
+                "{json}
+"
+            )
+            .into_bytes(),
+        ));
+    }
     let pending = match &job.video {
         None => None,
         Some((path, v)) => {

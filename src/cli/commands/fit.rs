@@ -11,17 +11,9 @@ use crate::herd::fit::{
 use clap::Args;
 use std::path::PathBuf;
 
+/// The gradient descent's flags, shared by `fit` and `ablate`.
 #[derive(Args, Debug)]
-pub struct FitArgs {
-    /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
-    #[arg(value_name = "CLIP/", num_args = 1.., required = true)]
-    pub clips: Vec<PathBuf>,
-    /// Output parameter set (herdfit.params/1).
-    #[arg(long, value_name = "PARAMS.json")]
-    pub out: PathBuf,
-    /// Starting parameters; a generic start (every value 0.5) when omitted.
-    #[arg(long, alias = "init", value_name = "P.json")]
-    pub start: Option<PathBuf>,
+pub struct StepFlags {
     /// Unrolled steps per update (1 = the paper's greedy per-frame scheme).
     #[arg(long, value_name = "W", default_value_t = 4)]
     pub window: usize,
@@ -37,6 +29,36 @@ pub struct FitArgs {
     pub lr: f64,
     #[arg(long, value_parser = choice::<Optimizer>(OPTIMIZERS), default_value_t = Optimizer::Adam)]
     pub optimizer: Optimizer,
+}
+
+impl StepFlags {
+    /// `cfg` with these settings.
+    pub fn apply(&self, cfg: FitConfig) -> FitConfig {
+        FitConfig {
+            window: self.window,
+            epochs: self.epochs,
+            beta: self.beta,
+            var_weight: self.var_weight,
+            lr: self.lr,
+            optimizer: self.optimizer,
+            ..cfg
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
+    #[arg(value_name = "CLIP/", num_args = 1.., required = true)]
+    pub clips: Vec<PathBuf>,
+    /// Output parameter set (herdfit.params/1).
+    #[arg(long, value_name = "PARAMS.json")]
+    pub out: PathBuf,
+    /// Starting parameters; a generic start (every value 0.5) when omitted.
+    #[arg(long, alias = "init", value_name = "P.json")]
+    pub start: Option<PathBuf>,
+    #[command(flatten)]
+    pub steps: StepFlags,
     /// Frames used, a..b (b exclusive); all frames when omitted.
     #[arg(long, value_name = "a..b", value_parser = parse_range)]
     pub frames: Option<(usize, usize)>,
@@ -107,6 +129,17 @@ pub struct FitArgs {
     /// Seeds of the identifiability estimate (each probes the objective at 1 + 2×12 points).
     #[arg(long, value_name = "K", default_value_t = UncertaintyConfig::default().seeds)]
     pub uncertainty_seeds: usize,
+    /// Parameters held at their start value (comma-separated names, e.g. cohesion.angular).
+    #[arg(long, value_name = "NAME,…", value_delimiter = ',')]
+    pub freeze: Vec<String>,
+    /// Weight of the density term of the field-matching and ensemble objectives.
+    #[arg(long, value_name = "W", default_value_t = 1.0)]
+    pub density_weight: f64,
+    /// One parameter set per zone (herdfit.zones/1: named polygons in the clip's coordinates
+    /// covering every accessible cell once), learnt jointly; --out is then a parameter-set
+    /// bundle (herdfit.param-sets/1) that author scenes' regions name sets of.
+    #[arg(long, value_name = "ZONES.json")]
+    pub zones: Option<PathBuf>,
     /// Finite-difference step of the identifiability estimate.
     #[arg(long, value_name = "H", default_value_t = UncertaintyConfig::default().step)]
     pub uncertainty_step: f64,
@@ -117,13 +150,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
         clips: a.clips,
         start: a.start,
         frames: a.frames.map(|(x, y)| x..y),
-        config: FitConfig {
-            window: a.window,
-            epochs: a.epochs,
-            beta: a.beta,
-            var_weight: a.var_weight,
-            lr: a.lr,
-            optimizer: a.optimizer,
+        config: a.steps.apply(FitConfig {
             frames: 0..0,
             seed: a.seed,
             density_threshold: a.density_threshold,
@@ -141,7 +168,10 @@ pub fn exec(a: FitArgs) -> Result<()> {
                 starts: a.starts,
                 holdout: a.holdout,
             },
-        },
+            frozen: a.freeze,
+            density_weight: a.density_weight,
+            ..FitConfig::default()
+        }),
         eval_seeds: a.eval_seeds,
         checkpoint: a.checkpoint,
         resume: a.resume,
@@ -154,7 +184,14 @@ pub fn exec(a: FitArgs) -> Result<()> {
             step: a.uncertainty_step,
             ..UncertaintyConfig::default()
         },
+        zones: a.zones,
     };
+    if job.zones.is_some() {
+        let s = crate::herd::fit::zone_job::run_zones(&job, &mut Bars::default())
+            .map_err(|e| with_flags(e, &[("global.starts", "--starts")]))?;
+        print!("{s}");
+        return Ok(());
+    }
     let summary = run(&job, &mut Bars::default()).map_err(|e| {
         with_flags(
             e,
@@ -164,6 +201,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
                 ("uncertainty.step", "--uncertainty-step"),
                 ("global.starts", "--starts"),
                 ("global.holdout", "--holdout"),
+                ("frozen", "--freeze"),
             ],
         )
     })?;

@@ -1,6 +1,7 @@
 //! One file per verb (cargo's `commands/` style): its flags, and `exec`, which turns them into
 //! the library's job, makes one library call and prints the result.
 
+pub mod ablate;
 pub mod author;
 pub mod bench;
 pub mod crowd;

@@ -53,6 +53,10 @@ pub struct SynthArgs {
     /// Smooth pan, zoom and rotation of the camera (identity at frame 0); poses go to camera.json.
     #[arg(long)]
     pub camera_motion: bool,
+    /// One parameter set per zone: a parameter-set bundle (herdfit.param-sets/1) whose sets'
+    /// polygons cover the grid; each agent takes its zone's set every step.
+    #[arg(long, value_name = "SETS.json")]
+    pub zone_sets: Option<PathBuf>,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
     pub out: PathBuf,
@@ -77,6 +81,7 @@ pub fn exec(a: SynthArgs) -> Result<()> {
         precision: a.precision,
         out: a.out,
         video: a.video_file.map(|p| (p, video)),
+        zone_sets: a.zone_sets,
     };
     let renamed = [("heading_deg", "--heading"), ("grid", "--grid-size")];
     let syn = write_clip(&job, &mut Bars::default()).map_err(|e| with_flags(e, &renamed))?;

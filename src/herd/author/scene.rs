@@ -59,8 +59,12 @@ fn one() -> f64 {
 #[serde(deny_unknown_fields)]
 pub struct RegionSpec {
     pub polygon: Vec<P2>,
-    /// Parameter-set file (relative to the scene).
+    /// Parameter-set file (relative to the scene), or a parameter-set bundle
+    /// (`herdfit.param-sets/1`, a zone fit's output) when `set` names one of its sets.
     pub params: PathBuf,
+    /// The name of the set in the bundle `params` (a zone's name).
+    #[serde(default)]
+    pub set: Option<String>,
     /// Speed cap (BL/s) inside the region.
     #[serde(default)]
     pub speed_cap: Option<f64>,
@@ -463,7 +467,15 @@ fn region_params(file: &SceneFile, path: &Path) -> Result<Vec<Params>> {
                 return Err(bad(&format!("regions[{k}].speed_cap"), "must be > 0"));
             }
         }
-        params.push(load_params(&format!("regions[{k}].params"), &r.params)?);
+        let at = format!("regions[{k}].params");
+        params.push(match &r.set {
+            None => load_params(&at, &r.params)?,
+            Some(name) => crate::herd::fit::zones::ParamSets::load(&dir.join(&r.params))
+                .map_err(|e| bad(&at, &e.to_string()))?
+                .get(name)
+                .map_err(|m| bad(&format!("regions[{k}].set"), &m))?
+                .clone(),
+        });
     }
     if let Some(c) = file.default_speed_cap {
         if !(c.is_finite() && c > 0.0) {

@@ -78,6 +78,33 @@ pub(super) struct Learnt {
     pub(super) log: Vec<LogRow>,
     /// Each window's (loss, gradient) when the run probes ([`super::run::window_gradients`]).
     pub(super) probes: Vec<(f64, [f64; N_PARAMS])>,
+    /// A zone fit's other parameter sets (zones 1, 2, …; zone 0's is `theta`) and their
+    /// optimiser states ([`super::run::fit_zones`]).
+    pub(super) zones: Vec<([f64; N_PARAMS], OptState)>,
+}
+
+impl Learnt {
+    /// Every parameter set, zone 0 first, one after another (`[12·Z]`).
+    pub(super) fn flat(&self) -> Vec<f64> {
+        let mut v = self.theta.to_vec();
+        for (t, _) in &self.zones {
+            v.extend_from_slice(t);
+        }
+        v
+    }
+
+    /// One optimiser step on every parameter set with its part of the gradient `g` (`[12·Z]`).
+    pub(super) fn update(&mut self, g: &[f64], cfg: &FitConfig, lr: f64, rng: &mut impl rand::Rng) {
+        let part = |k: usize| -> [f64; N_PARAMS] {
+            let mut p = [0.0; N_PARAMS];
+            p.copy_from_slice(&g[k * N_PARAMS..(k + 1) * N_PARAMS]);
+            p
+        };
+        super::run::update(&mut self.theta, &part(0), &mut self.opt, cfg, lr, rng);
+        for (k, (t, o)) in self.zones.iter_mut().enumerate() {
+            super::run::update(t, &part(k + 1), o, cfg, lr, rng);
+        }
+    }
 }
 
 /// The state to start from: θ = the start, or the checkpoint's state when resuming (refused
@@ -101,6 +128,7 @@ pub(super) fn resume(
                 opt: k.opt,
                 log: k.log,
                 probes: Vec::new(),
+                zones: Vec::new(),
             };
             Ok((learnt, k.epochs_done))
         }
@@ -110,6 +138,7 @@ pub(super) fn resume(
                 opt: OptState::new(N_PARAMS),
                 log: Vec::new(),
                 probes: Vec::new(),
+                zones: Vec::new(),
             },
             0,
         )),

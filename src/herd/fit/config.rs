@@ -63,6 +63,24 @@ pub struct FitConfig {
     /// written when off, so checkpoints of single-start fits keep their bytes).
     #[serde(default, skip_serializing_if = "GlobalPhase::is_off")]
     pub global: GlobalPhase,
+    /// Parameters held at their start value, by name (`cohesion.angular`, …, as
+    /// [`crate::herd::params::param_names`]): the ablation of angular perception (§7.2.2) holds
+    /// the four angular ranges at 1 (Φ = π). Not written when empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub frozen: Vec<String>,
+    /// Weight of the density term of the field-matching and ensemble objectives (0: the ablation
+    /// of density matching, §7.2.3; in the paper's objective the density term is β of eq. 11).
+    /// Not written when 1.
+    #[serde(default = "unit_weight", skip_serializing_if = "is_unit_weight")]
+    pub density_weight: f64,
+}
+
+fn unit_weight() -> f64 {
+    1.0
+}
+
+fn is_unit_weight(w: &f64) -> bool {
+    *w == 1.0
 }
 
 /// Settings of the multi-start global phase (issue #15 item 3, [`crate::herd::fit::global`]).
@@ -163,6 +181,8 @@ impl Default for FitConfig {
             guidance_scale: GUIDANCE_SCALE,
             force_kernel: crate::herd::sim::ForceKernel::Fused,
             global: GlobalPhase::default(),
+            frozen: Vec::new(),
+            density_weight: 1.0,
         }
     }
 }
@@ -206,12 +226,30 @@ impl FitConfig {
                 f64::INFINITY,
             ),
             ("zero_grad_step", self.zero_grad_step, 0.0, f64::INFINITY),
+            ("density_weight", self.density_weight, 0.0, f64::INFINITY),
         ] {
             if !(v.is_finite() && v >= lo && v <= hi) {
                 return Err(Error::config(key, format!("{v} is out of range")));
             }
         }
+        self.frozen_indices()?;
         self.settle.check()
+    }
+
+    /// The indices of the `frozen` parameters; an unknown name is an error naming `frozen`.
+    pub fn frozen_indices(&self) -> Result<Vec<usize>> {
+        let names = crate::herd::params::param_names();
+        self.frozen
+            .iter()
+            .map(|n| {
+                names.iter().position(|m| m == n).ok_or_else(|| {
+                    Error::config(
+                        "frozen",
+                        format!("'{n}' is not a parameter (one of {})", names.join(", ")),
+                    )
+                })
+            })
+            .collect()
     }
 
     /// [`FitConfig::check`], then the settings against a clip: the frames inside it, a herd in

@@ -114,7 +114,14 @@ pub fn fit_global(
         frames: holdout_frames.clone(),
         ..inner.clone()
     };
-    let starts = candidate_starts(&init.to_vec(), &cfg.global, cfg.seed);
+    let mut starts = candidate_starts(&init.to_vec(), &cfg.global, cfg.seed);
+    // Frozen parameters keep the given start's value in every candidate.
+    let frozen = cfg.frozen_indices()?;
+    for s in starts.iter_mut() {
+        for &p in &frozen {
+            s[p] = init.to_vec()[p];
+        }
+    }
     let (chosen, candidates, mut results) = multistart(
         &starts,
         |k, s| -> Result<(Vec<f64>, FitResult)> {

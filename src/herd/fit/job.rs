@@ -45,6 +45,9 @@ pub struct FitJob {
     pub plot: Option<PathBuf>,
     /// The identifiability estimate at the fitted point, written as the set's `uncertainty`.
     pub uncertainty: UncertaintyConfig,
+    /// A zones file (`herdfit.zones/1`): one parameter set per zone, learnt jointly, written as a
+    /// parameter-set bundle (`herdfit.param-sets/1`) at `out` ([`super::zone_job`]).
+    pub zones: Option<PathBuf>,
 }
 
 impl Default for FitJob {
@@ -61,6 +64,7 @@ impl Default for FitJob {
             log: None,
             plot: None,
             uncertainty: UncertaintyConfig::default(),
+            zones: None,
         }
     }
 }
@@ -103,8 +107,20 @@ impl FitJob {
         if self.clips.is_empty() {
             return Err(Error::config("clips", "give at least one clip"));
         }
-        if self.uncertainty.enabled {
+        if self.uncertainty.enabled && self.zones.is_none() {
             self.uncertainty.check()?;
+        }
+        if self.zones.is_some() {
+            let refuse = |key: &str, why: &str| Err(Error::config(key, why.to_string()));
+            if self.clips.len() != 1 {
+                return refuse("zones", "a zone fit takes one clip");
+            }
+            if !self.config.global.is_off() {
+                return refuse("global.starts", "a zone fit has no global phase: set 1");
+            }
+            if self.checkpoint.is_some() {
+                return refuse("checkpoint", "a zone fit writes no checkpoints");
+            }
         }
         if crate::data::atomic::is_stdout(&self.out) && (self.log.is_none() || self.plot.is_none())
         {
@@ -365,7 +381,7 @@ fn provenance(
 }
 
 /// The loss curve: per epoch, the mean E_mean, E_var, density and velocity errors of its windows.
-fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
+pub(super) fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
     let per_epoch = |f: &dyn Fn(&LogRow) -> f64| -> Vec<(f64, f64)> {
         (0..epochs)
             .filter_map(|e| {

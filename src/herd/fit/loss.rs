@@ -155,9 +155,24 @@ pub fn step_loss(hx: &Tensor<1>, hy: &Tensor<1>, t: &StepTarget) -> StepLoss {
 /// splatting and K the blur that splatting applies to points uniform in a cell
 /// ([`target::blur_like_splat`]), so that a herd matching the clip scores 0 on average.
 pub fn fields_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
+    fields_loss_weighted(clip, state, f, 1.0)
+}
+
+/// [`fields_loss`] with its density term weighted by `density_weight` (0: the ablation of
+/// density matching, §7.2.3).
+pub fn fields_loss_weighted(
+    clip: &ClipFields,
+    state: &HerdState,
+    f: usize,
+    density_weight: f64,
+) -> Result<Tensor<1>> {
     let ([rho, mx, my], norm_d, norm_m) = field_targets(clip, f, &state.x.device())?;
     let [rho_s, mx_s, my_s] = splatted_fields(state, &clip.grid())?;
-    let ed = (rho_s - rho).square().sum().div_scalar(norm_d);
+    let ed = (rho_s - rho)
+        .square()
+        .sum()
+        .div_scalar(norm_d)
+        .mul_scalar(density_weight);
     let em = ((mx_s - mx).square() + (my_s - my).square())
         .sum()
         .div_scalar(norm_m);
@@ -210,6 +225,17 @@ pub(crate) fn add(total: &mut Option<Tensor<1>>, l: Tensor<1>) {
 /// parameter set is not rewarded for making the herd less variable (which matching one
 /// simulated herd to one clip does: E‖ρ' − ρ‖² = ‖E ρ' − ρ‖² + Var ρ' + …; RESULTS.md §1).
 pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Result<Tensor<1>> {
+    ensemble_loss_weighted(clip, states, f, 1.0)
+}
+
+/// [`ensemble_loss`] with its density term weighted by `density_weight` (0: the ablation of
+/// density matching, §7.2.3).
+pub fn ensemble_loss_weighted(
+    clip: &ClipFields,
+    states: &[HerdState],
+    f: usize,
+    density_weight: f64,
+) -> Result<Tensor<1>> {
     let k = states.len();
     if k < 2 {
         return Err(Error::invalid(
@@ -240,7 +266,9 @@ pub fn ensemble_loss(clip: &ClipFields, states: &[HerdState], f: usize) -> Resul
     };
     let sd = spread(0, &rb);
     let sm = spread(1, &mxb) + spread(2, &myb);
-    let ed = ((rb - rho).square().sum() - sd).div_scalar(norm_d);
+    let ed = ((rb - rho).square().sum() - sd)
+        .div_scalar(norm_d)
+        .mul_scalar(density_weight);
     let em = ((mxb - mx).square().sum() + (myb - my).square().sum() - sm).div_scalar(norm_m);
     Ok(ed + em)
 }

@@ -13,6 +13,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod global;
+mod herds;
 pub mod identify;
 pub mod job;
 pub mod log;
@@ -20,6 +21,8 @@ pub mod loss;
 pub mod plan;
 pub mod run;
 pub mod target;
+pub mod zone_job;
+pub mod zones;
 
 pub use crate::herd::eval::{clip_model, evaluate};
 pub use crate::herd::guidance::{
@@ -35,4 +38,4 @@ pub use job::{FitJob, FitSummary};
 pub use log::{log_csv, write_log, LogRow};
 pub use loss::{ensemble_loss, fields_loss};
 pub use plan::{plan_step, window_loss};
-pub use run::{fit, fit_clips, loss_of, update, FitResult};
+pub use run::{fit, fit_clips, fit_zones, loss_of, update, FitResult, ZoneFitResult};

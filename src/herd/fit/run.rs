@@ -3,11 +3,13 @@
 
 use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt};
 use super::config::{FitConfig, LossKind};
+use super::herds::{check_finite_step, grad_of, Herds};
 use super::log::LogRow;
 use super::loss::StepTarget;
-use super::loss::{add, ensemble_loss, fields_loss, step_loss};
+use super::loss::{add, ensemble_loss_weighted, fields_loss_weighted, step_loss};
 use super::plan::{plan_step, window_loss};
 use super::target::Stencil;
+use super::zones::Zones;
 use crate::backend::cpu_device;
 use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
@@ -18,9 +20,8 @@ use crate::herd::params::SpeedModel;
 use crate::herd::params::ALIGNMENT;
 use crate::herd::params::{Params, N_PARAMS};
 use crate::herd::sim::{read_vec, Model, StepDecisions};
-use crate::herd::sim::{theta_tensor, ForceTensors, Guidance, HerdState};
-use crate::herd::start::{population_control, start_herd};
-use crate::measure::fields::field_errors;
+use crate::herd::sim::{thetas_tensor, ForceTensors, Guidance, HerdState};
+use crate::herd::start::start_herd;
 use crate::optim::OptState;
 use burn::tensor::{Device, Tensor};
 use rand::{Rng, SeedableRng};
@@ -36,8 +37,13 @@ pub fn update(
     lr: f64,
     rng: &mut impl Rng,
 ) {
+    let before = *theta;
     crate::optim::step(cfg.optimizer, theta, g, opt, lr, cfg.zero_grad_step, rng);
     Params::clamp_vec(theta);
+    // Frozen parameters keep their value (checked names; an unknown one was refused earlier).
+    for p in cfg.frozen_indices().unwrap_or_default() {
+        theta[p] = before[p];
+    }
 }
 
 /// Result of a fit.
@@ -77,6 +83,60 @@ pub fn fit_clips(
     fit_inner(clips, init, cfg, ckpt, true, progress)
 }
 
+/// The result of a zone fit: one parameter set per zone (in the zones' order) and the log (its
+/// `theta` is zone 0's).
+#[derive(Clone, Debug)]
+pub struct ZoneFitResult {
+    pub sets: Vec<Params>,
+    pub log: Vec<LogRow>,
+}
+
+/// A zone fit (paper §7.2.4): one parameter set per zone of `zones`, learnt jointly — every
+/// step each agent uses the set of the zone its cell lies in ([`ForceTensors::zoned`]), so one
+/// window's gradient reaches every zone's set through the agents that used it, and each set
+/// takes its own optimiser step. `starts[k]` is zone k's start. No checkpoints.
+pub fn fit_zones(
+    clip: &ClipFields,
+    starts: &[Params],
+    cfg: &FitConfig,
+    zones: &Zones,
+    mut progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<ZoneFitResult> {
+    if starts.len() != zones.len() || starts.is_empty() {
+        return Err(Error::Internal(format!(
+            "{} starts for {} zones",
+            starts.len(),
+            zones.len()
+        )));
+    }
+    zones.check_agents(clip, cfg.frames.clone())?;
+    let clips = [clip];
+    let mut run = FitRun::new(&clips, &starts[0], cfg, true)?;
+    run.zones = Some(zones);
+    let (mut learnt, _) = resume(None, cfg, starts[0].to_vec())?;
+    learnt.zones = starts[1..]
+        .iter()
+        .map(|p| (p.to_vec(), OptState::new(N_PARAMS)))
+        .collect();
+    for epoch in 0..cfg.epochs {
+        let mut rng = epoch_rng(cfg.seed, epoch);
+        run.epoch_on_clip(epoch, 0, &mut learnt, &mut rng, &mut progress)?;
+    }
+    let thetas = std::iter::once(learnt.theta).chain(learnt.zones.iter().map(|(t, _)| *t));
+    let sets = thetas
+        .zip(starts)
+        .map(|(t, s)| {
+            let mut p = s.with_vec(&t);
+            p.speed = run.params.speed.clone();
+            p
+        })
+        .collect();
+    Ok(ZoneFitResult {
+        sets,
+        log: learnt.log,
+    })
+}
+
 /// The loss of a parameter set on a clip without learning: one epoch of the fit's schedule
 /// (epoch-0 herd and noise) with no updates; returns the mean E_mean, E_var and field-matching
 /// loss over its windows. Comparing two parameter sets this way uses the same herd, noise and
@@ -114,6 +174,7 @@ pub fn window_gradients(
         opt: OptState::new(N_PARAMS),
         log: Vec::new(),
         probes: Vec::new(),
+        zones: Vec::new(),
     };
     let mut rng = epoch_rng(one.seed, 0);
     for ci in 0..clips.len() {
@@ -137,24 +198,20 @@ struct FitRun<'a> {
     learn: bool,
     /// Record every window's loss and gradient ([`window_gradients`]).
     probe: bool,
-}
-
-/// The K replica herds of one clip in one epoch, with the next free id of each.
-struct Herds {
-    rows: Vec<Vec<AgentRow>>,
-    next_ids: Vec<u64>,
+    /// A zone fit's zones: each agent uses its cell's zone's parameter set ([`fit_zones`]).
+    zones: Option<&'a Zones>,
 }
 
 /// The forward pass over one window besides its loss: the logged loss values, and each live
 /// replica's plans and end state.
-struct Forward {
+pub(super) struct Forward {
     e_mean: f64,
     e_var: f64,
     e_fields: f64,
     /// Replicas that held agents at the start of the window.
-    live: Vec<usize>,
+    pub(super) live: Vec<usize>,
     plans: Vec<Vec<(StepDecisions, StepTarget)>>,
-    ends: Vec<HerdState>,
+    pub(super) ends: Vec<HerdState>,
 }
 
 fn fit_inner(
@@ -184,51 +241,6 @@ fn fit_inner(
         start,
         log: learnt.log,
     })
-}
-
-/// The fit-loss guard (issue #14): a NaN/inf loss or gradient stops the fit with one line naming
-/// the epoch, the window and the likely cause, before the optimiser step, so θ, the checkpoint of
-/// the last finished epoch and every output stay as they were (the optimiser's own rule would
-/// otherwise take a random step past a non-finite gradient, §6.1).
-fn check_finite_step(
-    epoch: usize,
-    clip: usize,
-    window: std::ops::Range<usize>,
-    losses: [f64; 3],
-    g: &[f64; N_PARAMS],
-) -> Result<()> {
-    let bad_loss = losses.iter().any(|v| !v.is_finite());
-    let bad_grad = g.iter().position(|v| !v.is_finite());
-    if !bad_loss && bad_grad.is_none() {
-        return Ok(());
-    }
-    let what = match (bad_loss, bad_grad) {
-        (true, _) => format!(
-            "the loss is not finite (E_mean {}, E_var {}, E_fields {})",
-            losses[0], losses[1], losses[2]
-        ),
-        (false, Some(p)) => format!("the gradient of parameter {p} is {}", g[p]),
-        (false, None) => unreachable!("checked above"),
-    };
-    Err(Error::invalid(format!(
-        "epoch {epoch}, clip #{clip}, window frames {}..{}: {what}; likely cause: extreme values in \
-         the clip's fields (density, velocity, fps) or a step size (lr) too large for them; \
-         the last finished epoch's checkpoint is kept",
-        window.start, window.end
-    )))
-}
-
-/// The gradient of `loss` with respect to `theta` (zeros where none reaches it).
-fn grad_of(loss: Tensor<1>, theta: &Tensor<1>) -> Result<[f64; N_PARAMS]> {
-    let grads = loss.backward();
-    let gv = theta
-        .grad(&grads)
-        .map(|t| read_vec(&t))
-        .transpose()?
-        .unwrap_or_else(|| vec![0.0; N_PARAMS]);
-    let mut g = [0.0; N_PARAMS];
-    g.copy_from_slice(&gv);
-    Ok(g)
 }
 
 impl<'a> FitRun<'a> {
@@ -275,6 +287,7 @@ impl<'a> FitRun<'a> {
             per_clip,
             learn,
             probe: false,
+            zones: None,
         })
     }
 
@@ -304,7 +317,8 @@ impl<'a> FitRun<'a> {
                 f += w;
                 continue;
             }
-            let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &learnt.theta, rng)?;
+            let flat = learnt.flat();
+            let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &flat, rng)?;
             let (em, ev, ef) = (fwd.e_mean, fwd.e_var, fwd.e_fields);
             // The gradient is needed to learn and, for the identifiability probe, to record.
             let g = match self.learn || self.probe {
@@ -313,10 +327,12 @@ impl<'a> FitRun<'a> {
                         true => read_vec(&loss.clone().detach())?[0],
                         false => 0.0,
                     };
-                    let g = self.gradient(&model, &herds, loss, &th, &fwd, &learnt.theta)?;
+                    let g = self.gradient(&model, &herds, loss, &th, &fwd, &flat)?;
                     check_finite_step(epoch, ci, f..f + w, [em, ev, ef], &g)?;
                     if self.probe {
-                        learnt.probes.push((value, g));
+                        let mut g0 = [0.0; N_PARAMS];
+                        g0.copy_from_slice(&g[..N_PARAMS]);
+                        learnt.probes.push((value, g0));
                     }
                     Some(g)
                 }
@@ -325,7 +341,7 @@ impl<'a> FitRun<'a> {
             if let (true, Some(g)) = (self.learn, g) {
                 // Learning rate decays linearly to 10 % over the epochs.
                 let lr = cfg.lr * (1.0 - 0.9 * epoch as f64 / cfg.epochs.max(1) as f64);
-                update(&mut learnt.theta, &g, &mut learnt.opt, cfg, lr, rng);
+                learnt.update(&g, cfg, lr, rng);
             }
             model.params = model.params.with_vec(&learnt.theta);
             f += w;
@@ -383,7 +399,7 @@ impl<'a> FitRun<'a> {
         herds: &Herds,
         f: usize,
         w: usize,
-        theta: &[f64; N_PARAMS],
+        theta: &[f64],
         rng: &mut ChaCha8Rng,
     ) -> Result<(Tensor<1>, Tensor<1>, Forward)> {
         let (cfg, clip) = (self.cfg, self.clips[ci]);
@@ -395,8 +411,8 @@ impl<'a> FitRun<'a> {
             (LossKind::Paper, true) => (1.0, 0.0),
             (LossKind::Paper, false) => (1.0, cfg.var_weight),
         };
-        let th = theta_tensor(theta, &self.ad).require_grad();
-        let forces = ForceTensors::new(&th, &model.params.constants);
+        let th = thetas_tensor(theta, &self.ad).require_grad();
+        let forces = ForceTensors::new(&th.clone().narrow(0, 0, N_PARAMS), &model.params.constants);
         let mut total: Option<Tensor<1>> = None;
         let (mut em, mut ev, mut ef) = (0.0, 0.0, 0.0);
         let replicas = herds.rows.len();
@@ -423,15 +439,16 @@ impl<'a> FitRun<'a> {
                     f + s,
                     rng,
                 )?;
+                let fz = self.step_forces(&forces, &th, &plan.1, model);
                 let (next, loss, e_m, e_v) =
-                    window_loss(model, &forces, state, std::slice::from_ref(&plan), weights)?;
+                    window_loss(model, &fz, state, std::slice::from_ref(&plan), weights)?;
                 plans.push(plan);
                 state = next;
                 em += e_m / (w as f64 * kr);
                 ev += e_v / (w as f64 * kr);
                 let loss = match cfg.loss {
                     LossKind::Fields => {
-                        let fl = fields_loss(clip, &state, f + s + 1)?;
+                        let fl = fields_loss_weighted(clip, &state, f + s + 1, cfg.density_weight)?;
                         ef += read_vec(&fl.clone().detach())?[0] / (w as f64 * kr);
                         loss + fl
                     }
@@ -441,7 +458,12 @@ impl<'a> FitRun<'a> {
                     }
                     LossKind::Paper => {
                         // Logged only: evaluated off the autodiff graph.
-                        let fl = fields_loss(clip, &state.clone().detach(), f + s + 1)?;
+                        let fl = fields_loss_weighted(
+                            clip,
+                            &state.clone().detach(),
+                            f + s + 1,
+                            cfg.density_weight,
+                        )?;
                         ef += read_vec(&fl)?[0] / (w as f64 * kr);
                         loss
                     }
@@ -453,7 +475,7 @@ impl<'a> FitRun<'a> {
         }
         if cfg.loss == LossKind::Ensemble {
             for (s, states) in per_step.iter().enumerate() {
-                let l = ensemble_loss(clip, states, f + s + 1)?;
+                let l = ensemble_loss_weighted(clip, states, f + s + 1, cfg.density_weight)?;
                 ef += read_vec(&l.clone().detach())?[0] / w as f64;
                 add(&mut total, l);
             }
@@ -482,8 +504,8 @@ impl<'a> FitRun<'a> {
         loss: Tensor<1>,
         th: &Tensor<1>,
         fwd: &Forward,
-        theta: &[f64; N_PARAMS],
-    ) -> Result<[f64; N_PARAMS]> {
+        theta: &[f64],
+    ) -> Result<Vec<f64>> {
         let cfg = self.cfg;
         let mut g = grad_of(loss, th)?;
         if !(cfg.split_gradients && cfg.loss == LossKind::Paper) {
@@ -491,13 +513,14 @@ impl<'a> FitRun<'a> {
         }
         let kr = fwd.live.len() as f64;
         let w = fwd.plans[0].len();
-        let th2 = theta_tensor(theta, &self.ad).require_grad();
-        let forces2 = ForceTensors::new(&th2, &model.params.constants);
+        let th2 = thetas_tensor(theta, &self.ad).require_grad();
+        let c = &model.params.constants;
+        let forces2 = ForceTensors::new(&th2.clone().narrow(0, 0, N_PARAMS), c);
         let mut total2: Option<Tensor<1>> = None;
         for (k, &r) in fwd.live.iter().enumerate() {
             let mut s2 = HerdState::from_rows(&herds.rows[r], &self.ad);
             for (dec, tgt) in &fwd.plans[k] {
-                s2 = model.step(&forces2, &s2, dec)?;
+                s2 = model.step(&self.step_forces(&forces2, &th2, tgt, model), &s2, dec)?;
                 let l = step_loss(&s2.hx, &s2.hy, tgt).e_var;
                 add(&mut total2, l.div_scalar(kr));
             }
@@ -506,62 +529,29 @@ impl<'a> FitRun<'a> {
             .ok_or_else(|| Error::invalid("empty window"))?
             .div_scalar(w as f64);
         let gvar = grad_of(loss2, &th2)?;
-        for p in ALIGNMENT {
-            g[p] = cfg.var_weight * gvar[p];
+        for k in 0..theta.len() / N_PARAMS {
+            for p in ALIGNMENT {
+                g[k * N_PARAMS + p] = cfg.var_weight * gvar[k * N_PARAMS + p];
+            }
         }
         Ok(g)
     }
-}
 
-impl Herds {
-    /// A replica that lost every agent is restarted from the fields of frame `f`.
-    fn refill_empty(&mut self, clip: &ClipFields, f: usize, model: &Model, rng: &mut ChaCha8Rng) {
-        for (rows, next_id) in self.rows.iter_mut().zip(self.next_ids.iter_mut()) {
-            if rows.is_empty() {
-                *rows = population_control(
-                    clip,
-                    f,
-                    std::mem::take(rows),
-                    0.0,
-                    &model.params.speed,
-                    next_id,
-                    rng,
-                );
+    /// The forces of one step: `shared` (the one parameter set), or in a zone fit each agent's
+    /// zone's set, chosen by the cell the plan recorded for it ([`ForceTensors::zoned`]).
+    fn step_forces(
+        &self,
+        shared: &ForceTensors,
+        th: &Tensor<1>,
+        tgt: &StepTarget,
+        model: &Model,
+    ) -> ForceTensors {
+        match self.zones {
+            None => shared.clone(),
+            Some(z) => {
+                let zone: Vec<usize> = tgt.cell.iter().map(|&c| z.zone_of_cell(c)).collect();
+                ForceTensors::zoned(th, &zone, &model.params.constants)
             }
         }
-    }
-
-    /// After a window ending at frame `f`: each live replica's end state, detached, under
-    /// population control; returns the replicas' mean density and velocity errors and their
-    /// total agents.
-    fn control(
-        &mut self,
-        clip: &ClipFields,
-        f: usize,
-        fwd: &Forward,
-        cfg: &FitConfig,
-        model: &Model,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<(f64, f64, usize)> {
-        let kr = fwd.live.len() as f64;
-        let (mut de, mut ve, mut agents) = (0.0, 0.0, 0usize);
-        for (k, &r) in fwd.live.iter().enumerate() {
-            let ids: Vec<u64> = self.rows[r].iter().map(|x| x.id).collect();
-            let rows = fwd.ends[k].clone().detach().rows(&ids)?;
-            self.rows[r] = population_control(
-                clip,
-                f,
-                rows,
-                cfg.density_threshold,
-                &model.params.speed,
-                &mut self.next_ids[r],
-                rng,
-            );
-            let (d, v) = field_errors(clip, f, &self.rows[r]);
-            de += d / kr;
-            ve += v / kr;
-            agents += self.rows[r].len();
-        }
-        Ok((de, ve, agents))
     }
 }

@@ -269,6 +269,31 @@ impl ForceTensors {
         }
     }
 
+    /// One parameter set per zone, differentiable: `theta` holds Z sets of 12 values (`[12·Z]`)
+    /// and agent i uses set `zone[i]`; the `[n, 1]` per-agent tensors and the `[n, 12]` packed
+    /// coefficients are rows selected from the zones' (eq. 3–4), so gradients reach every zone's
+    /// parameters from the agents that used them.
+    pub fn zoned(theta: &Tensor<1>, zone: &[usize], c: &Constants) -> Self {
+        let z = theta.dims()[0] / N_PARAMS;
+        let sets: Vec<ForceTensors> = (0..z)
+            .map(|k| ForceTensors::new(&theta.clone().narrow(0, k * N_PARAMS, N_PARAMS), c))
+            .collect();
+        let device = theta.device();
+        let idx: Vec<i64> = zone.iter().map(|&k| k.min(z - 1) as i64).collect();
+        let idx =
+            Tensor::<1, burn::tensor::Int>::from_data(TensorData::new(idx, [zone.len()]), &device);
+        let rows = |pick: &dyn Fn(&ForceTensors) -> Tensor<2>| {
+            Tensor::cat(sets.iter().map(pick).collect::<Vec<_>>(), 0).select(0, idx.clone())
+        };
+        ForceTensors {
+            w: std::array::from_fn(|g| rows(&|f| f.w[g].clone())),
+            alpha: std::array::from_fn(|g| rows(&|f| f.alpha[g].clone())),
+            gamma: std::array::from_fn(|g| rows(&|f| f.gamma[g].clone())),
+            per_agent: true,
+            coef: rows(&|f| f.coef.clone()),
+        }
+    }
+
     /// One parameter set per agent (no gradient): `thetas[i]` are agent i's 12 values.
     pub fn per_agent(thetas: &[[f64; N_PARAMS]], c: &Constants, device: &Device) -> Self {
         let n = thetas.len();
@@ -296,6 +321,12 @@ impl ForceTensors {
             coef: mat_tensor(coef, n, herdfit_kernels::N_COEF, device),
         }
     }
+}
+
+/// Several parameter vectors, one after another (`[12·Z]`, [`ForceTensors::zoned`]), as a tensor
+/// on `device`.
+pub fn thetas_tensor(thetas: &[f64], device: &Device) -> Tensor<1> {
+    vec_tensor(thetas.to_vec(), device)
 }
 
 /// A parameter vector as a tensor on `device`.

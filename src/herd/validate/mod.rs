@@ -18,6 +18,7 @@ use crate::measure::rasterise;
 use serde::Serialize;
 
 mod report;
+pub mod zones;
 
 pub use report::{markdown, run, ValidateJob};
 
@@ -92,7 +93,7 @@ pub struct Stat {
     pub std: f64,
 }
 
-fn stat(v: &[f64]) -> Stat {
+pub(crate) fn stat(v: &[f64]) -> Stat {
     let v: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
         return Stat {

@@ -1,0 +1,199 @@
+//! Zone fit vs single-set fit on a synthetic two-zone clip (issue #17, paper §7.2.4).
+//!
+//! A herd crosses a field whose left zone ("herding") plays one parameter set and right zone
+//! ("loose") another (`synth --zone-sets`). The first half of the clip is fitted twice from the
+//! generic start — one set per zone (`fit --zones`) and one set for the whole clip — and both,
+//! the generating sets, and the generating sets moved by ±0.06 per parameter are validated on the
+//! second half with the same seeds (common random numbers): the whole grid's coarse density
+//! error and each zone's density, polarization, angular momentum and aspect-ratio errors.
+//!
+//! `cargo run --release --example zones -- [EPOCHS] [OUT]` (default 6, `out/zones/`)
+
+use herdfit::herd::fit::job::{run, FitJob};
+use herdfit::herd::fit::zone_job::run_zones;
+use herdfit::herd::fit::zones::{NamedSet, ParamSets, ZoneSpec, ZonesFile, PARAM_SETS_SCHEMA};
+use herdfit::herd::fit::{FitConfig, LossKind, UncertaintyConfig};
+use herdfit::herd::params::Params;
+use herdfit::herd::synth::{write_clip, SynthJob};
+use herdfit::herd::validate::zones::{validate_zones, ZoneSetReport};
+use herdfit::herd::validate::ValidateConfig;
+use herdfit::herd::zoned::ZoneSets;
+use herdfit::progress::NoProgress;
+use rand::{Rng, SeedableRng};
+use std::path::Path;
+
+fn write(path: &Path, v: &impl serde::Serialize) -> herdfit::Result<()> {
+    let s = serde_json::to_string_pretty(v).map_err(|e| herdfit::Error::Internal(e.to_string()))?;
+    std::fs::write(path, s).map_err(|e| herdfit::Error::file(path, e.to_string()))
+}
+
+fn main() -> herdfit::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let epochs: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
+    let out = Path::new(args.get(2).map_or("out/zones", String::as_str)).to_path_buf();
+    std::fs::create_dir_all(&out).map_err(|e| herdfit::Error::file(&out, e.to_string()))?;
+    // 16 × 8 cells of 3 BL; the zones meet at x = 21 BL (between cell columns 6 and 7).
+    let zones = vec![
+        ZoneSpec {
+            name: "herding".into(),
+            polygon: vec![[0.0, 0.0], [21.0, 0.0], [21.0, 24.0], [0.0, 24.0]],
+        },
+        ZoneSpec {
+            name: "loose".into(),
+            polygon: vec![[21.0, 0.0], [48.0, 0.0], [48.0, 24.0], [21.0, 24.0]],
+        },
+    ];
+    let mut base = Params::default();
+    base.speed.mean = 1.5;
+    base.speed.std = 0.3;
+    let set = |v: [f64; 12]| base.with_vec(&v);
+    // Herding: strong cohesion and alignment over wide ranges; loose: weak cohesion, no
+    // alignment to speak of, strong short-range avoidance.
+    let truth = vec![
+        set([0.6, 0.7, 0.7, 0.4, 0.2, 0.6, 0.8, 0.6, 0.6, 0.7, 0.3, 0.5]),
+        set([0.15, 0.3, 0.4, 0.8, 0.3, 0.8, 0.1, 0.3, 0.4, 0.7, 0.3, 0.5]),
+    ];
+    let bundle = ParamSets {
+        schema: PARAM_SETS_SCHEMA.into(),
+        sets: zones
+            .iter()
+            .zip(&truth)
+            .map(|(z, p)| NamedSet {
+                name: z.name.clone(),
+                polygon: z.polygon.clone(),
+                params: p.clone(),
+            })
+            .collect(),
+        provenance: None,
+    };
+    let (truth_path, zones_path) = (out.join("truth-sets.json"), out.join("zones.json"));
+    write(&truth_path, &bundle)?;
+    let zfile = ZonesFile {
+        schema: herdfit::herd::fit::zones::ZONES_SCHEMA.into(),
+        zones: zones.clone(),
+    };
+    write(&zones_path, &zfile)?;
+    base.save(&out.join("base.json"))?;
+    let clip_dir = out.join("clip");
+    write_clip(
+        &SynthJob {
+            params: Some(out.join("base.json")),
+            agents: 300,
+            frame_count: 160,
+            grid_size: (16, 8),
+            cell_size: 3.0,
+            seed: 5,
+            out: clip_dir.clone(),
+            zone_sets: Some(truth_path.clone()),
+            ..SynthJob::default()
+        },
+        &mut NoProgress,
+    )?;
+    let clip = herdfit::data::ClipFields::load(&clip_dir)?;
+    let config = FitConfig {
+        epochs,
+        window: 4,
+        loss: LossKind::Fields,
+        ..FitConfig::default()
+    };
+    let t0 = std::time::Instant::now();
+    let job = FitJob {
+        clips: vec![clip_dir.clone()],
+        frames: Some(0..80),
+        config: config.clone(),
+        eval_seeds: 2,
+        out: out.join("zone-fit.json"),
+        uncertainty: UncertaintyConfig {
+            enabled: false,
+            ..UncertaintyConfig::default()
+        },
+        zones: Some(zones_path.clone()),
+        ..FitJob::default()
+    };
+    let zs = run_zones(&job, &mut NoProgress)?;
+    let zone_secs = t0.elapsed().as_secs_f64();
+    print!("{zs}");
+    let t0 = std::time::Instant::now();
+    let single_job = FitJob {
+        out: out.join("single-fit.json"),
+        zones: None,
+        ..job
+    };
+    run(&single_job, &mut NoProgress)?;
+    let single_secs = t0.elapsed().as_secs_f64();
+    let grid = clip.grid();
+    let of = |b: &ParamSets, p: &Path| ZoneSets::of_bundle(b, p, &grid, &clip.obstacles);
+    let zone_fit = ParamSets::load(&out.join("zone-fit.json"))?;
+    let single = Params::load(&out.join("single-fit.json"))?;
+    let repeat = |p: &Params| ParamSets {
+        sets: bundle
+            .sets
+            .iter()
+            .map(|s| NamedSet {
+                params: p.clone(),
+                ..s.clone()
+            })
+            .collect(),
+        ..bundle.clone()
+    };
+    // θ* moved by ±0.06 per parameter (random signs, seed 17).
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+    let mut moved = bundle.clone();
+    for s in &mut moved.sets {
+        let mut v = s.params.to_vec();
+        for x in v.iter_mut() {
+            *x = (*x + if rng.gen::<bool>() { 0.06 } else { -0.06 }).clamp(0.001, 1.0);
+        }
+        s.params = s.params.with_vec(&v);
+    }
+    let sets = vec![
+        ("zone fit".to_string(), of(&zone_fit, &out)?),
+        ("single fit".to_string(), of(&repeat(&single), &out)?),
+        ("truth".to_string(), of(&bundle, &out)?),
+        ("truth ±0.06".to_string(), of(&moved, &out)?),
+    ];
+    let vcfg = ValidateConfig {
+        seeds: 4,
+        ..ValidateConfig::default()
+    };
+    let reports = validate_zones(&clip, &sets, &vcfg, || {})?;
+    write(&out.join("zones-validation.json"), &reports)?;
+    println!("fit wall: zone {zone_secs:.1} s, single {single_secs:.1} s ({epochs} epochs)");
+    table(&reports);
+    let dist = |a: &ParamSets| -> Vec<f64> {
+        a.sets
+            .iter()
+            .zip(&bundle.sets)
+            .map(|(x, t)| {
+                let (p, q) = (x.params.to_vec(), t.params.to_vec());
+                p.iter().zip(&q).map(|(a, b)| (a - b).abs()).sum::<f64>() / 12.0
+            })
+            .collect()
+    };
+    println!(
+        "mean |θ − θ*| per parameter, per zone: zone fit {:?}, single fit {:?}",
+        dist(&zone_fit),
+        dist(&repeat(&single))
+    );
+    Ok(())
+}
+
+fn table(reports: &[ZoneSetReport]) {
+    println!("| set | density err (coarse) | velocity err | zone | zone density err | polarization err | ang. momentum err | aspect err |");
+    println!("|---|---:|---:|---|---:|---:|---:|---:|");
+    for r in reports {
+        for z in &r.zones {
+            println!(
+                "| {} | {:.4} | {:.4} | {} | {:.4} | {:.4} | {:.4} | {:.4} |",
+                r.name,
+                r.density_error.mean,
+                r.velocity_error.mean,
+                z.zone,
+                z.density_error.mean,
+                z.polarization_error.mean,
+                z.angular_momentum_error.mean,
+                z.aspect_ratio_error.mean
+            );
+        }
+    }
+}

@@ -1,0 +1,165 @@
+//! `herdfit ablate` (paper §7.2): every switch applied to its variant, the report's files and
+//! numbers, the `frozen` and `density_weight` fit keys, and bad input.
+
+mod common;
+use common::{fails, ok, s};
+use herdfit::herd::fit::{fit, FitConfig, LossKind};
+use herdfit::herd::params::Params;
+
+/// A small synthetic clip (40 agents, 16 frames, 8×6 cells of 3 BL) in `dir/clip`.
+fn small_clip(dir: &std::path::Path) -> std::path::PathBuf {
+    let clip = dir.join("clip");
+    ok(&[
+        "synth",
+        "--agents",
+        "40",
+        "--frame-count",
+        "16",
+        "--grid-size",
+        "8x6",
+        "--cell-size",
+        "3",
+        "--seed",
+        "3",
+        "--out",
+        s(&clip),
+    ]);
+    clip
+}
+
+#[test]
+fn ablate_runs_every_switch_and_reports_table_4() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = small_clip(dir.path());
+    let out = dir.path().join("abl");
+    let md = ok(&[
+        "ablate",
+        s(&clip),
+        "--out",
+        s(&out),
+        "--epochs",
+        "1",
+        "--window",
+        "3",
+        "--seeds",
+        "1",
+        "--settle",
+        "0",
+    ]);
+    for f in [
+        "ablation.json",
+        "ablation.md",
+        "density-error.png",
+        "polarization.png",
+        "errors.png",
+        "params-full.json",
+        "params-no-occlusion.json",
+        "params-no-speed-density.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    assert_eq!(r["schema"], "herdfit.ablation/1");
+    assert_eq!(r["fit_frames"], serde_json::json!([0, 8]));
+    assert_eq!(r["heldout_frames"], serde_json::json!([8, 16]));
+    let v = r["variants"].as_array().unwrap();
+    let names: Vec<&str> = v.iter().map(|x| x["name"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        [
+            "full",
+            "no-occlusion",
+            "no-angular",
+            "no-density",
+            "no-dir-variance",
+            "no-speed-density"
+        ]
+    );
+    // The switches reached the fitted sets: occlusion off only in its variant; the angular
+    // ranges held at 1 (Φ = π) through the fit.
+    for (k, x) in v.iter().enumerate() {
+        assert_eq!(x["occlusion"].as_bool().unwrap(), k != 1, "{}", names[k]);
+        assert_eq!(x["rows"].as_array().unwrap().len(), 6);
+    }
+    for g in 0..4 {
+        assert_eq!(v[2]["params"][3 * g + 2].as_f64().unwrap(), 1.0);
+    }
+    // The speed–density table is gone from its variant's speed model only.
+    let speed = |name: &str| -> serde_json::Value {
+        let p = std::fs::read_to_string(out.join(format!("params-{name}.json"))).unwrap();
+        serde_json::from_str::<serde_json::Value>(&p).unwrap()["speed"].clone()
+    };
+    assert!(speed("full").get("density_table").is_some());
+    assert!(speed("no-speed-density").get("density_table").is_none());
+    // Table 4: the video's STD and every variant's error, as ablation.json holds them.
+    assert!(md.contains("| measure | video STD | full model error | without occlusion error |"));
+    let std = r["video"][2]["std"].as_f64().unwrap();
+    assert!(md.contains(&format!("| polarization | {std:.4} |")), "{md}");
+    for x in v {
+        let e = x["rows"][0]["error"]["mean"].as_f64().unwrap();
+        assert!(md.contains(&format!("{e:.4}")), "{e} not in the table");
+    }
+    assert!(md.contains("- **occlusion** helps"), "{md}");
+}
+
+#[test]
+fn frozen_parameters_keep_their_start_and_bad_keys_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = herdfit::data::ClipFields::load(&small_clip(dir.path())).unwrap();
+    let start = Params::neutral();
+    let cfg = FitConfig {
+        frames: 0..8,
+        epochs: 2,
+        window: 3,
+        loss: LossKind::Fields,
+        density_weight: 0.5,
+        frozen: vec!["cohesion.angular".into(), "alignment.weight".into()],
+        ..FitConfig::default()
+    };
+    let r = fit(&clip, &start, &cfg, None, |_, _, _, _| {}).unwrap();
+    let v = r.params.to_vec();
+    assert_eq!(v[2], 0.5);
+    assert_eq!(v[6], 0.5);
+    assert!(v.iter().any(|x| *x != 0.5), "nothing moved: {v:?}");
+    let bad = FitConfig {
+        frozen: vec!["cohesion.colour".into()],
+        ..cfg.clone()
+    };
+    let e = bad.check().unwrap_err().to_string();
+    assert!(
+        e.starts_with("frozen: 'cohesion.colour' is not a parameter"),
+        "{e}"
+    );
+    let bad = FitConfig {
+        density_weight: -1.0,
+        ..cfg
+    };
+    let e = bad.check().unwrap_err().to_string();
+    assert!(e.starts_with("density_weight: -1 is out of range"), "{e}");
+}
+
+#[test]
+fn ablate_bad_input_is_one_line_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = small_clip(dir.path());
+    let out = dir.path().join("abl");
+    let e = fails(&[
+        "ablate",
+        s(&clip),
+        "--out",
+        s(&out),
+        "--switches",
+        "occlusion,occlusion",
+    ]);
+    assert!(e.contains("switches: 'occlusion' is given twice"), "{e}");
+    let e = fails(&["ablate", s(&clip), "--out", s(&out), "--switches", "wings"]);
+    assert!(e.contains("--switches: 'wings' is not one of"), "{e}");
+    let e = fails(&["ablate", s(&clip), "--out", s(&out), "--split", "0"]);
+    assert!(e.contains("--split: 0 leaves no frames to fit"), "{e}");
+    let e = fails(&["ablate", s(&clip), "--out", s(&out), "--window", "50"]);
+    assert!(e.contains("--window"), "{e}");
+    let e = fails(&["ablate", s(&dir.path().join("none")), "--out", s(&out)]);
+    assert!(e.contains("none"), "{e}");
+    assert!(!out.exists(), "a failed ablation left {out:?}");
+}
