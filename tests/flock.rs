@@ -178,19 +178,11 @@ fn shipped_examples_regenerate_byte_for_byte_and_classify() {
 
 /// Steady flight keys for `n` birds from an example; checks every key shape.
 fn check_keys(example: &synth::SynthConfig, n: usize, keys: usize, seed: u64) -> (f64, f64) {
-    let t = synth::synth(example).unwrap();
-    let p = extract::extract(&t, "synthetic", &ExtractConfig::default()).unwrap();
     let cfg = steady::SteadyConfig::default();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let init = steady::initial_shapes(&p, n, &cfg, &mut rng).unwrap();
+    let (init, range, gr) = synth::key_shape_setup(example, n, &cfg, &mut rng).unwrap();
     assert_eq!(init.shapes[0].len(), n);
     assert_eq!(init.nl + init.nr + 1, n);
-    let (_, range) = steady::ranges(&init.shapes).unwrap();
-    let means: Vec<f64> = p.frames.iter().map(|f| f.mean_gap).collect();
-    let gr = [
-        means.iter().cloned().fold(f64::INFINITY, f64::min),
-        means.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
-    ];
     let mut prev = steady::first_key(&init.shapes[0]).unwrap();
     let (mut worst, mut reached) = (0.0f64, 0.0);
     for _ in 0..keys {
