@@ -118,8 +118,8 @@ impl Initiation {
         let mut sides: Vec<Option<Side>> = vec![None; n];
         let mut slots: Vec<Option<usize>> = vec![None; n];
         let mut followers: Vec<Vec<usize>> = vec![Vec::new(); n];
-        for i in 0..n {
-            if let Some(j) = refs[i] {
+        for (i, r) in refs.iter().enumerate() {
+            if let Some(j) = *r {
                 followers[j].push(i);
             }
         }
@@ -157,9 +157,9 @@ impl Initiation {
             }
         }
         // Links off the leader's chains are dropped: a reference must be matched (chain rules).
-        for i in 0..n {
-            if !done[i] {
-                refs[i] = None;
+        for (r, d) in refs.iter_mut().zip(&done) {
+            if !d {
+                *r = None;
             }
         }
         (sides, slots)
