@@ -35,6 +35,12 @@ fn main() {
         nr: init.nr,
     };
     let cfg = InitiationConfig::default();
+    let mut target_pair = f64::INFINITY;
+    for (a, p) in target.pos.iter().enumerate() {
+        for q in &target.pos[a + 1..] {
+            target_pair = target_pair.min((p[0] - q[0]).hypot(p[1] - q[1]));
+        }
+    }
     if let Some(seed) = trace {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let start = initiation::random_start(n, &cfg, &mut rng);
@@ -63,6 +69,15 @@ fn main() {
                         None => "-".into(),
                     })
                     .collect();
+                if std::env::var_os("FLOCK_DEBUG").is_some() {
+                    for i in 0..n {
+                        let b = sim.birds[i];
+                        println!(
+                            "  bird {i:>2} pos ({:>7.2}, {:>7.2}) θ {:>6.1}° v {:.3} ref {:?} side {:?} slot {:?}",
+                            b.pos[0], b.pos[1], b.theta.to_degrees(), b.v, d.refs[i], d.sides[i], d.slots[i]
+                        );
+                    }
+                }
                 println!(
                     "t {:>4.0} s  mean {:>7}  slotted {slotted}/{n}  shared slots {dup}  per bird {}",
                     s as f64 / cfg.fps,
@@ -81,6 +96,13 @@ fn main() {
             initiation::run(Initiation::new(cfg.clone(), target.clone(), start).expect("init"))
         })
         .collect();
+    let failed: Vec<String> = (0..runs)
+        .filter(|&k| out[k as usize].converged_after.is_none())
+        .map(|k| (1000 + k).to_string())
+        .collect();
+    if !failed.is_empty() {
+        println!("not converged: seeds {}", failed.join(" "));
+    }
     let ok: Vec<_> = out.iter().filter(|r| r.converged_after.is_some()).collect();
     let mut times: Vec<f64> = ok.iter().filter_map(|r| r.converged_after).collect();
     times.sort_by(f64::total_cmp);
@@ -91,7 +113,8 @@ fn main() {
     let fol = ok.iter().map(|r| r.max_followers).max().unwrap_or(0);
     println!(
         "N = {n}: {} of {runs} converged (mean distance ≤ {} b for {} s) within {} s; time median \
-         {:.1} s, max {:.1} s; closest pair {pair:.2} b; most followers of a non-leader {fol}",
+         {:.1} s, max {:.1} s; closest pair {pair:.2} b (in the target shape itself \
+         {target_pair:.2} b); most followers of a non-leader {fol}",
         ok.len(),
         cfg.converge_distance,
         cfg.hold,

@@ -5,7 +5,6 @@
 //!
 //! `cargo run --release --example flock_keys -- [KEYS]` (default 5).
 
-use herdfit::flock::extract::{self, ExtractConfig};
 use herdfit::flock::{steady, synth};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -19,17 +18,10 @@ fn main() {
     let out: Vec<(usize, f64, f64)> = cases
         .par_iter()
         .map(|(ex, n)| {
-            let t = synth::synth(ex).expect("synth");
-            let p = extract::extract(&t, "synthetic", &ExtractConfig::default()).expect("extract");
             let cfg = steady::SteadyConfig::default();
             let mut rng = ChaCha8Rng::seed_from_u64(11 + *n as u64);
-            let init = steady::initial_shapes(&p, *n, &cfg, &mut rng).expect("initial");
-            let (_, range) = steady::ranges(&init.shapes).expect("ranges");
-            let means: Vec<f64> = p.frames.iter().map(|f| f.mean_gap).collect();
-            let gr = [
-                means.iter().cloned().fold(f64::INFINITY, f64::min),
-                means.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
-            ];
+            let (init, range, gr) =
+                synth::key_shape_setup(ex, *n, &cfg, &mut rng).expect("key-shape set-up");
             let mut prev = steady::first_key(&init.shapes[0]).expect("first key");
             let (mut worst, mut reached) = (0.0f64, 0.0);
             for _ in 0..keys {

@@ -178,19 +178,11 @@ fn shipped_examples_regenerate_byte_for_byte_and_classify() {
 
 /// Steady flight keys for `n` birds from an example; checks every key shape.
 fn check_keys(example: &synth::SynthConfig, n: usize, keys: usize, seed: u64) -> (f64, f64) {
-    let t = synth::synth(example).unwrap();
-    let p = extract::extract(&t, "synthetic", &ExtractConfig::default()).unwrap();
     let cfg = steady::SteadyConfig::default();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let init = steady::initial_shapes(&p, n, &cfg, &mut rng).unwrap();
+    let (init, range, gr) = synth::key_shape_setup(example, n, &cfg, &mut rng).unwrap();
     assert_eq!(init.shapes[0].len(), n);
     assert_eq!(init.nl + init.nr + 1, n);
-    let (_, range) = steady::ranges(&init.shapes).unwrap();
-    let means: Vec<f64> = p.frames.iter().map(|f| f.mean_gap).collect();
-    let gr = [
-        means.iter().cloned().fold(f64::INFINITY, f64::min),
-        means.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
-    ];
     let mut prev = steady::first_key(&init.shapes[0]).unwrap();
     let (mut worst, mut reached) = (0.0f64, 0.0);
     for _ in 0..keys {
@@ -333,7 +325,19 @@ fn initiation_runs(n: usize, runs: u64) -> usize {
         median(&times),
         times.iter().cloned().fold(0.0, f64::max)
     );
-    assert!(worst_pair >= 1.0, "N = {n}: birds {worst_pair} b apart");
+    // The target shape's own closest pair (Step 1 places neighbours ~1 b apart laterally, some
+    // nearly abreast): converged birds may be no closer than it, less 0.1 b.
+    let mut target_pair = f64::INFINITY;
+    for (a, p) in target.pos.iter().enumerate() {
+        for q in &target.pos[a + 1..] {
+            target_pair = target_pair.min((p[0] - q[0]).hypot(p[1] - q[1]));
+        }
+    }
+    println!("N = {n}: closest pair of the target shape itself {target_pair:.2} b");
+    assert!(
+        worst_pair >= target_pair.min(1.0) - 0.1,
+        "N = {n}: birds {worst_pair} b apart"
+    );
     assert!(most_followers <= 1, "N = {n}: {most_followers}");
     for r in &ok_runs {
         assert!(r.final_mean_error.unwrap() <= cfg.converge_distance);
@@ -342,19 +346,13 @@ fn initiation_runs(n: usize, runs: u64) -> usize {
 }
 
 #[test]
-#[ignore = "issue #19 must-show NOT met: 0 of 20 (and 0 of 100) N = 14 starts converge within 60 s (`cargo run --release --example flock_initiation -- 14 100`, RESULTS.md §3); run with --ignored"]
-fn initiation_converges_from_twenty_random_starts() {
+fn initiation_converges_from_random_starts() {
+    // A modest sample (seconds); the issue's 100-start sweep is the example
+    // `cargo run --release --example flock_initiation -- 14 100` (and `-- 41 100`), RESULTS.md §3.
     let ok = initiation_runs(14, 20);
     assert!(ok >= 19, "N = 14: {ok} of 20 converged");
-}
-
-#[test]
-#[ignore = "the issue's 100-start sweep for N = 14 and 41 (minutes); run with --ignored"]
-fn initiation_converges_from_random_starts() {
-    for n in [14usize, 41] {
-        let ok = initiation_runs(n, 100);
-        assert!(ok >= 95, "N = {n}: {ok} of 100 converged");
-    }
+    let ok = initiation_runs(41, 4);
+    assert!(ok >= 4, "N = 41: {ok} of 4 converged");
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -432,16 +430,34 @@ fn animate_writes_tracks_savings_report_and_plots_deterministically() {
         assert_eq!(rep["schema"], "herdfit.flock-animation/1");
         let init = rep["initiation_frames"].as_u64().unwrap() as usize;
         assert_eq!(init, 100, "4 s of initiation at 25 fps");
-        assert_eq!(t.frames().len(), init + 60);
+        let hand = rep["hand_over_frames"].as_u64().unwrap() as usize;
+        assert_eq!(t.frames().len(), init + hand + 60);
         let sav = std::fs::read_to_string(o.join("savings.csv")).unwrap();
         assert!(sav.starts_with("frame,time,id,e,xi\n"));
         assert_eq!(sav.lines().count(), 1 + 60 * 12);
-        // Savings are finite fractions of induced power (negative while the hand-over still has
-        // birds off their places).
+        // The 60 frames come after the hand-over, so every bird flies in formation: no e < 0
+        // (before the fix, frames of the hand-over gave e from −32.6 to +33.4). e above 1 is
+        // Hummel's model itself at overlapping wing tips (this example's gaps are 0.88–1.03 b,
+        // i.e. up to 0.12 b of overlap, where an inner bird's e reaches 1.11; RESULTS.md §3).
         for l in sav.lines().skip(1) {
             let e: f64 = l.split(',').nth(3).unwrap().parse().unwrap();
-            assert!(e.is_finite(), "{l}");
+            assert!((0.0..=1.5).contains(&e), "{l}");
         }
+        let first: u64 = sav
+            .lines()
+            .nth(1)
+            .unwrap()
+            .split(',')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        let hand = rep["hand_over_frames"].as_u64().unwrap();
+        assert_eq!(
+            first,
+            init as u64 + hand,
+            "savings start after the hand-over"
+        );
         let side: serde_json::Value =
             serde_json::from_slice(&std::fs::read(o.join("savings.json")).unwrap()).unwrap();
         assert_eq!(side["schema"], "herdfit.flock-savings/1");

@@ -26,7 +26,7 @@ pub const SAVINGS_SCHEMA: &str = "herdfit.flock-savings/1";
 pub struct AnimateConfig {
     /// Birds N (None: the example's N̂).
     pub birds: Option<usize>,
-    /// Steady-flight frames F (the hand-over included).
+    /// Steady-flight frames F, after the hand-over (whose frames come on top).
     pub frames: usize,
     pub seed: u64,
     /// Wingspan of the animated birds, metres (None: the example's, when it is in metres, else
@@ -122,8 +122,9 @@ pub struct AnimationReport {
     pub fps: f64,
     pub wingspan_m: f64,
     pub speed_mps: f64,
-    /// Frames: initiation, then steady flight (the hand-over at its start).
+    /// Frames: initiation, hand-over, then the F steady frames (the frames with savings).
     pub initiation_frames: usize,
+    pub hand_over_frames: usize,
     pub steady_frames: usize,
     /// Example bird of each animated bird (Step 1's correspondence).
     pub example_bird: Vec<Option<u64>>,
@@ -246,20 +247,15 @@ pub fn animate(
     let init = steady::initial_shapes(params, n, &cfg.steady, &mut rng)?;
     let (_, range) = steady::ranges(&init.shapes)?;
     let first = steady::first_key(&init.shapes[0])?;
-    let steady_s = (cfg.frames - 1) as f64 / fps;
-    let (keys, timeline) = build_keys(
-        first,
-        init.nl,
-        init.nr,
-        &range,
-        params,
-        steady_s,
-        &cfg.steady,
-        &mut rng,
-        progress,
-    );
+    // The target is the first key shape as the timeline places it (centred on its centroid).
     let target = Target {
-        pos: timeline.keys[0].clone(),
+        pos: Timeline::new(
+            vec![first.pos.clone()],
+            cfg.steady.key_interval,
+            cfg.steady.max_accel,
+        )
+        .keys
+        .swap_remove(0),
         nl: init.nl,
         nr: init.nr,
     };
@@ -287,12 +283,25 @@ pub fn animate(
     } else {
         0.0
     };
-    steady_frames(
-        &timeline, &ho, hand_s, n, cfg.frames, fps, v, &mut fr, progress,
+    // The F steady frames start where the hand-over ends: the savings (eq. 1) describe the
+    // formation the model assumes, not birds still moving to their places.
+    let hand_count = (hand_s * fps).ceil() as usize;
+    let count = hand_count + cfg.frames;
+    let (keys, timeline) = build_keys(
+        first,
+        init.nl,
+        init.nr,
+        &range,
+        params,
+        (count - 1) as f64 / fps,
+        &cfg.steady,
+        &mut rng,
+        progress,
     );
-    let (rows, savings, mean_saving) = rows_and_savings(&fr, &z, wingspan_m, fps, init_frames);
+    steady_frames(&timeline, &ho, hand_s, n, count, fps, v, &mut fr, progress);
+    let hand_frames = init_frames + hand_count;
+    let (rows, savings, mean_saving) = rows_and_savings(&fr, &z, wingspan_m, fps, hand_frames);
     let flock_mean_saving = mean_saving.iter().sum::<f64>() / n as f64;
-    let hand_frames = init_frames + (hand_s * fps).ceil() as usize;
     let max_accel_steady = max_accel(&fr.pos, fps, hand_frames + 1, fr.pos.len());
     let max_accel_hand_over = if run.is_some() {
         max_accel(&fr.pos, fps, init_frames + 1, hand_frames + 1)
@@ -319,6 +328,7 @@ pub fn animate(
         wingspan_m,
         speed_mps: v * wingspan_m,
         initiation_frames: init_frames,
+        hand_over_frames: hand_count,
         steady_frames: cfg.frames,
         example_bird: init.example_bird.clone(),
         xi_range: range,
@@ -381,7 +391,7 @@ pub fn write_outputs(anim: &Animation, out: &Path, progress: &mut dyn Progress) 
             "e": "power reduction e_i = Σ_j g_ij (Klotsman & Tal eq. 1, Hummel 1983): fraction of the bird's induced power saved",
             "xi": "relative power reduction ξ_i = e_i / Σ e",
         },
-        "frames": "steady flight only (the model assumes steady formation flight)",
+        "frames": "the F steady-flight frames after the hand-over (the model assumes steady formation flight)",
     });
     dir.write(
         "savings.json",

@@ -182,14 +182,14 @@ pub(super) fn steady_frames(
 }
 
 /// Track rows (metres, altitude `z`) for every frame; savings (e, ξ) and each bird's mean e
-/// over the steady frames from `init_frames` on.
+/// over the steady frames, from frame `first_steady` on (after the hand-over).
 #[allow(clippy::type_complexity)]
 pub(super) fn rows_and_savings(
     fr: &Frames,
     z: &[f64],
     wingspan_m: f64,
     fps: f64,
-    init_frames: usize,
+    first_steady: usize,
 ) -> (Vec<TrackRow>, Vec<(u64, f64, u64, f64, f64)>, Vec<f64>) {
     let n = z.len();
     let mut rows = Vec::with_capacity(fr.pos.len() * n);
@@ -211,7 +211,7 @@ pub(super) fn rows_and_savings(
                 role: Some(if i == leader { "leader" } else { "follower" }.into()),
             });
         }
-        if f >= init_frames && power::check_lateral(p).is_ok() {
+        if f >= first_steady && power::check_lateral(p).is_ok() {
             let e = power::savings_unchecked(p);
             let xi = power::relative(&e);
             for i in 0..n {

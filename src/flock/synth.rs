@@ -242,6 +242,27 @@ pub fn synth(cfg: &SynthConfig) -> Result<Tracks> {
     Tracks::new(meta, rows)
 }
 
+/// The steady-flight set-up of a key-shape case: the synthetic example `ex` extracted (§4),
+/// Step 1's initial shapes for `n` birds, Step 2's ranges [p_i, P_i] and the range of the
+/// example's per-frame mean lateral gaps (the gaps key shapes draw from).
+pub fn key_shape_setup(
+    ex: &SynthConfig,
+    n: usize,
+    cfg: &super::steady::SteadyConfig,
+    rng: &mut impl Rng,
+) -> Result<(super::steady::InitialShapes, Vec<[f64; 2]>, [f64; 2])> {
+    let t = synth(ex)?;
+    let p = super::extract::extract(&t, "synthetic", &super::extract::ExtractConfig::default())?;
+    let init = super::steady::initial_shapes(&p, n, cfg, rng)?;
+    let (_, range) = super::steady::ranges(&init.shapes)?;
+    let means: Vec<f64> = p.frames.iter().map(|f| f.mean_gap).collect();
+    let gaps = [
+        means.iter().cloned().fold(f64::INFINITY, f64::min),
+        means.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+    ];
+    Ok((init, range, gaps))
+}
+
 /// The examples shipped in `examples/flocks/` (file stem, settings). `herdfit flock synth
 /// --examples DIR` writes exactly these.
 /// The examples and flock sizes of the key-shape checks (eq. 4 solved by Levenberg–Marquardt):

@@ -87,7 +87,7 @@ pub struct AnimateArgs {
     /// Birds N (default: as many as the example).
     #[arg(long, value_name = "N")]
     pub birds: Option<usize>,
-    /// Steady-flight frames.
+    /// Steady-flight frames F (after the hand-over from the initiation).
     #[arg(long, value_name = "F")]
     pub frames: Option<usize>,
     #[arg(long)]

@@ -7,11 +7,16 @@
 //! (θ from +y towards +x, the paper's convention); speeds in wingspans per step, one step per
 //! output frame, so that eq. 5's √|r − v| and eq. 6's max(r, 1) read as printed.
 //!
-//! Two additions the paper leaves open, both in `ARCHITECTURE.md`: the leader (front-most bird)
-//! and birds that see no flockmate turn towards the migration direction and relax to the cruise
-//! speed under the same caps; and **side balancing**: when a side's chain of followers is longer
-//! than the target's side while the other side has free places, the rear-most bird beyond the end
-//! switches sides and follows the end of the other chain until it reaches its place.
+//! Rules the paper leaves open or that it needs to converge (all in `ARCHITECTURE.md`,
+//! "Initiation additions" and "the chain rules"): the leader (front-most bird) and birds without
+//! a reference turn towards the migration direction at the cruise speed; eq. 6 steers at a point
+//! `look_ahead` beyond the target along the migration direction; K's sign in eq. 5 is + while the
+//! bird is behind its place; and the **chain rules**: a bird is followed by at most one bird (the
+//! leader by one per side) at any distance — of two, the rear one chooses again (§6.2.2 without
+//! its 10 b threshold) —, a bird keeps its reference while it sees it (hysteresis), a follower of
+//! the leader keeps its side, a bird chooses only a reference matched to the target shape with a
+//! free place behind it on its side, and one that finds none in its visual volume searches all
+//! round.
 
 mod perception;
 mod setup;
@@ -40,19 +45,12 @@ pub struct Initiation {
     pub cfg: InitiationConfig,
     pub target: Target,
     pub birds: Vec<Bird>,
-    /// Birds switching sides (side balancing), with the side they go to.
-    switching: Vec<Option<Side>>,
     /// The current leader (front-most, with a hysteresis of [`LEADER_MARGIN`]).
     leader: Option<usize>,
-    /// Steps taken, and the step each switch started.
-    steps: usize,
-    /// Last step's references: a bird keeps its reference while it stays visible.
+    /// Last step's references and sides (the hysteresis of the chain rules).
     prev_refs: Vec<Option<usize>>,
-    switch_since: Vec<usize>,
+    prev_sides: Vec<Option<Side>>,
 }
-
-/// A side switch is abandoned after this long (seconds).
-pub const SWITCH_TIMEOUT: f64 = 15.0;
 
 /// Another bird takes the lead only once it is this far (wingspans) ahead of the leader, so a
 /// follower overshooting its place does not flip the leadership back and forth.
@@ -86,11 +84,9 @@ impl Initiation {
             cfg,
             target,
             birds,
-            switching: vec![None; n],
             leader: None,
-            steps: 0,
             prev_refs: vec![None; n],
-            switch_since: vec![0; n],
+            prev_sides: vec![None; n],
         })
     }
 
@@ -109,19 +105,9 @@ impl Initiation {
             _ => front,
         };
         self.leader = Some(leader);
-        self.switching[leader] = None;
-        self.steps += 1;
-        let timeout = (SWITCH_TIMEOUT * self.cfg.fps) as usize;
-        for i in 0..n {
-            if self.switching[i].is_some() && self.steps - self.switch_since[i] > timeout {
-                self.switching[i] = None;
-            }
-        }
-        let mut refs = self.references(leader);
-        self.balance(&mut refs, leader);
+        let (refs, sides, slots) = self.references(leader);
         self.prev_refs = refs.clone();
-        let sides = self.sides(&refs, leader);
-        let slots = self.slots(&refs, &sides, leader);
+        self.prev_sides = sides.clone();
         let mean_error = self.mean_error(&slots, leader);
         let cruise = self.cfg.speed / self.cfg.fps;
         let dv = self.cfg.max_speed_change / (self.cfg.fps * self.cfg.fps);
@@ -144,14 +130,16 @@ impl Initiation {
                     // direction (the distance r and K's sign stay the target's).
                     let rd = rb.dir();
                     let la = self.cfg.look_ahead;
-                    let aim = [to[0] + la * rd[0], to[1] + la * rd[1]];
+                    let aim = [to[0], to[1] + la];
                     let delta = if aim[0] != 0.0 || aim[1] != 0.0 {
                         wrap(aim[0].atan2(aim[1]) - b.theta)
                     } else {
                         0.0
                     };
-                    let bd = b.dir();
-                    let k = if to[0] * bd[0] + to[1] * bd[1] >= 0.0 {
+                    // K's sign (eq. 5): + while the bird is behind its place, i.e. the target
+                    // (one step of the reference ahead of the place) lies more than that step
+                    // ahead along the reference's direction.
+                    let k = if to[0] * rd[0] + to[1] * rd[1] >= rb.v {
                         self.cfg.k
                     } else {
                         -self.cfg.k
@@ -175,18 +163,6 @@ impl Initiation {
                 theta,
                 v,
             };
-            // A switching bird that reached its place rejoins the ordinary rules.
-            if self.switching[i].is_some() {
-                if let (Some(t), Some(_)) = (slots[i], refs[i]) {
-                    let want = [
-                        self.birds[leader].pos[0] + self.target.pos[t][0] - self.target.pos[0][0],
-                        self.birds[leader].pos[1] + self.target.pos[t][1] - self.target.pos[0][1],
-                    ];
-                    if dist(b.pos, want) < 1.5 {
-                        self.switching[i] = None;
-                    }
-                }
-            }
         }
         self.birds = next;
         Decisions {

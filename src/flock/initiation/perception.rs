@@ -1,17 +1,32 @@
 //! Perception and the references (Klotsman & Tal §6.1, §6.2.1 side determination and target
-//! distances, §6.2.2 separation) and side balancing (module docs of `initiation`).
+//! distances, §6.2.2 separation), with the chain rules of the module docs of `initiation`.
 
 use super::super::extract::Side;
 use super::super::hpr;
-use super::{dist, Bird, Initiation};
+use super::{dist, Initiation};
+
+fn other(s: Side) -> Side {
+    match s {
+        Side::Left => Side::Right,
+        Side::Right => Side::Left,
+    }
+}
 
 impl Initiation {
     /// Candidate references of bird `i` in order of preference (§6.1): visible birds within the
-    /// reference volume by distance, then the other visible birds by distance.
-    pub(super) fn preferences(&self, i: usize) -> Vec<usize> {
+    /// reference volume by distance, then the other visible birds by distance, then (chain
+    /// rules: a bird that finds no free reference ahead searches) the birds visible within the
+    /// visual volume widened by `keep_margin_deg`, then the birds HPR hides there, each by
+    /// distance. The second list: the birds `i` may keep as
+    /// its reference, visible within that widened volume (hysteresis: a bird abreast of or
+    /// ahead of its reference sits on or beyond the volume's edge).
+    pub(super) fn preferences(&self, i: usize) -> (Vec<usize>, Vec<usize>) {
         let b = &self.birds[i];
         let d = b.dir();
         let eye = self.cfg.eye_field_deg.to_radians();
+        let wide = (self.cfg.eye_field_deg + self.cfg.keep_margin_deg)
+            .min(180.0)
+            .to_radians();
         let refv = self.cfg.reference_field_deg.to_radians();
         let mut cand = Vec::new();
         let mut pts = Vec::new();
@@ -23,7 +38,7 @@ impl Initiation {
             let ang = (d[0] * r[1] - d[1] * r[0])
                 .atan2(d[0] * r[0] + d[1] * r[1])
                 .abs();
-            if ang <= eye && (r[0] != 0.0 || r[1] != 0.0) {
+            if ang <= wide && (r[0] != 0.0 || r[1] != 0.0) {
                 cand.push((j, ang, r[0].hypot(r[1])));
                 pts.push(o.pos);
             }
@@ -31,19 +46,30 @@ impl Initiation {
         let vis = hpr::visible_2d(b.pos, &pts, self.cfg.hpr_pad);
         let mut inner: Vec<(usize, f64)> = Vec::new();
         let mut outer: Vec<(usize, f64)> = Vec::new();
+        let mut around: Vec<(usize, f64)> = Vec::new();
+        let mut hidden: Vec<(usize, f64)> = Vec::new();
+        let mut keep = Vec::new();
         for (k, &(j, ang, r)) in cand.iter().enumerate() {
-            if vis[k] {
+            if !vis[k] {
+                hidden.push((j, r));
+            } else {
+                keep.push(j);
                 if ang <= refv {
                     inner.push((j, r));
-                } else {
+                } else if ang <= eye {
                     outer.push((j, r));
+                } else {
+                    around.push((j, r));
                 }
             }
         }
         let by = |a: &(usize, f64), b: &(usize, f64)| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0));
         inner.sort_by(by);
         outer.sort_by(by);
-        inner.into_iter().chain(outer).map(|(j, _)| j).collect()
+        around.sort_by(by);
+        hidden.sort_by(by);
+        let prefs = inner.into_iter().chain(outer).chain(around).chain(hidden);
+        (prefs.map(|(j, _)| j).collect(), keep)
     }
 
     fn leads_to(refs: &[Option<usize>], from: usize, to: usize) -> bool {
@@ -58,210 +84,141 @@ impl Initiation {
         true
     }
 
-    /// Sides (§6.2.1): a follower of a bird without a side (the leader) takes the side it is on
-    /// relative to it; others take their reference's side.
-    pub(super) fn sides(&self, refs: &[Option<usize>], leader: usize) -> Vec<Option<Side>> {
-        let n = self.birds.len();
-        let mut sides: Vec<Option<Option<Side>>> = vec![None; n];
-        sides[leader] = Some(None);
-        fn side_of(
-            i: usize,
-            refs: &[Option<usize>],
-            birds: &[Bird],
-            switching: &[Option<Side>],
-            memo: &mut Vec<Option<Option<Side>>>,
-            depth: usize,
-        ) -> Option<Side> {
-            if let Some(s) = memo[i] {
+    /// The side bird `i` takes behind `j` (§6.2.1): `j`'s side when it has one, else the side
+    /// `i` is on relative to `j` — except that a bird that already followed the leader on a side
+    /// keeps it (hysteresis, module docs).
+    fn side_behind(&self, i: usize, j: usize, sides: &[Option<Side>], leader: usize) -> Side {
+        if j == leader && self.prev_refs[i] == Some(leader) {
+            if let Some(s) = self.prev_sides[i] {
                 return s;
             }
-            let s = match (switching[i], refs[i]) {
-                (Some(s), _) => Some(s),
-                (None, None) => None,
-                (None, Some(j)) => {
-                    let sj = if depth > refs.len() {
-                        None
-                    } else {
-                        side_of(j, refs, birds, switching, memo, depth + 1)
-                    };
-                    sj.or(Some(if birds[i].pos[0] > birds[j].pos[0] {
-                        Side::Right
-                    } else {
-                        Side::Left
-                    }))
-                }
-            };
-            memo[i] = Some(s);
-            s
         }
-        (0..n)
-            .map(|i| side_of(i, refs, &self.birds, &self.switching, &mut sides, 0))
-            .collect()
+        if j != leader {
+            if let Some(s) = sides[j] {
+                return s;
+            }
+        }
+        if self.birds[i].pos[0] > self.birds[j].pos[0] {
+            Side::Right
+        } else {
+            Side::Left
+        }
     }
 
-    /// References after the separation drive (§6.2.2): of two birds following the same bird (on
-    /// the same side, for the leader) within `separation_distance` of each other, the rear one
-    /// takes its next preference; references that would close a cycle are skipped.
-    pub(super) fn references(&self, leader: usize) -> Vec<Option<usize>> {
+    /// Sides and target slots of the chains hanging from the leader (§6.2.1 side determination
+    /// and target distances), dropping the links that break the chain rules: a second follower
+    /// of a bird (of the leader on one side) — the rear one goes (§6.2.2) — and a follower
+    /// beyond the end of its side's chain, and links off the leader's chains.
+    fn structure(
+        &self,
+        refs: &mut [Option<usize>],
+        leader: usize,
+    ) -> (Vec<Option<Side>>, Vec<Option<usize>>) {
         let n = self.birds.len();
-        let prefs: Vec<Vec<usize>> = (0..n)
+        let mut sides: Vec<Option<Side>> = vec![None; n];
+        let mut slots: Vec<Option<usize>> = vec![None; n];
+        let mut followers: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (i, r) in refs.iter().enumerate() {
+            if let Some(j) = *r {
+                followers[j].push(i);
+            }
+        }
+        // Front birds first, so that of two followers of one bird the rear one is dropped.
+        for f in &mut followers {
+            f.sort_by(|&a, &b| {
+                self.birds[b].pos[1]
+                    .total_cmp(&self.birds[a].pos[1])
+                    .then(a.cmp(&b))
+            });
+        }
+        slots[leader] = Some(0);
+        let mut queue = vec![leader];
+        let mut done = vec![false; n];
+        done[leader] = true;
+        while let Some(j) = queue.pop() {
+            let mut used: Vec<Side> = Vec::new();
+            for &i in &followers[j] {
+                let mut s = self.side_behind(i, j, &sides, leader);
+                // At the leader, a follower whose side is taken or empty in the target takes
+                // the other side (chain rules).
+                if j == leader && (used.contains(&s) || self.target.next(0, s).is_none()) {
+                    s = other(s);
+                }
+                let next = slots[j].and_then(|t| self.target.next(t, s));
+                if used.contains(&s) || (j != leader && !used.is_empty()) || next.is_none() {
+                    refs[i] = None;
+                    continue;
+                }
+                used.push(s);
+                sides[i] = Some(s);
+                slots[i] = next;
+                done[i] = true;
+                queue.push(i);
+            }
+        }
+        // Links off the leader's chains are dropped: a reference must be matched (chain rules).
+        for (r, d) in refs.iter_mut().zip(&done) {
+            if !d {
+                *r = None;
+            }
+        }
+        (sides, slots)
+    }
+
+    /// References (§6.1) under the separation drive (§6.2.2) and the chain rules (module docs):
+    /// a bird keeps last step's reference while it sees it and the link keeps the rules; birds
+    /// without one choose, front-most first, the first of their preferences that no other bird
+    /// follows (the leader: on that side) and that is matched to the target shape (§6.2.1) with
+    /// a free place behind it on their side.
+    /// Returns the references, sides and target slots.
+    #[allow(clippy::type_complexity)]
+    pub(super) fn references(
+        &self,
+        leader: usize,
+    ) -> (Vec<Option<usize>>, Vec<Option<Side>>, Vec<Option<usize>>) {
+        let n = self.birds.len();
+        let (prefs, keep): (Vec<Vec<usize>>, Vec<Vec<usize>>) = (0..n)
             .map(|i| {
                 if i == leader {
-                    return vec![];
+                    (vec![], vec![])
+                } else {
+                    self.preferences(i)
                 }
-                let mut p = self.preferences(i);
-                // Keep last step's reference first while it is still visible.
-                if let Some(j) = self.prev_refs[i] {
-                    if let Some(k) = p.iter().position(|&c| c == j) {
-                        p.remove(k);
-                        p.insert(0, j);
-                    }
-                }
-                p
             })
+            .unzip();
+        let mut refs: Vec<Option<usize>> = (0..n)
+            .map(|i| self.prev_refs[i].filter(|j| i != leader && *j != i && keep[i].contains(j)))
             .collect();
-        let mut pick = vec![0usize; n];
-        let mut refs: Vec<Option<usize>> = vec![None; n];
-        let choose = |i: usize, pick: &mut Vec<usize>, refs: &mut Vec<Option<usize>>| {
-            refs[i] = None;
-            while pick[i] < prefs[i].len() {
-                let c = prefs[i][pick[i]];
-                if !Self::leads_to(refs, c, i) {
-                    refs[i] = Some(c);
-                    return;
+        let mut order: Vec<usize> = (0..n).filter(|&i| i != leader).collect();
+        order.sort_by(|&a, &b| {
+            self.birds[b].pos[1]
+                .total_cmp(&self.birds[a].pos[1])
+                .then(a.cmp(&b))
+        });
+        let mut tried = vec![false; n];
+        loop {
+            let (sides, slots) = self.structure(&mut refs, leader);
+            let Some(&i) = order.iter().find(|&&i| refs[i].is_none() && !tried[i]) else {
+                return (refs, sides, slots);
+            };
+            tried[i] = true;
+            refs[i] = prefs[i].iter().copied().find(|&c| {
+                if Self::leads_to(&refs, c, i) {
+                    return false;
                 }
-                pick[i] += 1;
-            }
-        };
-        // Front birds choose first, so cycles are broken at their rear-most bird.
-        let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by(|&a, &b| self.birds[b].pos[1].total_cmp(&self.birds[a].pos[1]));
-        for &i in &order {
-            if i != leader {
-                choose(i, &mut pick, &mut refs);
-            }
-        }
-        for _ in 0..3 * n {
-            let sides = self.sides(&refs, leader);
-            let mut changed = false;
-            for &f in &order {
-                let Some(j) = refs[f] else { continue };
-                if self.switching[f].is_some() {
-                    continue;
-                }
-                // A bird in front of f with the same reference (and side, at the leader), near.
-                let clash = order.iter().take_while(|&&o| o != f).any(|&o| {
-                    refs[o] == Some(j)
-                        && (j != leader || sides[o] == sides[f])
-                        && dist(self.birds[o].pos, self.birds[f].pos)
-                            <= self.cfg.separation_distance
-                });
-                if clash {
-                    pick[f] += 1;
-                    choose(f, &mut pick, &mut refs);
-                    changed = true;
-                }
-            }
-            if !changed {
-                break;
-            }
-        }
-        refs
-    }
-
-    /// Target slots (§6.2.1 target distances): the leader takes slot 0; a bird whose reference
-    /// has a slot takes the next slot on its side.
-    pub(super) fn slots(
-        &self,
-        refs: &[Option<usize>],
-        sides: &[Option<Side>],
-        leader: usize,
-    ) -> Vec<Option<usize>> {
-        let n = self.birds.len();
-        let mut slots: Vec<Option<Option<usize>>> = vec![None; n];
-        slots[leader] = Some(Some(0));
-        for _ in 0..n {
-            let mut progress = false;
-            for i in 0..n {
-                if slots[i].is_some() {
-                    continue;
-                }
-                let (Some(j), Some(s)) = (refs[i], sides[i]) else {
-                    continue;
+                let taken_on = |s: Side| {
+                    (0..n).any(|o| {
+                        o != i && refs[o] == Some(c) && (c != leader || sides[o] == Some(s))
+                    })
                 };
-                if let Some(sj) = slots[j] {
-                    slots[i] = Some(sj.and_then(|t| self.target.next(t, s)));
-                    progress = true;
+                let mut s = self.side_behind(i, c, &sides, leader);
+                if c == leader && (taken_on(s) || self.target.next(0, s).is_none()) {
+                    s = other(s);
                 }
-            }
-            if !progress {
-                break;
-            }
-        }
-        slots.into_iter().map(|s| s.flatten()).collect()
-    }
-
-    /// Side balancing (module docs): starts and ends side switches; returns overridden
-    /// references for switching birds.
-    #[allow(clippy::needless_range_loop)]
-    pub(super) fn balance(&mut self, refs: &mut [Option<usize>], leader: usize) {
-        let n = self.birds.len();
-        let sides = self.sides(refs, leader);
-        let slots = self.slots(refs, &sides, leader);
-        let mut taken = vec![false; n];
-        for t in slots.iter().flatten() {
-            taken[*t] = true;
-        }
-        for s in [Side::Left, Side::Right] {
-            let other = if s == Side::Left {
-                Side::Right
-            } else {
-                Side::Left
-            };
-            // End of the other side's chain: its deepest taken slot's bird.
-            let mut end_slot = 0;
-            while let Some(nx) = self.target.next(end_slot, other) {
-                if !taken[nx] {
-                    break;
-                }
-                end_slot = nx;
-            }
-            let free = self.target.next(end_slot, other).is_some();
-            let end_bird = (0..n)
-                .find(|&i| slots[i] == Some(end_slot))
-                .unwrap_or(leader);
-            // Switching birds already heading there follow the chain's end.
-            let mut heading_there = 0;
-            for i in 0..n {
-                if self.switching[i] == Some(other) {
-                    heading_there += 1;
-                    refs[i] = Some(end_bird).filter(|&e| e != i);
-                }
-            }
-            let count = |side: Side| sides.iter().filter(|x| **x == Some(side)).count();
-            let want = |side: Side| match side {
-                Side::Left => self.target.nl,
-                Side::Right => self.target.nr,
-            };
-            if !free || heading_there > 0 || count(s) <= want(s) || count(other) >= want(other) {
-                continue;
-            }
-            // Rear-most bird on side s beyond the end of its chain, followed by nobody.
-            let beyond = (0..n)
-                .filter(|&i| {
-                    i != leader
-                        && sides[i] == Some(s)
-                        && slots[i].is_none()
-                        && refs[i].is_some()
-                        && !refs.contains(&Some(i))
-                        && self.switching[i].is_none()
-                })
-                .min_by(|&a, &b| self.birds[a].pos[1].total_cmp(&self.birds[b].pos[1]));
-            if let Some(b) = beyond {
-                self.switching[b] = Some(other);
-                self.switch_since[b] = self.steps;
-                refs[b] = Some(end_bird);
-            }
+                let taken = taken_on(s);
+                let room = slots[c].is_some_and(|t| self.target.next(t, s).is_some());
+                !taken && room && dist(self.birds[i].pos, self.birds[c].pos) > 0.0
+            });
         }
     }
 }

@@ -15,6 +15,9 @@ pub struct InitiationConfig {
     pub speed: f64,
     /// Visual volume per eye, degrees either side of the heading (the paper: 90°).
     pub eye_field_deg: f64,
+    /// A bird keeps its reference while it sees it within the visual volume widened by this
+    /// (degrees per eye; hysteresis of the chain rules, `ARCHITECTURE.md`).
+    pub keep_margin_deg: f64,
     /// Reference-bird volume per eye, degrees (the paper: 0.35π = 63°).
     pub reference_field_deg: f64,
     /// Margin of the HPR flipping sphere beyond the farthest bird, wingspans (the paper's R =
@@ -59,6 +62,7 @@ impl Default for InitiationConfig {
             fps: 25.0,
             speed: 10.0,
             eye_field_deg: 90.0,
+            keep_margin_deg: 90.0,
             reference_field_deg: 63.0,
             hpr_pad: 0.5,
             k: 0.06,
@@ -110,6 +114,12 @@ impl InitiationConfig {
             return Err(Error::invalid(format!(
                 "look_ahead = {} must be ≥ 0",
                 self.look_ahead
+            )));
+        }
+        if !(self.keep_margin_deg.is_finite() && self.keep_margin_deg >= 0.0) {
+            return Err(Error::invalid(format!(
+                "keep_margin_deg = {} must be ≥ 0",
+                self.keep_margin_deg
             )));
         }
         if !(self.hold.is_finite() && self.hold >= 0.0) {
