@@ -29,7 +29,7 @@ fails=0
 for t in "${targets[@]}"; do
   if HERDFIT_FUZZ_CPU_SECONDS="$secs" "$copy" --exact "$t" --nocapture --test-threads 1 \
        > "$copy.$t.log" 2>&1; then
-    echo "ok     $t: $(grep '^fuzz ' "$copy.$t.log")"
+    echo "ok     $t: $(grep -o 'fuzz .*' "$copy.$t.log")"
   else
     fails=$((fails + 1))
     echo "FAILED $t:"; tail -n 20 "$copy.$t.log"

@@ -112,7 +112,7 @@ pub(super) fn kmeans_into(
     // Drop empty clusters, renumbering the assignment (at most a handful of clusters).
     let mut kept = 0;
     for c in 0..centres.len() {
-        if !assign.iter().any(|&a| a == c) {
+        if !assign.contains(&c) {
             continue;
         }
         if kept != c {

@@ -310,6 +310,16 @@ pub fn import_reference(prefix: &Path) -> Result<ClipFields> {
     let meta = parse_meta(&meta_path)?;
     let res = meta.resolution;
     let frames = parse_frames(&frame_path, res)?;
+    // Density, two velocity components and direction variance per cell and frame (f32), before
+    // any of them is allocated: a Resolution within the grid limit can still ask for more memory
+    // than there is over many frames.
+    let cells = (res as f64) * (res as f64);
+    crate::limits::check_memory(
+        "Resolution",
+        &format!("{} frames of {res}×{res} cells", frames.len()),
+        frames.len() as f64 * cells * 16.0,
+    )
+    .map_err(|e| e.in_file(&meta_path))?;
     let obstacles = parse_cells(&cell_path, res)?;
     let cell = meta.ground / res as f64;
     let area = cell * cell;

@@ -315,11 +315,15 @@ fn world_grid(file: &SceneFile, path: &Path) -> Result<Grid> {
             return Err(bad(k, "must be > 0"));
         }
     }
-    let nx = (w.width / w.cell_size).ceil() as usize;
-    let ny = (w.height / w.cell_size).ceil() as usize;
-    if nx * ny > 4_000_000 {
+    // Counted in f64: a width of 1e300 cells would saturate the usize casts and wrap their product.
+    let (fx, fy) = (
+        (w.width / w.cell_size).ceil(),
+        (w.height / w.cell_size).ceil(),
+    );
+    if (fx * fy).is_nan() || fx * fy > 4e6 {
         return Err(bad("world", "more than 4 million grid cells"));
     }
+    let (nx, ny) = (fx as usize, fy as usize);
     let grid = Grid {
         origin: [0.0, 0.0],
         cell_size: w.cell_size,
