@@ -412,6 +412,30 @@ fn simulate_an_output_larger_than_the_disk_is_refused_up_front() {
 
 #[test]
 fn import_reference_a_million_cells_per_side_is_refused() {
+    import_reference_with_resolution(1_000_000, &[], "Resolution");
+}
+
+/// Found by the 10-minute fuzz run (#14): 4096² cells is within the grid limit, but two frames of
+/// them need 537 MB; under a 256 MiB memory limit that is refused before anything is allocated.
+#[test]
+fn import_reference_more_memory_than_the_limit_is_refused() {
+    import_reference_with_resolution(
+        4096,
+        &[("HERDFIT_MEMORY_LIMIT", "268435456")],
+        "needs about",
+    );
+}
+
+/// Found by the 10-minute fuzz run (#14): a world of 1e300 cells per side wrapped the usize cell
+/// count and panicked in ndarray.
+#[test]
+fn author_a_world_of_1e300_cells_is_refused() {
+    let t = with_scene(|v| v["world"]["width"] = serde_json::json!(1e300));
+    case_in(t.path(), &["author", "scene.json", "--out", "a"], "world");
+}
+
+/// `import-reference` of the test clip with its `Resolution` replaced (errors must name `names`).
+fn import_reference_with_resolution(res: usize, env: &[(&str, &str)], names: &str) {
     let t = workdir();
     let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference");
     for e in std::fs::read_dir(&src).unwrap() {
@@ -421,7 +445,7 @@ fn import_reference_a_million_cells_per_side_is_refused() {
             text.lines()
                 .map(|l| {
                     if l.starts_with("Resolution") {
-                        "Resolution 1000000".to_string()
+                        format!("Resolution {res}")
                     } else {
                         l.to_string()
                     }
@@ -439,10 +463,11 @@ fn import_reference_a_million_cells_per_side_is_refused() {
         .find(|n| n.ends_with("_data_meta.txt"))
         .expect("a reference meta file");
     let prefix = meta.trim_end_matches("_data_meta.txt").to_string();
-    case_in(
+    harness::case_in_env(
         t.path(),
         &["import-reference", &prefix, "--out", "r"],
-        "Resolution",
+        names,
+        env,
     );
 }
 
@@ -631,6 +656,37 @@ fn clip_with_a_huge_speed_is_refused_by_validate() {
         t.path(),
         &["validate", "clip", "--params", "p.json", "--out", "r"],
         "speed.mean",
+    );
+}
+
+/// Found by the 10-minute fuzz run (#14): one flipped digit of an array's shape in its npy header
+/// made ndarray-npy allocate what the header claims (662 MB) before the data's checksum failed.
+/// The headers are now read first and checked against the memory limit: here 20 kB, between the
+/// fixture's 12.3 kB of arrays and the 41 kB its density header claims once (12, 8, 8) reads
+/// (99, 9, 9).
+#[test]
+fn clip_whose_npy_header_claims_more_than_memory_is_refused() {
+    let t = workdir();
+    let npz = t.path().join("clip").join("fields.npz");
+    let mut bytes = std::fs::read(&npz).unwrap();
+    let key = b"'shape': (";
+    let at = bytes
+        .windows(key.len())
+        .position(|w| w == key)
+        .expect("an npy header")
+        + key.len();
+    // Every digit of the first array's shape becomes 9: same length, so the archive still opens.
+    for b in bytes[at..].iter_mut().take_while(|b| **b != b')') {
+        if b.is_ascii_digit() {
+            *b = b'9';
+        }
+    }
+    std::fs::write(&npz, &bytes).unwrap();
+    harness::case_in_env(
+        t.path(),
+        &["fields-info", "clip"],
+        "fields.npz: reading its arrays needs about",
+        &[("HERDFIT_MEMORY_LIMIT", "20000")],
     );
 }
 

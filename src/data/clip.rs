@@ -305,6 +305,7 @@ impl ClipFields {
         let meta: ClipMeta = serde_json::from_str(&text)
             .map_err(|e| Error::file(&meta_path, format!("not a {CLIP_SCHEMA} file: {e}")))?;
         let npz_path = dir.join("fields.npz");
+        check_npz_sizes(&npz_path)?;
         let file = std::fs::File::open(&npz_path)
             .map_err(|e| Error::file(&npz_path, format!("cannot read: {e}")))?;
         let mut npz = NpzReader::new(file)
@@ -328,4 +329,35 @@ impl ClipFields {
         clip.validate().map_err(|e| e.in_file(dir))?;
         Ok(clip)
     }
+}
+
+/// Every array of a clip's `fields.npz`: its npy header read first and the bytes its shape and
+/// element type claim checked against the memory limit, before ndarray-npy allocates them (a
+/// damaged header — one flipped digit of a shape — can claim gigabytes; issue #14).
+fn check_npz_sizes(path: &Path) -> Result<()> {
+    let file =
+        std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+    let Ok(mut zip) = zip::ZipArchive::new(file) else {
+        // Not an archive: ndarray-npy's reader says so in its own words.
+        return Ok(());
+    };
+    let mut total = 0f64;
+    for i in 0..zip.len() {
+        let Ok(mut entry) = zip.by_index(i) else {
+            continue;
+        };
+        let name = entry.name().trim_end_matches(".npy").to_string();
+        let header = ndarray_npy::npy::header::Header::from_reader(&mut entry)
+            .map_err(|e| Error::file(path, format!("array '{name}': {e}")))?;
+        // The descriptor as its Python literal, e.g. '<f4' or '|u1': the element's byte size.
+        let descr = header.type_descriptor.to_string();
+        let elem = descr
+            .trim_matches(|c: char| !c.is_ascii_digit())
+            .parse::<f64>()
+            .unwrap_or(8.0);
+        let n = header.shape.iter().fold(1f64, |a, &d| a * d as f64);
+        total += n * elem;
+    }
+    crate::limits::check_memory("fields.npz", "reading its arrays", total)
+        .map_err(|e| e.in_file(path))
 }

@@ -133,8 +133,18 @@ pub fn check(args: &[&str], o: &Output, names: &str, dir: &Path, before: &BTreeM
 
 /// Runs `herdfit args` in `dir` and checks every promise; the error must contain `names`.
 pub fn case_in(dir: &Path, args: &[&str], names: &str) {
+    case_in_env(dir, args, names, &[]);
+}
+
+/// [`case_in`] with extra environment variables for the child (e.g. `HERDFIT_MEMORY_LIMIT`).
+pub fn case_in_env(dir: &Path, args: &[&str], names: &str, env: &[(&str, &str)]) {
     let before = snapshot(dir);
-    let o = bin().args(args).current_dir(dir).output().expect("runs");
+    let o = bin()
+        .args(args)
+        .envs(env.iter().copied())
+        .current_dir(dir)
+        .output()
+        .expect("runs");
     check(args, &o, names, dir, &before);
 }
 
