@@ -6,25 +6,9 @@ use common::{fails, ok, s};
 use herdfit::herd::fit::{fit, FitConfig, LossKind};
 use herdfit::herd::params::Params;
 
-/// A small synthetic clip (40 agents, 16 frames, 8×6 cells of 3 BL) in `dir/clip`.
+/// The test's clip: 40 agents, 16 frames, seed 3 (`common::small_clip`).
 fn small_clip(dir: &std::path::Path) -> std::path::PathBuf {
-    let clip = dir.join("clip");
-    ok(&[
-        "synth",
-        "--agents",
-        "40",
-        "--frame-count",
-        "16",
-        "--grid-size",
-        "8x6",
-        "--cell-size",
-        "3",
-        "--seed",
-        "3",
-        "--out",
-        s(&clip),
-    ]);
-    clip
+    common::small_clip(dir, 40, 16, 3)
 }
 
 #[test]

@@ -275,25 +275,29 @@ fn recorded_settings_reproduce_the_extraction() {
     }
     let mask = d.join("mask.png");
     opencv::imgcodecs::imwrite(s(&mask), &m, &opencv::core::Vector::new()).unwrap();
+    // The recorded settings' extraction, with its obstacles and range.
+    let extract = |out: &Path, obstacles: &Path, frames: &str, smooth: &str| {
+        ok(&[
+            "extract",
+            s(&video),
+            "--out",
+            s(out),
+            "--grid",
+            "10",
+            "--body-length-px",
+            "16",
+            "--body-colour",
+            "235,235,225",
+            "--obstacles",
+            s(obstacles),
+            "--frames",
+            frames,
+            "--smooth",
+            smooth,
+        ])
+    };
     let a = d.join("a");
-    ok(&[
-        "extract",
-        s(&video),
-        "--out",
-        s(&a),
-        "--grid",
-        "10",
-        "--body-length-px",
-        "16",
-        "--body-colour",
-        "235,235,225",
-        "--obstacles",
-        s(&mask),
-        "--frames",
-        "5..40",
-        "--smooth",
-        "5",
-    ]);
+    extract(&a, &mask, "5..40", "5");
     let clip = ClipFields::load(&a).unwrap();
     assert_eq!(clip.frames(), 35);
     // Columns 8 and 9 of 10 (x ≥ 512 px) are obstacles; column 7 straddles 480 px (half).
@@ -309,24 +313,7 @@ fn recorded_settings_reproduce_the_extraction() {
     )
     .unwrap();
     let p = d.join("p");
-    ok(&[
-        "extract",
-        s(&video),
-        "--out",
-        s(&p),
-        "--grid",
-        "10",
-        "--body-length-px",
-        "16",
-        "--body-colour",
-        "235,235,225",
-        "--obstacles",
-        s(&polys),
-        "--frames",
-        "5..8",
-        "--smooth",
-        "1",
-    ]);
+    extract(&p, &polys, "5..8", "1");
     assert_eq!(ClipFields::load(&p).unwrap().obstacles, clip.obstacles);
     let settings = &clip.meta.provenance["settings"];
     assert_eq!(settings["smooth"], 5);

@@ -90,25 +90,9 @@ fn zoned_forces_equal_per_agent_ones_and_their_gradients_split_the_shared_gradie
     }
 }
 
-/// A 40-agent clip on 8×6 cells of 3 BL (24 × 18 BL) in `dir/clip`.
+/// The test's clip: 60 agents, 12 frames, seed 2 (`common::small_clip`).
 fn small_clip(dir: &std::path::Path) -> std::path::PathBuf {
-    let clip = dir.join("clip");
-    ok(&[
-        "synth",
-        "--agents",
-        "60",
-        "--frame-count",
-        "12",
-        "--grid-size",
-        "8x6",
-        "--cell-size",
-        "3",
-        "--seed",
-        "2",
-        "--out",
-        s(&clip),
-    ]);
-    clip
+    common::small_clip(dir, 60, 12, 2)
 }
 
 fn zones_file(dir: &std::path::Path, name: &str, zones: serde_json::Value) -> std::path::PathBuf {

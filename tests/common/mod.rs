@@ -52,3 +52,26 @@ pub fn fails(args: &[&str]) -> String {
 pub fn s(p: &Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
+
+/// A small synthetic clip on 8×6 cells of 3 BL (24 × 18 BL) in `dir/clip`: `agents` agents,
+/// `frames` frames, seed `seed`.
+pub fn small_clip(dir: &Path, agents: u32, frames: u32, seed: u32) -> std::path::PathBuf {
+    let clip = dir.join("clip");
+    let (a, f, sd) = (agents.to_string(), frames.to_string(), seed.to_string());
+    ok(&[
+        "synth",
+        "--agents",
+        &a,
+        "--frame-count",
+        &f,
+        "--grid-size",
+        "8x6",
+        "--cell-size",
+        "3",
+        "--seed",
+        &sd,
+        "--out",
+        s(&clip),
+    ]);
+    clip
+}
