@@ -14,7 +14,7 @@ use std::path::PathBuf;
 pub struct AblateArgs {
     #[arg(value_name = "CLIP/")]
     pub clip: PathBuf,
-    /// Output report folder (ablation.json, ablation.md, plots, params-<variant>.json).
+    /// Output report folder (ablation.json, ablation.md, plots, params-VARIANT.json).
     #[arg(long, value_name = "REPORT/")]
     pub out: PathBuf,
     /// Starting parameters of every variant; a generic start (every value 0.5) when omitted.
