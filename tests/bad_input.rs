@@ -659,8 +659,8 @@ fn clip_with_a_huge_speed_is_refused_by_validate() {
     );
 }
 
-/// Found by the 10-minute fuzz run (#14): one flipped digit of an array's shape in its npy header
-/// made ndarray-npy allocate what the header claims (662 MB) before the data's checksum failed.
+/// Found by the 10-minute fuzz run (#14): a flipped npy version byte made ndarray-npy allocate a
+/// 662 MB header; a header's shape can likewise claim more than the memory there is.
 /// The headers are now read first and checked against the memory limit: here 20 kB, between the
 /// fixture's 12.3 kB of arrays and the 41 kB its density header claims once (12, 8, 8) reads
 /// (99, 9, 9).
@@ -688,6 +688,20 @@ fn clip_whose_npy_header_claims_more_than_memory_is_refused() {
         "fields.npz: reading its arrays needs about",
         &[("HERDFIT_MEMORY_LIMIT", "20000")],
     );
+    // The fuzz's own case: the version byte 1 → 3 makes two bytes of the header text part of a
+    // u32 header length (hundreds of megabytes), refused before anything is allocated.
+    let t = workdir();
+    let npz = t.path().join("clip").join("fields.npz");
+    let mut bytes = std::fs::read(&npz).unwrap();
+    let magic = b"\x93NUMPY";
+    let at = bytes
+        .windows(6)
+        .position(|w| w == magic)
+        .expect("npy magic")
+        + 6;
+    bytes[at] ^= 2;
+    std::fs::write(&npz, &bytes).unwrap();
+    case_in(t.path(), &["fields-info", "clip"], "its npy header claims");
 }
 
 #[test]

@@ -331,6 +331,10 @@ impl ClipFields {
     }
 }
 
+/// Most header bytes of an npy array read, preamble included (NumPy's own default limit is
+/// 10,000).
+const NPY_MAX_HEADER: usize = 65_536;
+
 /// Every array of a clip's `fields.npz`: its npy header read first and the bytes its shape and
 /// element type claim checked against the memory limit, before ndarray-npy allocates them (a
 /// damaged header — one flipped digit of a shape — can claim gigabytes; issue #14).
@@ -347,7 +351,36 @@ fn check_npz_sizes(path: &Path) -> Result<()> {
             continue;
         };
         let name = entry.name().trim_end_matches(".npy").to_string();
-        let header = ndarray_npy::npy::header::Header::from_reader(&mut entry)
+        // The preamble first (magic, version, header length: u16 in version 1, u32 after): a
+        // damaged version byte turns two bytes of the header text into a length of hundreds of
+        // megabytes, which ndarray-npy's header reader would allocate. NumPy itself reads at
+        // most 10,000 header bytes unless told otherwise.
+        let bad = |m: String| Error::file(path, format!("array '{name}': {m}"));
+        let mut head = vec![0u8; 10];
+        std::io::Read::read_exact(&mut entry, &mut head).map_err(|e| bad(e.to_string()))?;
+        if &head[..6] != b"\x93NUMPY" {
+            return Err(bad("not an npy array (no npy magic)".into()));
+        }
+        let len = match head[6] {
+            1 => 10 + u16::from_le_bytes([head[8], head[9]]) as usize,
+            2 | 3 => {
+                head.resize(12, 0);
+                std::io::Read::read_exact(&mut entry, &mut head[10..])
+                    .map_err(|e| bad(e.to_string()))?;
+                12 + u32::from_le_bytes([head[8], head[9], head[10], head[11]]) as usize
+            }
+            v => return Err(bad(format!("npy version {v} is not 1, 2 or 3"))),
+        };
+        if len > NPY_MAX_HEADER {
+            return Err(bad(format!(
+                "its npy header claims {len} bytes (at most {NPY_MAX_HEADER})"
+            )));
+        }
+        // Only the header: reading on to the end would check the data's CRC here already.
+        let done = head.len();
+        head.resize(len, 0);
+        std::io::Read::read_exact(&mut entry, &mut head[done..]).map_err(|e| bad(e.to_string()))?;
+        let header = ndarray_npy::npy::header::Header::from_reader(&mut &head[..])
             .map_err(|e| Error::file(path, format!("array '{name}': {e}")))?;
         // The descriptor as its Python literal, e.g. '<f4' or '|u1': the element's byte size.
         let descr = header.type_descriptor.to_string();
