@@ -53,7 +53,9 @@ fn main() {
         }
     };
     if let Err(e) = herdfit::cli::run(cli) {
-        eprintln!("error: {e}");
+        // An error raised inside a temporary sibling names the output it stands for.
+        let msg = herdfit::data::atomic::cleanup::user_facing(&e.to_string());
+        eprintln!("error: {msg}");
         std::process::exit(1);
     }
 }

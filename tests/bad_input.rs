@@ -434,6 +434,36 @@ fn author_a_world_of_1e300_cells_is_refused() {
     case_in(t.path(), &["author", "scene.json", "--out", "a"], "world");
 }
 
+/// Issue #14's list: a scene with `spawn.count` 1e9 aborted on a failed allocation and left a
+/// hidden temporary folder. Both the integer and the float spelling are refused with one line
+/// naming the key (`case_in` checks that nothing, hidden files included, is left behind).
+#[test]
+fn author_a_billion_spawned_agents_is_refused() {
+    let t = with_scene(|v| v["spawn"]["count"] = serde_json::json!(1_000_000_000u64));
+    case_in(
+        t.path(),
+        &["author", "scene.json", "--out", "a"],
+        "spawn.count",
+    );
+    let t = with_scene(|v| v["spawn"]["count"] = serde_json::json!(1e9));
+    case_in(
+        t.path(),
+        &["author", "scene.json", "--out", "a"],
+        "scene.json",
+    );
+}
+
+/// Issue #14's list: a scene `duration` of 1e12 s aborted (and left a hidden temporary folder).
+#[test]
+fn author_a_duration_of_1e12_seconds_is_refused() {
+    let t = with_scene(|v| v["duration"] = serde_json::json!(1e12));
+    case_in(
+        t.path(),
+        &["author", "scene.json", "--out", "a"],
+        "duration",
+    );
+}
+
 /// `import-reference` of the test clip with its `Resolution` replaced (errors must name `names`).
 fn import_reference_with_resolution(res: usize, env: &[(&str, &str)], names: &str) {
     let t = workdir();
@@ -903,6 +933,47 @@ fn sigkill_leftovers_are_removed_by_the_next_run_on_the_same_output() {
     assert!(st.success());
     assert!(temp_leftovers(t.path()).is_empty());
     assert!(t.path().join("long.csv").is_file());
+}
+
+/// Issue #14's list: a kill while a video was written left a hidden `.herdfit-*` AVI (44.7 MB in
+/// one case). The next run that writes the same video removes it; nothing else is left.
+#[cfg(feature = "video")]
+#[test]
+fn sigkill_while_a_video_is_written_is_cleaned_by_the_next_run() {
+    let t = tempfile::tempdir().unwrap();
+    let d = t.path();
+    #[rustfmt::skip]
+    let synth = |frames: &str, out: &str| {
+        let mut c = harness::bin();
+        c.args(["synth", "--agents", "50", "--frame-count", frames, "--grid-size", "16x16",
+                "--cell-size", "2", "--video-file", "v.avi", "--out", out])
+            .current_dir(d);
+        c
+    };
+    let mut c = synth("20000", "long")
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let writing = || {
+        temp_leftovers(d)
+            .iter()
+            .any(|n| n.ends_with(".avi") && std::fs::metadata(d.join(n)).is_ok_and(|m| m.len() > 0))
+    };
+    for _ in 0..2400 {
+        if writing() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(25));
+    }
+    assert!(writing(), "the run writes the video's temporary sibling");
+    c.kill().unwrap();
+    c.wait().unwrap();
+    assert!(!d.join("v.avi").exists() && !d.join("long").exists());
+    assert_eq!(temp_leftovers(d).len(), 1, "{:?}", temp_leftovers(d));
+    let o = synth("3", "short").output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(temp_leftovers(d).is_empty(), "{:?}", temp_leftovers(d));
+    assert!(d.join("v.avi").is_file() && d.join("short/clip.json").is_file());
 }
 
 // ---- The "Lesser" list: truncated video, clamped ranges, nonsense flags, polygons, duplicate

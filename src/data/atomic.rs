@@ -47,8 +47,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .map_err(fail)?;
     let name = tmp.path().to_path_buf();
     cleanup::register(&name);
+    cleanup::name_for_user(&name, path);
     let done = (|| {
-        tmp.write_all(bytes)?;
+        // Through the plain file: NamedTempFile's own writes add "at path <hidden temp>" to
+        // their errors, and the user's error must name the output (issue #14).
+        tmp.as_file_mut().write_all(bytes)?;
         tmp.as_file().sync_all()?;
         tmp.persist(path).map(|_| ()).map_err(|e| e.error)
     })();
@@ -82,6 +85,7 @@ pub fn temp_sibling(path: &Path, suffix: &str) -> Result<tempfile::NamedTempFile
         .tempfile_in(dir)
         .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
     cleanup::register(t.path());
+    cleanup::name_for_user(t.path(), path);
     Ok(t)
 }
 
@@ -129,13 +133,13 @@ enum Sink {
 impl Write for Sink {
     fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
         match self {
-            Sink::Temp(t) => t.write(b),
+            Sink::Temp(t) => t.as_file_mut().write(b),
             Sink::Stdout(s) => s.write(b),
         }
     }
     fn flush(&mut self) -> std::io::Result<()> {
         match self {
-            Sink::Temp(t) => t.flush(),
+            Sink::Temp(t) => t.as_file_mut().flush(),
             Sink::Stdout(s) => s.flush(),
         }
     }
@@ -158,6 +162,7 @@ impl AtomicFile {
             .tempfile_in(dir)
             .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
         cleanup::register(tmp.path());
+        cleanup::name_for_user(tmp.path(), path);
         Ok(AtomicFile {
             path: path.to_path_buf(),
             out: std::io::BufWriter::with_capacity(1 << 20, Sink::Temp(tmp)),
@@ -238,6 +243,7 @@ impl AtomicDir {
             .tempdir_in(parent)
             .map_err(|e| Error::file(target, format!("cannot write: {e}")))?;
         cleanup::register(tmp.path());
+        cleanup::name_for_user(tmp.path(), target);
         Ok(AtomicDir {
             target: target.to_path_buf(),
             tmp,

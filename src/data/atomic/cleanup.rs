@@ -16,6 +16,27 @@ use std::sync::Mutex;
 
 static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
+/// Every temporary sibling made by this process, with the output it stands for, so that an error
+/// raised inside one (a plotting library writing `<temp folder>/metrics.png`, say) names the
+/// user's output and not a hidden path ([`user_facing`]).
+static NAMES: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
+
+/// Records that the temporary sibling `tmp` stands for `target` in messages.
+pub fn name_for_user(tmp: &Path, target: &Path) {
+    NAMES
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push((tmp.display().to_string(), target.display().to_string()));
+}
+
+/// `msg` with every temporary sibling's path replaced by the output it stands for.
+pub fn user_facing(msg: &str) -> String {
+    let names = NAMES.lock().unwrap_or_else(|e| e.into_inner());
+    names.iter().fold(msg.to_string(), |m, (tmp, user)| {
+        m.replace(tmp.as_str(), user)
+    })
+}
+
 /// Prefix of every temporary sibling herdfit makes.
 pub const TEMP_PREFIX: &str = ".herdfit-";
 
