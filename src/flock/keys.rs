@@ -270,7 +270,7 @@ pub fn next_key(
             );
         }
         rejected += 1;
-        if best.as_ref().map_or(true, |b| t > b.0) {
+        if best.as_ref().is_none_or(|b| t > b.0) {
             let tgt = prev
                 .xi_target
                 .iter()
