@@ -15,6 +15,7 @@ pub mod figures;
 mod frames;
 pub mod hpr;
 pub mod initiation;
+pub mod keys;
 pub mod power;
 pub mod ransac;
 #[cfg(feature = "video")]

@@ -7,9 +7,9 @@
 //! side likewise. Positions are `[x, y]` in wingspans in the flock frame (x right, y forward).
 
 use super::extract::{mean_std, FrameShape, ShapeParams, Side};
+pub use super::keys::{layout, next_key};
 use super::power;
 use super::ransac;
-use super::solve::{self, PositionProblem};
 use crate::error::{Error, Result};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
@@ -38,6 +38,12 @@ pub struct SteadyConfig {
     pub solve_tol: f64,
     /// Largest longitudinal move of a bird in one continuation step of the solver, wingspans.
     pub max_key_step: f64,
+    /// Metropolis steps per free bird for one draw of ξ̂ restricted to the reachable set.
+    pub draw_steps: usize,
+    /// Draws rejected (eq. 4 not solved to `solve_tol`) before a key shape gives up.
+    pub draw_retries: usize,
+    /// Smallest distance between two birds of Step 1's shapes, wingspans.
+    pub min_pair: f64,
 }
 
 impl Default for SteadyConfig {
@@ -52,6 +58,9 @@ impl Default for SteadyConfig {
             mirror: false,
             solve_tol: 1e-9,
             max_key_step: 3.0,
+            draw_steps: 8,
+            draw_retries: 4,
+            min_pair: 1.0,
         }
     }
 }
@@ -83,6 +92,12 @@ impl SteadyConfig {
         }
         if !(self.max_key_step.is_finite() && self.max_key_step > 0.0) {
             return bad("max_key_step", self.max_key_step, "must be > 0");
+        }
+        if self.draw_steps == 0 {
+            return bad("draw_steps", 0.0, "must be ≥ 1");
+        }
+        if !(self.min_pair.is_finite() && (0.0..=3.0).contains(&self.min_pair)) {
+            return bad("min_pair", self.min_pair, "must be in [0, 3] wingspans");
         }
         Ok(())
     }
@@ -218,7 +233,21 @@ pub fn initial_shapes(
                     Some(d) => d,
                     None => dev.sample(rng),
                 };
-                pos.push([sign * u, ransac::eval(coef, u) + dy]);
+                // Keep every pair at least `min_pair` apart: widen this bird's lateral gap
+                // (deterministically, no extra draw) while it sits too close to a placed bird.
+                let mut p = [sign * u, ransac::eval(coef, u) + dy];
+                for _ in 0..200 {
+                    let d = pos
+                        .iter()
+                        .map(|q: &[f64; 2]| (q[0] - p[0]).hypot(q[1] - p[1]))
+                        .fold(f64::INFINITY, f64::min);
+                    if d >= cfg.min_pair {
+                        break;
+                    }
+                    u += (cfg.min_pair - d).max(1e-3);
+                    p = [sign * u, ransac::eval(coef, u) + dy];
+                }
+                pos.push(p);
             }
         }
         shapes.push(pos);
@@ -262,19 +291,7 @@ pub fn draw_xi(
     cfg: &SteadyConfig,
     rng: &mut impl Rng,
 ) -> (Vec<f64>, Vec<[f64; 2]>) {
-    let bx: Vec<[f64; 2]> = prev
-        .iter()
-        .zip(range)
-        .map(|(&p, r)| {
-            let lo = ((1.0 - cfg.epsilon) * r[0]).max(cfg.c1 * p);
-            let hi = ((1.0 + cfg.epsilon) * r[1]).min(cfg.c2 * p);
-            if lo <= hi {
-                [lo, hi]
-            } else {
-                [p, p]
-            }
-        })
-        .collect();
+    let bx = super::keys::eq2_box(prev, range, cfg);
     let u: Vec<f64> = bx
         .iter()
         .map(|b| {
@@ -319,107 +336,25 @@ pub fn draw_xi(
 pub struct KeyShape {
     /// Positions, wingspans (flock frame).
     pub pos: Vec<[f64; 2]>,
-    /// Target relative savings ξ̂ (eq. 2, after the continuation).
+    /// The relative savings eq. 4 was solved for: the draw itself when `reproduced`.
     pub xi_target: Vec<f64>,
+    /// The drawn ξ̂ (eq. 2 restricted to the reachable set, [`super::keys`]).
+    pub xi_draw: Vec<f64>,
     /// ξ of the solved positions.
     pub xi: Vec<f64>,
-    /// Largest |ξ − ξ̂|/ξ̂.
+    /// Largest |ξ − ξ̂|/ξ̂ (ξ̂ = `xi_target`).
     pub max_relative_error: f64,
-    /// The lateral gap drawn for this key shape, wingspans.
+    /// The lateral gap of this key shape's layout, wingspans.
     pub gap: f64,
-    /// How far along the continuation from the previous key shape to the draw the solver got
-    /// (1: the draw itself).
-    pub reached: f64,
+    /// Whether Levenberg–Marquardt reproduced the draw to `solve_tol`.
+    pub reproduced: bool,
+    /// Draws rejected before this one because eq. 4 could not be solved for them.
+    pub draws_rejected: usize,
+    /// Acceptance rate of the Metropolis chain that drew ξ̂.
+    pub chain_acceptance: f64,
     /// Solver runs and residual evaluations.
     pub solves: usize,
     pub evaluations: usize,
-}
-
-/// Uniform lateral layout with gap `gap`: leader at 0, left birds at −k·gap, right at k·gap.
-fn layout(nl: usize, nr: usize, gap: f64) -> Vec<f64> {
-    let mut x = vec![0.0];
-    x.extend((1..=nl).map(|k| -(k as f64) * gap));
-    x.extend((1..=nr).map(|k| k as f64 * gap));
-    x
-}
-
-/// Step 3 for one key shape: draws ξ̂ (eq. 2) and a uniform lateral gap in `gap_range` (the
-/// paper's constant x-distance from the range of the example's mean gaps), then solves eq. 4 by
-/// continuation from the previous key shape (which solves its own equations): the lateral
-/// positions and targets move linearly from the previous ones to the draw, the solver warm-starts
-/// at every step, and a failed step (error above `solve_tol` or a bird moving more than
-/// `max_key_step`) is halved. Every point of that path stays in the eq. 2 box, so the targets do.
-#[allow(clippy::too_many_arguments)]
-pub fn next_key(
-    prev: &KeyShape,
-    nl: usize,
-    nr: usize,
-    range: &[[f64; 2]],
-    gap_range: [f64; 2],
-    cfg: &SteadyConfig,
-    rng: &mut impl Rng,
-) -> KeyShape {
-    let (draw, _) = draw_xi(&prev.xi_target, range, cfg, rng);
-    let gap = if gap_range[1] > gap_range[0] {
-        rng.gen_range(gap_range[0]..=gap_range[1])
-    } else {
-        gap_range[0]
-    }
-    .max(cfg.min_gap);
-    let x1 = layout(nl, nr, gap);
-    let x0: Vec<f64> = prev.pos.iter().map(|p| p[0] - prev.pos[0][0]).collect();
-    let y0: Vec<f64> = prev.pos.iter().map(|p| p[1] - prev.pos[0][1]).collect();
-    let at = |t: f64| -> (Vec<f64>, Vec<f64>) {
-        let x = x0.iter().zip(&x1).map(|(a, b)| a + t * (b - a)).collect();
-        let xi = prev
-            .xi_target
-            .iter()
-            .zip(&draw)
-            .map(|(a, b)| a + t * (b - a))
-            .collect();
-        (x, xi)
-    };
-    let (mut t, mut dt) = (0.0f64, 1.0f64);
-    let mut y = y0;
-    let (mut solves, mut evals) = (0, 0);
-    let mut err = prev.max_relative_error;
-    while t < 1.0 && dt >= 1.0 / 256.0 {
-        let tn = (t + dt).min(1.0);
-        let (x, xi) = at(tn);
-        let s = solve::solve(PositionProblem::new(x, xi, 0, y.clone()), 400);
-        solves += 1;
-        evals += s.evaluations;
-        let step =
-            s.y.iter()
-                .zip(&y)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-        if s.max_relative_error <= cfg.solve_tol && step <= cfg.max_key_step {
-            t = tn;
-            y = s.y;
-            err = s.max_relative_error;
-            dt = (2.0 * dt).min(1.0);
-        } else {
-            dt *= 0.5;
-        }
-    }
-    let (x, xi_target) = at(t);
-    let pos: Vec<[f64; 2]> = x.iter().zip(&y).map(|(&a, &b)| [a, b]).collect();
-    let xi = power::relative(&power::savings_unchecked(&pos));
-    KeyShape {
-        pos,
-        xi_target,
-        xi,
-        max_relative_error: err,
-        gap: if t >= 1.0 {
-            gap
-        } else {
-            prev.gap + t * (gap - prev.gap)
-        },
-        reached: t,
-        solves,
-        evaluations: evals,
-    }
 }
 
 /// The first key shape: Step 1's shape of the example's first frame, as it is (its ξ is its own
@@ -434,10 +369,13 @@ pub fn first_key(shape: &[[f64; 2]]) -> Result<KeyShape> {
     Ok(KeyShape {
         pos: shape.to_vec(),
         xi_target: xi.clone(),
+        xi_draw: xi.clone(),
         xi,
         max_relative_error: 0.0,
         gap: mean_std(&gaps).0,
-        reached: 1.0,
+        reproduced: true,
+        draws_rejected: 0,
+        chain_acceptance: 0.0,
         solves: 0,
         evaluations: 0,
     })

@@ -1,0 +1,327 @@
+//! Key shapes of the steady flight (Klotsman & Tal §5 Step 3, eq. 2–4) whose drawn relative
+//! savings ξ̂ are reproduced exactly by the positions that solve eq. 4.
+//!
+//! Eq. 4 has N − 1 unknowns (the longitudinal positions y relative to the leader; the lateral
+//! layout is fixed, "the x-distance is constant") and N equations, one of them redundant by
+//! Munk's theorem (Σ e does not depend on y, eq. 3). So the ξ that positions can give on a
+//! layout form a bounded (N − 1)-dimensional region R of the simplex Σ ξ = 1 (g saturates as
+//! |y| → ∞). Eq. 2 draws every ξ̂_i independently in its box; most such draws lie outside R
+//! (RESULTS.md §3: the rejection rate of plain eq. 2 draws). A key shape therefore draws ξ̂ from
+//! eq. 2's distribution *restricted to R*: uniform on R ∩ Box, sampled by a Metropolis chain over
+//! the positions y, whose density is the volume element √det(JᵀJ) of y ↦ ξ (J = ∂ξ/∂y), so that
+//! the draws are uniform in ξ as eq. 2's are, with the box as a hard constraint. Levenberg–
+//! Marquardt then solves eq. 4 for that ξ̂ from the previous key shape's positions (never from the
+//! chain's), with the straight-line continuation as a fallback; a draw it cannot reproduce to
+//! `solve_tol` is rejected and the chain draws again (bounded, counted in the key shape).
+
+use super::power;
+use super::solve::{self, PositionProblem};
+use super::steady::{KeyShape, SteadyConfig};
+use nalgebra::DMatrix;
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+/// Eq. 2's box for every bird: [(1 − ε) p_i, (1 + ε) P_i] ∩ [C₁ ξ̂_{k−1}, C₂ ξ̂_{k−1}] (the
+/// previous value alone where the two do not meet).
+pub fn eq2_box(prev: &[f64], range: &[[f64; 2]], cfg: &SteadyConfig) -> Vec<[f64; 2]> {
+    prev.iter()
+        .zip(range)
+        .map(|(&p, r)| {
+            let lo = ((1.0 - cfg.epsilon) * r[0]).max(cfg.c1 * p);
+            let hi = ((1.0 + cfg.epsilon) * r[1]).min(cfg.c2 * p);
+            if lo <= hi {
+                [lo, hi]
+            } else {
+                [p, p]
+            }
+        })
+        .collect()
+}
+
+/// Uniform lateral layout with gap `gap`: leader at 0, left birds at −k·gap, right at k·gap.
+pub fn layout(nl: usize, nr: usize, gap: f64) -> Vec<f64> {
+    let mut x = vec![0.0];
+    x.extend((1..=nl).map(|k| -(k as f64) * gap));
+    x.extend((1..=nr).map(|k| k as f64 * gap));
+    x
+}
+
+/// ξ (eq. 1 and §5 Step 3's ξ_i = e_i / E) and ∂ξ/∂y (the leader's y held), N × (N − 1), on
+/// lateral positions `x` with E = `total` (eq. 3).
+fn xi_and_jacobian(x: &[f64], y: &[f64], total: f64) -> (Vec<f64>, DMatrix<f64>) {
+    let n = x.len();
+    let mut xi = vec![0.0; n];
+    let mut j = DMatrix::zeros(n, n - 1);
+    for i in 0..n {
+        let mut diag = 0.0;
+        for k in 0..n {
+            if k == i {
+                continue;
+            }
+            let (dx, dy) = (x[k] - x[i], y[k] - y[i]);
+            xi[i] += power::g(dx, dy) / total;
+            let d = power::dg_dt(dx, dy) / total;
+            diag -= d;
+            if k != 0 {
+                j[(i, k - 1)] = d;
+            }
+        }
+        if i != 0 {
+            j[(i, i - 1)] += diag;
+        }
+    }
+    (xi, j)
+}
+
+/// Relative violation of the box: Σ max(0, lo − ξ, ξ − hi) / hi.
+fn violation(xi: &[f64], bx: &[[f64; 2]]) -> f64 {
+    xi.iter()
+        .zip(bx)
+        .map(|(v, b)| (b[0] - v).max(v - b[1]).max(0.0) / b[1].max(f64::MIN_POSITIVE))
+        .sum()
+}
+
+/// ½ ln det(JᵀJ): the log volume element of y ↦ ξ (−∞ where J loses rank).
+fn log_volume(j: &DMatrix<f64>) -> f64 {
+    match (j.transpose() * j).cholesky() {
+        Some(c) => c.l_dirty().diagonal().iter().map(|d| d.ln()).sum(),
+        None => f64::NEG_INFINITY,
+    }
+}
+
+/// State and tallies of the Metropolis chain of one key shape.
+#[derive(Clone, Debug)]
+struct Chain {
+    y: Vec<f64>,
+    xi: Vec<f64>,
+    viol: f64,
+    logv: f64,
+    scale: f64,
+    proposed: usize,
+    accepted: usize,
+}
+
+impl Chain {
+    fn new(x: &[f64], y: Vec<f64>, total: f64, bx: &[[f64; 2]]) -> Self {
+        let (xi, j) = xi_and_jacobian(x, &y, total);
+        Chain {
+            viol: violation(&xi, bx),
+            logv: log_volume(&j),
+            y,
+            xi,
+            scale: 0.05,
+            proposed: 0,
+            accepted: 0,
+        }
+    }
+
+    /// `steps` Metropolis steps: isotropic Gaussian moves of the N − 1 free birds, accepted with
+    /// probability min(1, vol(y′)/vol(y)) inside the box, never outside it. A chain that starts
+    /// outside (the previous key's ξ just off a box face by solver rounding) first accepts any
+    /// move that does not increase the violation. The proposal scale adapts towards 30 %
+    /// acceptance with a decaying gain.
+    fn run(&mut self, x: &[f64], total: f64, bx: &[[f64; 2]], steps: usize, rng: &mut impl Rng) {
+        let m = (x.len() - 1) as f64;
+        for s in 0..steps {
+            let mut y = self.y.clone();
+            for v in y.iter_mut().skip(1) {
+                let z: f64 = StandardNormal.sample(rng);
+                *v += self.scale / m.sqrt() * z;
+            }
+            let (xi, j) = xi_and_jacobian(x, &y, total);
+            let viol = violation(&xi, bx);
+            self.proposed += 1;
+            let ok = if self.viol > 0.0 {
+                viol <= self.viol
+            } else if viol > 0.0 {
+                false
+            } else {
+                let logv = log_volume(&j);
+                let u: f64 = rng.gen();
+                logv.is_finite() && u.ln() < logv - self.logv
+            };
+            let gain = 1.0 / (1.0 + s as f64).sqrt();
+            if ok {
+                self.logv = log_volume(&j);
+                self.y = y;
+                self.xi = xi;
+                self.viol = viol;
+                self.accepted += 1;
+                self.scale *= (0.7 * gain).exp();
+            } else {
+                self.scale *= (-0.3 * gain).exp();
+            }
+        }
+    }
+}
+
+/// Continuation of eq. 4 from (x0, ξ0), solved by y0, to (x1, ξ1): both interpolated linearly,
+/// Levenberg–Marquardt warm-started at every step, a failed step (error above `solve_tol` or a
+/// bird moving more than `max_key_step`) halved down to 1/256. Returns how far it got, its y and
+/// error, solver runs and evaluations.
+pub fn continuation(
+    x0: &[f64],
+    x1: &[f64],
+    xi0: &[f64],
+    xi1: &[f64],
+    y0: Vec<f64>,
+    cfg: &SteadyConfig,
+) -> (f64, Vec<f64>, f64, usize, usize) {
+    let lerp = |a: &[f64], b: &[f64], t: f64| -> Vec<f64> {
+        a.iter().zip(b).map(|(p, q)| p + t * (q - p)).collect()
+    };
+    let (mut t, mut dt) = (0.0f64, 1.0f64);
+    let mut y = y0;
+    let (mut solves, mut evals) = (0, 0);
+    let mut err =
+        PositionProblem::new(x0.to_vec(), xi0.to_vec(), 0, y.clone()).max_relative_error();
+    while t < 1.0 && dt >= 1.0 / 256.0 {
+        let tn = (t + dt).min(1.0);
+        let s = solve::solve(
+            PositionProblem::new(lerp(x0, x1, tn), lerp(xi0, xi1, tn), 0, y.clone()),
+            400,
+        );
+        solves += 1;
+        evals += s.evaluations;
+        let step =
+            s.y.iter()
+                .zip(&y)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+        if s.max_relative_error <= cfg.solve_tol && step <= cfg.max_key_step {
+            t = tn;
+            y = s.y;
+            err = s.max_relative_error;
+            dt = (2.0 * dt).min(1.0);
+        } else {
+            dt *= 0.5;
+        }
+    }
+    (t, y, err, solves, evals)
+}
+
+/// Step 3 for one key shape. (1) A uniform lateral gap is drawn in `gap_range` (the paper's
+/// constant x-distance from the range of the example's mean gaps) and the previous key's ξ̂ is
+/// carried onto that layout by [`continuation`] (as far as it goes: the layout then stops part
+/// way). (2) ξ̂ is drawn from eq. 2's box restricted to the reachable set by the Metropolis chain
+/// (`draw_steps` × (N − 1) steps from the previous key's positions). (3) Levenberg–Marquardt
+/// solves eq. 4 for that ξ̂ from the previous positions, then by continuation if that fails; a
+/// draw not reproduced to `solve_tol` is rejected and the chain goes on for another draw, up to
+/// `draw_retries` times. If every draw is rejected the key shape is the continuation's last point
+/// (`reproduced` false).
+#[allow(clippy::too_many_arguments)]
+pub fn next_key(
+    prev: &KeyShape,
+    nl: usize,
+    nr: usize,
+    range: &[[f64; 2]],
+    gap_range: [f64; 2],
+    cfg: &SteadyConfig,
+    rng: &mut impl Rng,
+) -> KeyShape {
+    let bx = eq2_box(&prev.xi_target, range, cfg);
+    let gap = if gap_range[1] > gap_range[0] {
+        rng.gen_range(gap_range[0]..=gap_range[1])
+    } else {
+        gap_range[0]
+    }
+    .max(cfg.min_gap);
+    let x0: Vec<f64> = prev.pos.iter().map(|p| p[0] - prev.pos[0][0]).collect();
+    let y0: Vec<f64> = prev.pos.iter().map(|p| p[1] - prev.pos[0][1]).collect();
+    let x1 = layout(nl, nr, gap);
+    let (ta, ya, _, mut solves, mut evals) =
+        continuation(&x0, &x1, &prev.xi_target, &prev.xi_target, y0, cfg);
+    let x: Vec<f64> = x0.iter().zip(&x1).map(|(a, b)| a + ta * (b - a)).collect();
+    let total = power::total_abreast(&x);
+    let mut chain = Chain::new(&x, ya.clone(), total, &bx);
+    let steps = cfg.draw_steps * (x.len() - 1);
+    let mut rejected = 0;
+    let mut best: Option<(f64, Vec<f64>, Vec<f64>, f64)> = None;
+    for _ in 0..=cfg.draw_retries {
+        chain.run(&x, total, &bx, steps, rng);
+        if chain.viol > 0.0 {
+            rejected += 1;
+            continue;
+        }
+        let draw = chain.xi.clone();
+        let s = solve::solve(
+            PositionProblem::new(x.clone(), draw.clone(), 0, ya.clone()),
+            400,
+        );
+        solves += 1;
+        evals += s.evaluations;
+        let (t, y, err) = if s.max_relative_error <= cfg.solve_tol {
+            (1.0, s.y, s.max_relative_error)
+        } else {
+            let (t, y, err, n, e) = continuation(&x, &x, &prev.xi_target, &draw, ya.clone(), cfg);
+            solves += n;
+            evals += e;
+            (t, y, err)
+        };
+        if t >= 1.0 {
+            return finish(
+                x,
+                y,
+                draw.clone(),
+                draw,
+                err,
+                gap_of(prev, ta, gap),
+                (rejected, &chain, solves, evals),
+            );
+        }
+        rejected += 1;
+        if best.as_ref().is_none_or(|b| t > b.0) {
+            let tgt = prev
+                .xi_target
+                .iter()
+                .zip(&draw)
+                .map(|(a, b)| a + t * (b - a))
+                .collect();
+            best = Some((t, y, tgt, err));
+        }
+    }
+    let (_, y, tgt, err) =
+        best.unwrap_or((0.0, ya, prev.xi_target.clone(), prev.max_relative_error));
+    let draw = chain.xi.clone();
+    let mut k = finish(
+        x,
+        y,
+        tgt,
+        draw,
+        err,
+        gap_of(prev, ta, gap),
+        (rejected, &chain, solves, evals),
+    );
+    k.reproduced = false;
+    k
+}
+
+fn gap_of(prev: &KeyShape, t: f64, gap: f64) -> f64 {
+    prev.gap + t * (gap - prev.gap)
+}
+
+fn finish(
+    x: Vec<f64>,
+    y: Vec<f64>,
+    xi_target: Vec<f64>,
+    xi_draw: Vec<f64>,
+    err: f64,
+    gap: f64,
+    (rejected, chain, solves, evaluations): (usize, &Chain, usize, usize),
+) -> KeyShape {
+    let pos: Vec<[f64; 2]> = x.iter().zip(&y).map(|(&a, &b)| [a, b]).collect();
+    let xi = power::relative(&power::savings_unchecked(&pos));
+    KeyShape {
+        pos,
+        xi_target,
+        xi_draw,
+        xi,
+        max_relative_error: err,
+        gap,
+        reproduced: true,
+        draws_rejected: rejected,
+        chain_acceptance: chain.accepted as f64 / chain.proposed.max(1) as f64,
+        solves,
+        evaluations,
+    }
+}
