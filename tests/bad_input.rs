@@ -850,21 +850,29 @@ fn temp_leftovers(dir: &std::path::Path) -> Vec<String> {
 }
 
 fn start_long_run(dir: &std::path::Path) -> std::process::Child {
-    let c = harness::bin()
-        .args([
-            "simulate", "--agents", "50", "--steps", "2000000", "--out", "long.csv",
-        ])
-        .current_dir(dir)
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Wait until its temporary sibling holds data: the writability probe that comes first is an
-    // empty temporary sibling too, removed at once, and on a slow machine the run can be caught
-    // between the two.
+    let mut c = harness::bin();
+    c.args([
+        "simulate", "--agents", "50", "--steps", "2000000", "--out", "long.csv",
+    ])
+    .current_dir(dir)
+    .stderr(std::process::Stdio::piped());
+    spawn_until_writing(c, dir, "")
+}
+
+/// Starts `cmd` and waits (25 ms polls, up to a minute) until a temporary sibling in `dir` whose
+/// name ends with `suffix` holds data: the writability probe that comes first is an empty
+/// temporary sibling too, removed at once, and on a slow machine the run can be caught between
+/// the two.
+fn spawn_until_writing(
+    mut cmd: std::process::Command,
+    dir: &std::path::Path,
+    suffix: &str,
+) -> std::process::Child {
+    let c = cmd.spawn().unwrap();
     let writing = || {
-        temp_leftovers(dir)
-            .iter()
-            .any(|n| std::fs::metadata(dir.join(n)).is_ok_and(|m| m.len() > 0))
+        temp_leftovers(dir).iter().any(|n| {
+            n.ends_with(suffix) && std::fs::metadata(dir.join(n)).is_ok_and(|m| m.len() > 0)
+        })
     };
     for _ in 0..2400 {
         if writing() {
@@ -872,7 +880,7 @@ fn start_long_run(dir: &std::path::Path) -> std::process::Child {
         }
         std::thread::sleep(std::time::Duration::from_millis(25));
     }
-    assert!(writing(), "the run writes a temporary sibling");
+    assert!(writing(), "the run writes a temporary sibling ({suffix})");
     c
 }
 
@@ -950,22 +958,9 @@ fn sigkill_while_a_video_is_written_is_cleaned_by_the_next_run() {
             .current_dir(d);
         c
     };
-    let mut c = synth("20000", "long")
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let writing = || {
-        temp_leftovers(d)
-            .iter()
-            .any(|n| n.ends_with(".avi") && std::fs::metadata(d.join(n)).is_ok_and(|m| m.len() > 0))
-    };
-    for _ in 0..2400 {
-        if writing() {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(25));
-    }
-    assert!(writing(), "the run writes the video's temporary sibling");
+    let mut long = synth("20000", "long");
+    long.stderr(std::process::Stdio::null());
+    let mut c = spawn_until_writing(long, d, ".avi");
     c.kill().unwrap();
     c.wait().unwrap();
     assert!(!d.join("v.avi").exists() && !d.join("long").exists());
