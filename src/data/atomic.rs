@@ -46,8 +46,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .tempfile_in(dir)
         .map_err(fail)?;
     let name = tmp.path().to_path_buf();
-    cleanup::register(&name);
-    cleanup::name_for_user(&name, path);
+    cleanup::register(&name, path);
     let done = (|| {
         // Through the plain file: NamedTempFile's own writes add "at path <hidden temp>" to
         // their errors, and the user's error must name the output (issue #14).
@@ -84,8 +83,7 @@ pub fn temp_sibling(path: &Path, suffix: &str) -> Result<tempfile::NamedTempFile
         .suffix(suffix)
         .tempfile_in(dir)
         .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
-    cleanup::register(t.path());
-    cleanup::name_for_user(t.path(), path);
+    cleanup::register(t.path(), path);
     Ok(t)
 }
 
@@ -161,8 +159,7 @@ impl AtomicFile {
         let tmp = temp_builder(&cleanup::temp_prefix(path))
             .tempfile_in(dir)
             .map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
-        cleanup::register(tmp.path());
-        cleanup::name_for_user(tmp.path(), path);
+        cleanup::register(tmp.path(), path);
         Ok(AtomicFile {
             path: path.to_path_buf(),
             out: std::io::BufWriter::with_capacity(1 << 20, Sink::Temp(tmp)),
@@ -242,8 +239,7 @@ impl AtomicDir {
             .prefix(&cleanup::temp_prefix(target))
             .tempdir_in(parent)
             .map_err(|e| Error::file(target, format!("cannot write: {e}")))?;
-        cleanup::register(tmp.path());
-        cleanup::name_for_user(tmp.path(), target);
+        cleanup::register(tmp.path(), target);
         Ok(AtomicDir {
             target: target.to_path_buf(),
             tmp,

@@ -131,18 +131,22 @@ impl Chain {
             let (xi, j) = xi_and_jacobian(x, &y, total);
             let viol = violation(&xi, bx);
             self.proposed += 1;
+            // The proposal's log volume, once: the Metropolis test needs it inside the box, and
+            // an accepted move keeps it.
+            let mut logv = None;
             let ok = if self.viol > 0.0 {
                 viol <= self.viol
             } else if viol > 0.0 {
                 false
             } else {
-                let logv = log_volume(&j);
+                let l = log_volume(&j);
+                logv = Some(l);
                 let u: f64 = rng.gen();
-                logv.is_finite() && u.ln() < logv - self.logv
+                l.is_finite() && u.ln() < l - self.logv
             };
             let gain = 1.0 / (1.0 + s as f64).sqrt();
             if ok {
-                self.logv = log_volume(&j);
+                self.logv = logv.unwrap_or_else(|| log_volume(&j));
                 self.y = y;
                 self.xi = xi;
                 self.viol = viol;

@@ -21,14 +21,6 @@ static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// user's output and not a hidden path ([`user_facing`]).
 static NAMES: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
 
-/// Records that the temporary sibling `tmp` stands for `target` in messages.
-pub fn name_for_user(tmp: &Path, target: &Path) {
-    NAMES
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .push((tmp.display().to_string(), target.display().to_string()));
-}
-
 /// `msg` with every temporary sibling's path replaced by the output it stands for.
 pub fn user_facing(msg: &str) -> String {
     let names = NAMES.lock().unwrap_or_else(|e| e.into_inner());
@@ -54,11 +46,16 @@ pub fn temp_prefix(target: &Path) -> String {
     format!("{TEMP_PREFIX}{}-{}-", std::process::id(), &name[..cut])
 }
 
-/// Records a temporary sibling so that a signal removes it.
-pub fn register(path: &Path) {
+/// Records a temporary sibling of `target` so that a signal removes it and an error raised inside
+/// it names `target` ([`user_facing`]).
+pub fn register(path: &Path, target: &Path) {
     LIVE.lock()
         .unwrap_or_else(|e| e.into_inner())
         .push(path.to_path_buf());
+    NAMES
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push((path.display().to_string(), target.display().to_string()));
 }
 
 /// Forgets a temporary sibling (renamed into place or removed).
