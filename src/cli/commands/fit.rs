@@ -140,6 +140,13 @@ pub struct FitArgs {
     /// bundle (herdfit.param-sets/1) that author scenes' regions name sets of.
     #[arg(long, value_name = "ZONES.json")]
     pub zones: Option<PathBuf>,
+    /// A still (one-frame clip, §7.2.4): steps simulated from the image before the objective is
+    /// averaged.
+    #[arg(long, value_name = "N", default_value_t = crate::herd::fit::still::StillConfig::default().settle)]
+    pub still_settle: usize,
+    /// A still: steps over which the density and direction-variance match is averaged.
+    #[arg(long, value_name = "N", default_value_t = crate::herd::fit::still::StillConfig::default().average)]
+    pub still_average: usize,
     /// Finite-difference step of the identifiability estimate.
     #[arg(long, value_name = "H", default_value_t = UncertaintyConfig::default().step)]
     pub uncertainty_step: f64,
@@ -185,6 +192,10 @@ pub fn exec(a: FitArgs) -> Result<()> {
             ..UncertaintyConfig::default()
         },
         zones: a.zones,
+        still: crate::herd::fit::still::StillConfig {
+            settle: a.still_settle,
+            average: a.still_average,
+        },
     };
     if job.zones.is_some() {
         let s = crate::herd::fit::zone_job::run_zones(&job, &mut Bars::default())
@@ -202,6 +213,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
                 ("global.starts", "--starts"),
                 ("global.holdout", "--holdout"),
                 ("frozen", "--freeze"),
+                ("still.settle", "--still-settle"),
+                ("still.average", "--still-average"),
             ],
         )
     })?;

@@ -73,6 +73,11 @@ pub struct FitConfig {
     /// Not written when 1.
     #[serde(default = "unit_weight", skip_serializing_if = "is_unit_weight")]
     pub density_weight: f64,
+    /// A fit from a single image (paper §7.2.4, [`crate::herd::fit::still`]): the clip is a
+    /// one-frame clip repeated as a stationary target; the loss is the density match plus λ_var
+    /// E_var over the steps after `settle`. Not written when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub still: Option<super::still::StillConfig>,
 }
 
 fn unit_weight() -> f64 {
@@ -183,6 +188,7 @@ impl Default for FitConfig {
             global: GlobalPhase::default(),
             frozen: Vec::new(),
             density_weight: 1.0,
+            still: None,
         }
     }
 }
@@ -233,6 +239,15 @@ impl FitConfig {
             }
         }
         self.frozen_indices()?;
+        if let Some(s) = &self.still {
+            s.check()?;
+            if self.loss != LossKind::Paper {
+                return Err(Error::config(
+                    "loss",
+                    "a still image has no velocity: it is fitted by its density and E_var, not by the field objectives",
+                ));
+            }
+        }
         self.settle.check()
     }
 

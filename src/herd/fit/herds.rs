@@ -103,11 +103,16 @@ impl Herds {
         for (k, &r) in fwd.live.iter().enumerate() {
             let ids: Vec<u64> = self.rows[r].iter().map(|x| x.id).collect();
             let rows = fwd.ends[k].clone().detach().rows(&ids)?;
+            // A still's stationary fit is not rebalanced (§7.2.4): drift is what it measures.
+            let threshold = match cfg.still {
+                Some(_) => f64::INFINITY,
+                None => cfg.density_threshold,
+            };
             self.rows[r] = population_control(
                 clip,
                 f,
                 rows,
-                cfg.density_threshold,
+                threshold,
                 &model.params.speed,
                 &mut self.next_ids[r],
                 rng,

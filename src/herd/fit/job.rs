@@ -8,6 +8,7 @@ use super::global::{fit_global, split_frames, GlobalReport};
 use super::identify::{identify, Uncertainty, UncertaintyConfig};
 use super::log::{write_log, LogRow};
 use super::run::{loss_of, FitResult};
+use super::still::{stationary_clip, still_measures, StillConfig, StillMeasures};
 use crate::data::atomic::check_writable;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
@@ -48,6 +49,9 @@ pub struct FitJob {
     /// A zones file (`herdfit.zones/1`): one parameter set per zone, learnt jointly, written as a
     /// parameter-set bundle (`herdfit.param-sets/1`) at `out` ([`super::zone_job`]).
     pub zones: Option<PathBuf>,
+    /// The schedule used when the clips are stills (one frame each, paper §7.2.4,
+    /// [`super::still`]); ignored otherwise.
+    pub still: StillConfig,
 }
 
 impl Default for FitJob {
@@ -65,6 +69,7 @@ impl Default for FitJob {
             plot: None,
             uncertainty: UncertaintyConfig::default(),
             zones: None,
+            still: StillConfig::default(),
         }
     }
 }
@@ -156,6 +161,8 @@ pub struct FitSummary {
     pub plot_warning: Option<String>,
     /// The identifiability estimate and its wall time in seconds (None when switched off).
     pub uncertainty: Option<(Uncertainty, f64)>,
+    /// A still's measures (density error, polarization) with the start and the fitted set.
+    pub still: Option<(StillConfig, [StillMeasures; 2])>,
 }
 
 /// Runs a fit job: loads the clips and the start, fits, evaluates the start and the fitted set,
@@ -167,16 +174,18 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         .iter()
         .map(|p| ClipFields::load(p))
         .collect::<Result<Vec<_>>>()?;
-    let clips: Vec<&ClipFields> = loaded.iter().collect();
     let init = match &job.start {
         Some(p) => Params::load(p)?,
         None => Params::neutral(),
     };
+    let (loaded, still) = stills(loaded, job, &init.speed)?;
+    let clips: Vec<&ClipFields> = loaded.iter().collect();
     // All frames of the shortest clip unless told otherwise.
     let shortest = clips.iter().map(|c| c.frames()).min().unwrap_or(0);
     let frames = job.frames.clone().unwrap_or(0..shortest);
     let cfg = FitConfig {
         frames: frames.clone(),
+        still,
         ..job.config.clone()
     };
     cfg.check()?;
@@ -255,9 +264,25 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         job,
         &cfg,
     )?;
+    let still_eval = match &cfg.still {
+        None => None,
+        Some(s) => {
+            let m = |p: &Params| {
+                still_measures(clips[0], p, s, cfg.seed, job.eval_seeds, cfg.precision)
+            };
+            Some((*s, [m(&start_params)?, m(&res.params)?]))
+        }
+    };
     let names: Vec<String> = job.clips.iter().map(|p| p.display().to_string()).collect();
     let mut out = res.params.clone();
     let mut prov = provenance(&names, &cfg, &res, loss, errors, job.eval_seeds);
+    if let Some((_, [a, b])) = &still_eval {
+        prov["evaluation"]["still"] = serde_json::json!({
+            "what": "density error against the image and polarization (eq. 12) of the whole herd, averaged over the steps after settling, and over the seeds",
+            "start": a,
+            "fitted": b,
+        });
+    }
     if let Some(g) = &global {
         prov["global"] = serde_json::to_value(g)
             .map_err(|e| Error::Internal(format!("serialising the global phase: {e}")))?;
@@ -294,7 +319,38 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         plot: plot_path,
         plot_warning,
         uncertainty,
+        still: still_eval,
     })
+}
+
+/// A fit from stills (paper §7.2.4): when every clip has one frame, each is replaced by its
+/// stationary target ([`stationary_clip`]) and the fit's `still` schedule is set; a still among
+/// video clips is an error naming it.
+fn stills(
+    loaded: Vec<ClipFields>,
+    job: &FitJob,
+    speed: &SpeedModel,
+) -> Result<(Vec<ClipFields>, Option<StillConfig>)> {
+    let one: Vec<bool> = loaded.iter().map(|c| c.frames() == 1).collect();
+    if !one.iter().any(|&b| b) {
+        return Ok((loaded, None));
+    }
+    if let Some(k) = one.iter().position(|&b| !b) {
+        let still = &job.clips[one.iter().position(|&b| b).unwrap_or(0)];
+        return Err(Error::file(
+            &job.clips[k],
+            format!(
+                "a clip of several frames cannot be fitted with the still {} (one frame)",
+                still.display()
+            ),
+        ));
+    }
+    job.still.check()?;
+    let out = loaded
+        .iter()
+        .map(|c| stationary_clip(c, &job.still, speed))
+        .collect();
+    Ok((out, Some(job.still)))
 }
 
 /// Density and velocity errors of each parameter set in `sets`, averaged over the clips (each
@@ -454,6 +510,18 @@ impl std::fmt::Display for FitSummary {
             "loss E_mean {:.4} → {:.4}, E_var {:.4} → {:.4}, E_fields {:.4} → {:.4}; density error {:.4} → {:.4}, velocity error {:.4} → {:.4}",
             lb.0, la.0, lb.1, la.1, lb.2, la.2, b.0, a.0, b.1, a.1
         )?;
+        if let Some((s, [a, b])) = &self.still {
+            writeln!(
+                f,
+                "still: density error {:.4} → {:.4}, polarization {:.4} → {:.4} (after {} settling steps, over {})",
+                a.density_error,
+                b.density_error,
+                a.polarization,
+                b.polarization,
+                s.settle,
+                s.average
+            )?;
+        }
         writeln!(
             f,
             "wrote {}, {}, {}",

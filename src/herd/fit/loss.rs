@@ -179,6 +179,21 @@ pub fn fields_loss_weighted(
     Ok(ed + em)
 }
 
+/// The density match of a still's stationary fit (paper §7.2.4, [`super::still`]):
+/// Σ(ρ' − Kρ)² / Σ(Kρ)², ρ' by bilinear splatting, K the like-for-like blur (the density term of
+/// [`fields_loss`] without its momentum term: a still has no velocity).
+pub fn density_loss(clip: &ClipFields, state: &HerdState, f: usize) -> Result<Tensor<1>> {
+    let ([rho, _, _], norm_d, _) = field_targets(clip, f, &state.x.device())?;
+    let rho_s = target::splat(
+        &state.x,
+        &state.y,
+        &state.snapshot()?.pos,
+        &clip.grid(),
+        None,
+    );
+    Ok((rho_s - rho).square().sum().div_scalar(norm_d))
+}
+
 /// The clip's splat-comparable density and momentum of frame `f`
 /// ([`target::splat_comparable_targets`]) and their normalisers Σρ², Σ‖m‖².
 fn field_targets(

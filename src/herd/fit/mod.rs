@@ -20,6 +20,7 @@ pub mod log;
 pub mod loss;
 pub mod plan;
 pub mod run;
+pub mod still;
 pub mod target;
 pub mod zone_job;
 pub mod zones;

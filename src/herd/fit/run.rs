@@ -6,7 +6,7 @@ use super::config::{FitConfig, LossKind};
 use super::herds::{check_finite_step, grad_of, Herds};
 use super::log::LogRow;
 use super::loss::StepTarget;
-use super::loss::{add, ensemble_loss_weighted, fields_loss_weighted, step_loss};
+use super::loss::{add, density_loss, ensemble_loss_weighted, fields_loss_weighted, step_loss};
 use super::plan::{plan_step, window_loss};
 use super::target::Stencil;
 use super::zones::Zones;
@@ -271,10 +271,12 @@ impl<'a> FitRun<'a> {
         let per_clip = clips
             .iter()
             .map(|clip| {
-                (
-                    guidance_fields(clip, cfg.guidance_scale),
-                    Stencil::new(clip),
-                )
+                // A still shows no direction to follow: no leaders (§7.2.4).
+                let guidance = match cfg.still {
+                    Some(_) => vec![Guidance::None; clip.frames()],
+                    None => guidance_fields(clip, cfg.guidance_scale),
+                };
+                (guidance, Stencil::new(clip))
             })
             .collect();
         Ok(FitRun {
@@ -320,6 +322,13 @@ impl<'a> FitRun<'a> {
             let flat = learnt.flat();
             let (loss, th, fwd) = self.forward(&mut model, ci, &herds, f, w, &flat, rng)?;
             let (em, ev, ef) = (fwd.e_mean, fwd.e_var, fwd.e_fields);
+            // A still's settling steps (§7.2.4) are simulated, not learnt from nor logged.
+            if cfg.still.is_some_and(|s| f + w <= s.settle) {
+                f += w;
+                herds.control(clip, f, &fwd, cfg, &model, rng)?;
+                progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
+                continue;
+            }
             // The gradient is needed to learn and, for the identifiability probe, to record.
             let g = match self.learn || self.probe {
                 true => {
@@ -407,6 +416,7 @@ impl<'a> FitRun<'a> {
         // Weights of (E_mean, E_var) in the back-propagated loss: the paper's split takes
         // E_var's gradient in a second pass; field matching replaces E_mean.
         let weights = match (cfg.loss, cfg.split_gradients) {
+            _ if cfg.still.is_some() => (0.0, (!cfg.split_gradients) as u8 as f64 * cfg.var_weight),
             (LossKind::Fields | LossKind::Ensemble, _) => (0.0, cfg.var_weight),
             (LossKind::Paper, true) => (1.0, 0.0),
             (LossKind::Paper, false) => (1.0, cfg.var_weight),
@@ -447,6 +457,11 @@ impl<'a> FitRun<'a> {
                 em += e_m / (w as f64 * kr);
                 ev += e_v / (w as f64 * kr);
                 let loss = match cfg.loss {
+                    _ if cfg.still.is_some() => {
+                        let dl = density_loss(clip, &state, f + s + 1)?;
+                        ef += read_vec(&dl.clone().detach())?[0] / (w as f64 * kr);
+                        loss + dl.mul_scalar(cfg.density_weight)
+                    }
                     LossKind::Fields => {
                         let fl = fields_loss_weighted(clip, &state, f + s + 1, cfg.density_weight)?;
                         ef += read_vec(&fl.clone().detach())?[0] / (w as f64 * kr);
@@ -508,7 +523,7 @@ impl<'a> FitRun<'a> {
     ) -> Result<Vec<f64>> {
         let cfg = self.cfg;
         let mut g = grad_of(loss, th)?;
-        if !(cfg.split_gradients && cfg.loss == LossKind::Paper) {
+        if !(cfg.split_gradients && (cfg.loss == LossKind::Paper || cfg.still.is_some())) {
             return Ok(g);
         }
         let kr = fwd.live.len() as f64;

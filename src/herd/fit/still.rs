@@ -1,0 +1,145 @@
+//! Fits from a single image (paper §7.2.4): a clip of one frame (density and direction variance,
+//! no velocity) fitted as a stationary target.
+//!
+//! The frame is repeated `settle + average + 1` times ([`stationary_clip`]) and fitted by the
+//! ordinary loop ([`super::run`]) with [`super::FitConfig::still`] set: each epoch starts the herd
+//! from the image's density with random headings (the velocity is zero), simulates `settle` steps
+//! without learning, then unrolls the `average` steps in windows whose loss is the time average of
+//! the density match Σ(ρ' − Kρ)² / Σ(Kρ)² ([`super::loss::density_loss`]) and λ_var E_var (eq. 8)
+//! against the image's direction variance S. With the paper's split (§6.1) the alignment
+//! parameters follow ∇E_var and the others the density term. No leaders (a still shows no
+//! direction to follow) and no rebalancing between windows (agents that leave the grid are
+//! replaced). A still measures no speeds: the start set's speed model is used, as the paper sets
+//! the seals' speeds from their known behaviour.
+
+use crate::backend::{cpu_device, Precision};
+use crate::data::{ClipFields, ClipSpeed};
+use crate::error::{Error, Result};
+use crate::herd::eval::run_from_fields;
+use crate::herd::params::{Params, SpeedModel};
+use crate::herd::sim::Guidance;
+use crate::herd::start::Settle;
+use crate::measure::emergent::polarization;
+use crate::measure::fields::field_errors;
+use serde::{Deserialize, Serialize};
+
+/// The schedule of a fit from a single image.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StillConfig {
+    /// Steps simulated from the image's density before the objective is averaged (no learning).
+    pub settle: usize,
+    /// Steps over which the density and direction-variance match is averaged (the learning
+    /// windows).
+    pub average: usize,
+}
+
+impl Default for StillConfig {
+    fn default() -> Self {
+        StillConfig {
+            settle: 25,
+            average: 50,
+        }
+    }
+}
+
+impl StillConfig {
+    /// Checks the ranges; errors name `still.settle` / `still.average`.
+    pub fn check(&self) -> Result<()> {
+        if self.settle > 100_000 {
+            return Err(Error::config(
+                "still.settle",
+                format!("{} is out of range 0..=100000", self.settle),
+            ));
+        }
+        if self.average == 0 || self.average > 100_000 {
+            return Err(Error::config(
+                "still.average",
+                format!("{} is out of range 1..=100000", self.average),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Frames of the stationary clip: frame 0, the settling steps and the averaged steps.
+    pub fn frames(&self) -> usize {
+        self.settle + self.average + 1
+    }
+}
+
+/// The stationary target of a one-frame clip: its frame repeated [`StillConfig::frames`] times
+/// with zero velocity; its speed model is `speed`'s when the still measured none (v_μ = 0).
+pub fn stationary_clip(still: &ClipFields, cfg: &StillConfig, speed: &SpeedModel) -> ClipFields {
+    let n = cfg.frames();
+    let one = |a: &ndarray::Array3<f32>| {
+        let f0 = a.index_axis(ndarray::Axis(0), 0);
+        ndarray::Array3::from_shape_fn((n, f0.dim().0, f0.dim().1), |(_, y, x)| f0[[y, x]])
+    };
+    let mut meta = still.meta.clone();
+    meta.frames = n;
+    if meta.speed.mean <= 0.0 {
+        meta.speed = ClipSpeed {
+            mean: speed.mean,
+            std: speed.stationary_std(),
+            density_table: speed.density_table.clone().unwrap_or_default(),
+        };
+    }
+    ClipFields {
+        meta,
+        density: one(&still.density),
+        velocity: ndarray::Array4::zeros((n, still.meta.ny, still.meta.nx, 2)),
+        dir_variance: one(&still.dir_variance),
+        obstacles: still.obstacles.clone(),
+    }
+}
+
+/// What a parameter set does with the image: the density error ([`field_errors`] against the
+/// image) and the polarization (eq. 12) of the herd, each averaged over the `average` steps after
+/// `settle` of runs from the image's density (no population control, no leaders), and over
+/// `seeds` runs (seeds `seed`, `seed + 1`, …). `clip` is the [`stationary_clip`].
+pub fn still_measures(
+    clip: &ClipFields,
+    params: &Params,
+    cfg: &StillConfig,
+    seed: u64,
+    seeds: usize,
+    precision: Precision,
+) -> Result<StillMeasures> {
+    let device = cpu_device(precision)?;
+    let guidance = vec![Guidance::None; clip.frames()];
+    let (mut de, mut pol, mut n): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    for k in 0..seeds.max(1) {
+        run_from_fields(
+            clip,
+            params,
+            (0, cfg.settle + cfg.average),
+            seed.wrapping_add(k as u64),
+            &Settle::default(),
+            &guidance,
+            &device,
+            |f, state, ids| {
+                if f > cfg.settle {
+                    let rows = state.rows(ids)?;
+                    de += field_errors(clip, 0, &rows).0;
+                    let vel: Vec<[f64; 2]> = rows.iter().map(|r| [r.vx, r.vy]).collect();
+                    pol += polarization(&vel, &vec![1.0; vel.len()]);
+                    n += 1.0;
+                }
+                Ok(())
+            },
+        )?;
+    }
+    Ok(StillMeasures {
+        density_error: de / n.max(1.0),
+        polarization: pol / n.max(1.0),
+    })
+}
+
+/// [`still_measures`]' result.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StillMeasures {
+    /// Σ|ρ' − ρ| / Σρ against the image, time-averaged.
+    pub density_error: f64,
+    /// Polarization of the whole herd (eq. 12), time-averaged.
+    pub polarization: f64,
+}
