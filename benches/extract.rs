@@ -35,6 +35,8 @@ fn bench(c: &mut Criterion) {
         seed: 2,
         heading_deg: 0.0,
         precision: Precision::F32,
+        density: 0.5,
+        random_headings: false,
     };
     let syn = synthesise(&cfg, &device, || {}).unwrap();
     let render = RenderConfig {

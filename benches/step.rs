@@ -146,6 +146,8 @@ fn fit_frames(c: &mut Criterion) {
             seed: 1,
             heading_deg: 0.0,
             precision: Precision::F32,
+            density: 0.5,
+            random_headings: false,
         };
         let clip = synthesise(&cfg, &device, || {}).unwrap().clip;
         let fc = FitConfig {

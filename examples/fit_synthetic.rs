@@ -31,6 +31,7 @@ fn main() -> herdfit::Result<()> {
         out: out.join("clip"),
         video: None,
         zone_sets: None,
+        ..SynthJob::default()
     };
     write_clip(&synth, &mut NoProgress)?;
     let job = FitJob {

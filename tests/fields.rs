@@ -30,6 +30,8 @@ fn small_synth(seed: u64) -> (SynthConfig, herdfit::herd::synth::Synth) {
         seed,
         heading_deg: 10.0,
         precision: Precision::F32,
+        density: 0.5,
+        random_headings: false,
     };
     let dev = cpu_device(Precision::F32).unwrap();
     let syn = synthesise(&cfg, &dev, || {}).unwrap();

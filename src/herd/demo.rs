@@ -75,6 +75,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
             (video.clone(), v)
         }),
         zone_sets: None,
+        ..SynthJob::default()
     };
     let syn = write_clip(&synth_job, progress)?;
     let synth = syn.summary(&synth_job);

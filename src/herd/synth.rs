@@ -33,6 +33,11 @@ pub struct SynthConfig {
     /// Direction of travel (and of the uniform guidance), degrees from +x.
     pub heading_deg: f64,
     pub precision: Precision,
+    /// Agents per BL² of the starting square.
+    pub density: f64,
+    /// Headings uniform on the circle and no guidance: randomly aligned agents centred on the
+    /// grid (a one-frame clip of them is a still, paper §7.2.4).
+    pub random_headings: bool,
 }
 
 impl SynthConfig {
@@ -71,6 +76,12 @@ impl SynthConfig {
         if !self.heading_deg.is_finite() {
             return Err(Error::config("heading_deg", "must be finite"));
         }
+        if !(self.density.is_finite() && self.density > 0.0 && self.density <= 100.0) {
+            return Err(Error::config(
+                "density",
+                format!("{} agents/BL² is out of range (0, 100]", self.density),
+            ));
+        }
         Ok(())
     }
 }
@@ -107,19 +118,29 @@ pub fn synthesise_zoned(
     let dir = [a.cos(), a.sin()];
     let size = g.size();
     let centre = [g.origin[0] + size[0] / 2.0, g.origin[1] + size[1] / 2.0];
+    // Randomly aligned agents rest on the grid's centre; a travelling herd starts upstream of it.
+    let upstream = if cfg.random_headings { 0.0 } else { 0.2 };
     let spec = HerdSpec {
         agents: cfg.agents,
-        density: 0.5,
+        density: cfg.density,
         centre: [
-            centre[0] - 0.2 * size[0] * dir[0],
-            centre[1] - 0.2 * size[1] * dir[1],
+            centre[0] - upstream * size[0] * dir[0],
+            centre[1] - upstream * size[1] * dir[1],
         ],
         heading_deg: cfg.heading_deg,
-        heading_spread_deg: 20.0,
+        heading_spread_deg: if cfg.random_headings {
+            f64::INFINITY
+        } else {
+            20.0
+        },
     };
     let world = World {
         obstacles: Some(obstacle_map(g, &cfg.obstacles)),
-        guidance: Guidance::Uniform(dir),
+        guidance: if cfg.random_headings {
+            Guidance::None
+        } else {
+            Guidance::Uniform(dir)
+        },
     };
     let init = random_herd(&spec, &cfg.params.speed, &world, cfg.seed)?;
     let ids: Vec<u64> = init.iter().map(|r| r.id).collect();
@@ -163,6 +184,8 @@ pub fn synthesise_zoned(
         "agents": cfg.agents,
         "seed": cfg.seed,
         "heading_deg": cfg.heading_deg,
+        "density": cfg.density,
+        "random_headings": cfg.random_headings,
         "precision": cfg.precision,
         "truth": "truth.json",
     });
@@ -216,6 +239,14 @@ pub struct SynthJob {
     /// grid: each agent takes its zone's set every step (`params` still gives the speed model
     /// and the constants); written into the clip as `truth-sets.json`.
     pub zone_sets: Option<PathBuf>,
+    /// Agents per BL² of the starting square.
+    pub density: f64,
+    /// Randomly aligned agents (uniform headings, no guidance) centred on the grid; with one
+    /// frame the clip is a still (paper §7.2.4).
+    pub random_headings: bool,
+    /// A PNG of frame 0 as the video would show it (a still's image for `extract`), and the
+    /// bare ground beside it as `<stem>-ground.png` (its background).
+    pub image: Option<PathBuf>,
 }
 
 /// How `synth` renders its video.
@@ -246,6 +277,9 @@ impl Default for SynthJob {
             out: PathBuf::from("clip"),
             video: None,
             zone_sets: None,
+            density: 0.5,
+            random_headings: false,
+            image: None,
         }
     }
 }
@@ -296,6 +330,9 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         None => Array2::zeros((ny, nx)),
     };
     AtomicDir::create(&job.out)?; // fail early on an unusable output folder
+    if let Some(img) = &job.image {
+        crate::data::atomic::check_writable(img)?;
+    }
     let device = cpu_device(job.precision)?;
     let cfg = SynthConfig {
         params: params.clone(),
@@ -307,6 +344,8 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         seed: job.seed,
         heading_deg: job.heading_deg,
         precision: job.precision,
+        density: job.density,
+        random_headings: job.random_headings,
     };
     let zones = match &job.zone_sets {
         None => None,
@@ -361,6 +400,10 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
             Some(pending)
         }
     };
+    if let Some(img) = &job.image {
+        let v = job.video.as_ref().map(|v| v.1.clone()).unwrap_or_default();
+        render::image(job, &v, &syn, img)?;
+    }
     clip.save(&job.out, &extra)?;
     if let Some(p) = pending {
         render::commit(p)?;
@@ -387,6 +430,15 @@ impl Synth {
             job.out.display()
         )
     }
+}
+
+/// Where `synth --image IMG.png` writes the bare ground: `IMG-ground.png` beside it.
+pub fn ground_path(image: &std::path::Path) -> PathBuf {
+    let stem = image
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    image.with_file_name(format!("{stem}-ground.png"))
 }
 
 /// Rendering the synthetic clip's video (OpenCV), or refusing to without the `video` feature.
@@ -439,6 +491,33 @@ mod render {
             "frame_size": crate::video::render::frame_size(&syn.clip.grid(), v.px_per_bl),
         });
         Ok((cams, pending, settings))
+    }
+
+    /// The still's image of frame 0 and its bare ground beside it (`<stem>-ground.png`).
+    #[cfg(feature = "video")]
+    pub fn image(job: &SynthJob, v: &SynthVideo, syn: &Synth, path: &Path) -> Result<()> {
+        let cfg = crate::video::RenderConfig {
+            px_per_bl: v.px_per_bl,
+            body_rgb: v.body_colour,
+            camera_motion: false,
+            seed: job.seed,
+        };
+        crate::video::render::render_image(
+            path,
+            &super::ground_path(path),
+            &syn.frames[0],
+            &syn.clip.grid(),
+            &syn.clip.obstacles,
+            &cfg,
+        )
+    }
+
+    #[cfg(not(feature = "video"))]
+    pub fn image(_job: &SynthJob, _v: &SynthVideo, _syn: &Synth, path: &Path) -> Result<()> {
+        Err(crate::error::Error::file(
+            path,
+            "this herdfit was built without the `video` feature (OpenCV)",
+        ))
     }
 
     #[cfg(not(feature = "video"))]

@@ -161,6 +161,114 @@ fn mat_from_bgr(buf: &[u8], w: usize, h: usize, path: &Path) -> Result<Mat> {
     Ok(m)
 }
 
+/// The static layer of a rendered frame: the ground texture and the obstacle cells.
+fn base_layer(
+    w: usize,
+    h: usize,
+    grid: &Grid,
+    obstacles: &Array2<u8>,
+    cfg: &RenderConfig,
+    path: &Path,
+) -> Result<Mat> {
+    let mut base = mat_from_bgr(&ground(w, h, cfg.seed), w, h, path)?;
+    let s = cfg.px_per_bl;
+    for ((iy, ix), &v) in obstacles.indexed_iter() {
+        if v == 0 {
+            continue;
+        }
+        let c = grid.centre(ix, iy);
+        let half = grid.cell_size / 2.0;
+        let a = world_to_px(grid, s, h, [c[0] - half, c[1] + half]);
+        let b = world_to_px(grid, s, h, [c[0] + half, c[1] - half]);
+        let rect = opencv::core::Rect::new(
+            a[0].round() as i32,
+            a[1].round() as i32,
+            (b[0] - a[0]).round() as i32,
+            (b[1] - a[1]).round() as i32,
+        );
+        imgproc::rectangle(
+            &mut base,
+            rect,
+            Scalar::new(55.0, 60.0, 62.0, 0.0),
+            -1,
+            imgproc::LINE_8,
+            0,
+        )
+        .map_err(cv(path))?;
+    }
+    Ok(base)
+}
+
+/// Draws every agent as an anti-aliased ellipse of one body length by [`BODY_WIDTH_BL`], along
+/// its velocity.
+fn draw_agents(
+    frame: &mut Mat,
+    agents: &[AgentRow],
+    grid: &Grid,
+    cfg: &RenderConfig,
+    path: &Path,
+) -> Result<()> {
+    let s = cfg.px_per_bl;
+    let h = frame.rows() as usize;
+    let colour = Scalar::new(
+        cfg.body_rgb[2] as f64,
+        cfg.body_rgb[1] as f64,
+        cfg.body_rgb[0] as f64,
+        0.0,
+    );
+    const SHIFT: i32 = 4;
+    let sub = (1 << SHIFT) as f64;
+    let axes = Size::new(
+        (0.5 * s * sub).round() as i32,
+        (0.5 * BODY_WIDTH_BL * s * sub).round() as i32,
+    );
+    for a in agents {
+        let p = world_to_px(grid, s, h, [a.x, a.y]);
+        let angle = -a.vy.atan2(a.vx).to_degrees();
+        imgproc::ellipse(
+            frame,
+            Point::new((p[0] * sub).round() as i32, (p[1] * sub).round() as i32),
+            axes,
+            angle,
+            0.0,
+            360.0,
+            colour,
+            -1,
+            imgproc::LINE_AA,
+            SHIFT,
+        )
+        .map_err(cv(path))?;
+    }
+    Ok(())
+}
+
+/// Renders one frame of `agents` as the video would show it (a still's image) into `path` (PNG),
+/// and the bare ground (its background) into `ground`; both written atomically.
+pub fn render_image(
+    path: &Path,
+    ground: &Path,
+    agents: &[AgentRow],
+    grid: &Grid,
+    obstacles: &Array2<u8>,
+    cfg: &RenderConfig,
+) -> Result<()> {
+    cfg.check()?;
+    let (w, h) = frame_size(grid, cfg.px_per_bl);
+    if w * h > 8192 * 8192 {
+        return Err(Error::invalid(format!("a {w}×{h} image is too large")));
+    }
+    let base = base_layer(w, h, grid, obstacles, cfg, path)?;
+    let mut frame = base.clone();
+    draw_agents(&mut frame, agents, grid, cfg, path)?;
+    for (p, m) in [(ground, &base), (path, &frame)] {
+        let mut buf = opencv::core::Vector::<u8>::new();
+        opencv::imgcodecs::imencode(".png", m, &mut buf, &opencv::core::Vector::new())
+            .map_err(cv(p))?;
+        crate::data::atomic::write_atomic(p, buf.as_slice())?;
+    }
+    Ok(())
+}
+
 /// A rendered video waiting in a temporary sibling of its destination.
 pub struct PendingVideo {
     path: std::path::PathBuf,
@@ -205,67 +313,13 @@ pub fn render_video(
             "OpenCV cannot open an MJPG AVI writer here",
         ));
     }
-    // Static layer: ground + obstacle cells.
-    let mut base = mat_from_bgr(&ground(w, h, cfg.seed), w, h, path)?;
-    let s = cfg.px_per_bl;
-    for ((iy, ix), &v) in obstacles.indexed_iter() {
-        if v == 0 {
-            continue;
-        }
-        let c = grid.centre(ix, iy);
-        let half = grid.cell_size / 2.0;
-        let a = world_to_px(grid, s, h, [c[0] - half, c[1] + half]);
-        let b = world_to_px(grid, s, h, [c[0] + half, c[1] - half]);
-        let rect = opencv::core::Rect::new(
-            a[0].round() as i32,
-            a[1].round() as i32,
-            (b[0] - a[0]).round() as i32,
-            (b[1] - a[1]).round() as i32,
-        );
-        imgproc::rectangle(
-            &mut base,
-            rect,
-            Scalar::new(55.0, 60.0, 62.0, 0.0),
-            -1,
-            imgproc::LINE_8,
-            0,
-        )
-        .map_err(cv(path))?;
-    }
-    let colour = Scalar::new(
-        cfg.body_rgb[2] as f64,
-        cfg.body_rgb[1] as f64,
-        cfg.body_rgb[0] as f64,
-        0.0,
-    );
-    const SHIFT: i32 = 4;
-    let sub = (1 << SHIFT) as f64;
-    let axes = Size::new(
-        (0.5 * s * sub).round() as i32,
-        (0.5 * BODY_WIDTH_BL * s * sub).round() as i32,
-    );
+    let base = base_layer(w, h, grid, obstacles, cfg, path)?;
     let mut cameras = Vec::with_capacity(frames.len());
     let mut frame = Mat::default();
     let mut out = Mat::default();
     for (f, agents) in frames.iter().enumerate() {
         base.copy_to(&mut frame).map_err(cv(path))?;
-        for a in agents {
-            let p = world_to_px(grid, s, h, [a.x, a.y]);
-            let angle = -a.vy.atan2(a.vx).to_degrees();
-            imgproc::ellipse(
-                &mut frame,
-                Point::new((p[0] * sub).round() as i32, (p[1] * sub).round() as i32),
-                axes,
-                angle,
-                0.0,
-                360.0,
-                colour,
-                -1,
-                imgproc::LINE_AA,
-                SHIFT,
-            )
-            .map_err(cv(path))?;
-        }
+        draw_agents(&mut frame, agents, grid, cfg, path)?;
         let cam = if cfg.camera_motion {
             camera_at(f, frames.len(), w, h)
         } else {

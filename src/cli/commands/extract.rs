@@ -18,7 +18,9 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ExtractArgs {
-    #[arg(value_name = "VIDEO")]
+    /// The overhead video, or a still image (.png, .jpg, …: a one-frame clip, needs
+    /// --dir-variance).
+    #[arg(value_name = "VIDEO|IMAGE")]
     pub video: PathBuf,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
@@ -77,6 +79,10 @@ pub struct ExtractArgs {
     /// One preview every N frames.
     #[arg(long, value_name = "N", default_value_t = 25)]
     pub preview_every: usize,
+    /// A still image (.png, .jpg, …; a one-frame clip, §7.2.4): its uniform direction variance
+    /// in rad², set by inspection (randomly aligned animals: π²/3 ≈ 3.29; aligned: 0).
+    #[arg(long, value_name = "V")]
+    pub dir_variance: Option<f64>,
 }
 
 /// A `--count` value `N@FRAME`.
@@ -146,6 +152,7 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
     cfg.smooth = a.smooth.unwrap_or(cfg.smooth);
     cfg.frames = a.frames.map(|(x, y)| [x, y]).or(cfg.frames);
     cfg.obstacles = a.obstacles.clone().or(cfg.obstacles);
+    cfg.dir_variance = a.dir_variance.or(cfg.dir_variance);
     match a.background.as_deref() {
         None => {}
         Some("auto") => cfg.background = None,
@@ -179,6 +186,7 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
         "frames" => a.frames.is_some(),
         "smooth" => a.smooth.is_some(),
         "count" => a.count.is_some(),
+        "dir_variance" => a.dir_variance.is_some(),
         "stabilise" => a.static_camera,
         _ => false,
     };

@@ -57,6 +57,17 @@ pub struct SynthArgs {
     /// polygons cover the grid; each agent takes its zone's set every step.
     #[arg(long, value_name = "SETS.json")]
     pub zone_sets: Option<PathBuf>,
+    /// Agents per BL² of the herd's starting square.
+    #[arg(long, value_name = "D", default_value_t = 0.5)]
+    pub density: f64,
+    /// Randomly aligned agents: headings uniform on the circle, no guidance, the herd centred on
+    /// the grid. With --frames 1 the clip is a still (a one-frame clip, paper §7.2.4).
+    #[arg(long)]
+    pub random_headings: bool,
+    /// Also render frame 0 as a PNG (a still's image for `extract`), and the bare ground as
+    /// IMG-ground.png beside it (needs the `video` feature).
+    #[arg(long, value_name = "IMG.png")]
+    pub image: Option<PathBuf>,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
     pub out: PathBuf,
@@ -82,8 +93,15 @@ pub fn exec(a: SynthArgs) -> Result<()> {
         out: a.out,
         video: a.video_file.map(|p| (p, video)),
         zone_sets: a.zone_sets,
+        density: a.density,
+        random_headings: a.random_headings,
+        image: a.image,
     };
-    let renamed = [("heading_deg", "--heading"), ("grid", "--grid-size")];
+    let renamed = [
+        ("heading_deg", "--heading"),
+        ("grid", "--grid-size"),
+        ("density", "--density"),
+    ];
     let syn = write_clip(&job, &mut Bars::default()).map_err(|e| with_flags(e, &renamed))?;
     println!("{}", syn.summary(&job));
     Ok(())

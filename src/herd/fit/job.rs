@@ -161,8 +161,9 @@ pub struct FitSummary {
     pub plot_warning: Option<String>,
     /// The identifiability estimate and its wall time in seconds (None when switched off).
     pub uncertainty: Option<(Uncertainty, f64)>,
-    /// A still's measures (density error, polarization) with the start and the fitted set.
-    pub still: Option<(StillConfig, [StillMeasures; 2])>,
+    /// A still's measures ([`still_measures`]): of the herd as drawn from the image, and after
+    /// settling with the start and with the fitted set.
+    pub still: Option<(StillConfig, [StillMeasures; 3])>,
 }
 
 /// Runs a fit job: loads the clips and the start, fits, evaluates the start and the fitted set,
@@ -270,15 +271,17 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
             let m = |p: &Params| {
                 still_measures(clips[0], p, s, cfg.seed, job.eval_seeds, cfg.precision)
             };
-            Some((*s, [m(&start_params)?, m(&res.params)?]))
+            let ([drawn, before], [_, after]) = (m(&start_params)?, m(&res.params)?);
+            Some((*s, [drawn, before, after]))
         }
     };
     let names: Vec<String> = job.clips.iter().map(|p| p.display().to_string()).collect();
     let mut out = res.params.clone();
     let mut prov = provenance(&names, &cfg, &res, loss, errors, job.eval_seeds);
-    if let Some((_, [a, b])) = &still_eval {
+    if let Some((_, [d, a, b])) = &still_eval {
         prov["evaluation"]["still"] = serde_json::json!({
-            "what": "density error against the image and polarization (eq. 12) of the whole herd, averaged over the steps after settling, and over the seeds",
+            "what": "against the image: density error of cell counts and smoothed (the fit's density term), crowding (density around an average animal over the image's), polarization (eq. 12); averaged over the steps after settling and over the seeds; `drawn`: the herd as drawn from the image, before any step",
+            "drawn": d,
             "start": a,
             "fitted": b,
         });
@@ -510,16 +513,24 @@ impl std::fmt::Display for FitSummary {
             "loss E_mean {:.4} → {:.4}, E_var {:.4} → {:.4}, E_fields {:.4} → {:.4}; density error {:.4} → {:.4}, velocity error {:.4} → {:.4}",
             lb.0, la.0, lb.1, la.1, lb.2, la.2, b.0, a.0, b.1, a.1
         )?;
-        if let Some((s, [a, b])) = &self.still {
+        if let Some((s, [d, a, b])) = &self.still {
             writeln!(
                 f,
-                "still: density error {:.4} → {:.4}, polarization {:.4} → {:.4} (after {} settling steps, over {})",
+                "still, start → fitted after {} settling steps, over {} (the herd as drawn from the image in brackets): density error {:.4} → {:.4} ({:.4}), smoothed {:.4} → {:.4} ({:.4}), crowding {:.3} → {:.3} ({:.3}), polarization {:.4} → {:.4} ({:.4})",
+                s.settle,
+                s.average,
                 a.density_error,
                 b.density_error,
+                d.density_error,
+                a.smooth_density_error,
+                b.smooth_density_error,
+                d.smooth_density_error,
+                a.crowding,
+                b.crowding,
+                d.crowding,
                 a.polarization,
                 b.polarization,
-                s.settle,
-                s.average
+                d.polarization,
             )?;
         }
         writeln!(

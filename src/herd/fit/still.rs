@@ -12,15 +12,17 @@
 //! replaced). A still measures no speeds: the start set's speed model is used, as the paper sets
 //! the seals' speeds from their known behaviour.
 
+use super::loss::density_loss;
 use crate::backend::{cpu_device, Precision};
 use crate::data::{ClipFields, ClipSpeed};
 use crate::error::{Error, Result};
 use crate::herd::eval::run_from_fields;
 use crate::herd::params::{Params, SpeedModel};
 use crate::herd::sim::Guidance;
+use crate::herd::sim::{read_vec, HerdState};
 use crate::herd::start::Settle;
 use crate::measure::emergent::polarization;
-use crate::measure::fields::field_errors;
+use crate::measure::fields::{cell_counts, field_errors};
 use serde::{Deserialize, Serialize};
 
 /// The schedule of a fit from a single image.
@@ -93,10 +95,14 @@ pub fn stationary_clip(still: &ClipFields, cfg: &StillConfig, speed: &SpeedModel
     }
 }
 
-/// What a parameter set does with the image: the density error ([`field_errors`] against the
-/// image) and the polarization (eq. 12) of the herd, each averaged over the `average` steps after
-/// `settle` of runs from the image's density (no population control, no leaders), and over
-/// `seeds` runs (seeds `seed`, `seed + 1`, …). `clip` is the [`stationary_clip`].
+/// What a parameter set does with the image, each measure averaged over the `average` steps
+/// after `settle` of runs from the image's density (no population control, no leaders), and over
+/// `seeds` runs (seeds `seed`, `seed + 1`, …): the density error against the image, raw
+/// ([`field_errors`]) and smoothed (the fit's own density term,
+/// [`super::loss::density_loss`]), the crowding (the density around an average animal,
+/// Σn²/(A Σn) over cells, relative to the image's) and the polarization (eq. 12). The `start`
+/// measures are those of the herd as drawn from the image, before any step. `clip` is the
+/// [`stationary_clip`].
 pub fn still_measures(
     clip: &ClipFields,
     params: &Params,
@@ -104,12 +110,37 @@ pub fn still_measures(
     seed: u64,
     seeds: usize,
     precision: Precision,
-) -> Result<StillMeasures> {
+) -> Result<[StillMeasures; 2]> {
     let device = cpu_device(precision)?;
     let guidance = vec![Guidance::None; clip.frames()];
-    let (mut de, mut pol, mut n): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    let area = clip.grid().cell_area();
+    let crowding = |n: &[f64]| {
+        let (s1, s2) = n.iter().fold((0.0, 0.0), |(a, b), &x| (a + x, b + x * x));
+        s2 / (area * s1.max(1e-12))
+    };
+    let image: Vec<f64> = clip
+        .density
+        .index_axis(ndarray::Axis(0), 0)
+        .iter()
+        .map(|&r| r as f64 * area)
+        .collect();
+    let image_crowding = crowding(&image);
+    let mut sum = [0.0f64; 4];
+    let mut n = 0.0f64;
+    let mut start = [0.0f64; 4];
+    let measure = |f: usize, state: &HerdState, ids: &[u64]| -> Result<[f64; 4]> {
+        let rows = state.rows(ids)?;
+        let vel: Vec<[f64; 2]> = rows.iter().map(|r| [r.vx, r.vy]).collect();
+        let (counts, _) = cell_counts(clip, &rows);
+        Ok([
+            field_errors(clip, f, &rows).0,
+            read_vec(&density_loss(clip, state, f)?)?[0],
+            crowding(&counts) / image_crowding.max(1e-12),
+            polarization(&vel, &vec![1.0; vel.len()]),
+        ])
+    };
     for k in 0..seeds.max(1) {
-        run_from_fields(
+        let rows0 = run_from_fields(
             clip,
             params,
             (0, cfg.settle + cfg.average),
@@ -119,27 +150,39 @@ pub fn still_measures(
             &device,
             |f, state, ids| {
                 if f > cfg.settle {
-                    let rows = state.rows(ids)?;
-                    de += field_errors(clip, 0, &rows).0;
-                    let vel: Vec<[f64; 2]> = rows.iter().map(|r| [r.vx, r.vy]).collect();
-                    pol += polarization(&vel, &vec![1.0; vel.len()]);
+                    let m = measure(f, state, ids)?;
+                    sum.iter_mut().zip(m).for_each(|(s, v)| *s += v);
                     n += 1.0;
                 }
                 Ok(())
             },
         )?;
+        let s0 = HerdState::from_rows(&rows0, &device);
+        let ids: Vec<u64> = rows0.iter().map(|r| r.id).collect();
+        let m = measure(0, &s0, &ids)?;
+        start.iter_mut().zip(m).for_each(|(s, v)| *s += v);
     }
-    Ok(StillMeasures {
-        density_error: de / n.max(1.0),
-        polarization: pol / n.max(1.0),
-    })
+    let k = seeds.max(1) as f64;
+    let of = |m: [f64; 4], n: f64| StillMeasures {
+        density_error: m[0] / n,
+        smooth_density_error: m[1] / n,
+        crowding: m[2] / n,
+        polarization: m[3] / n,
+    };
+    Ok([of(start, k), of(sum, n.max(1.0))])
 }
 
 /// [`still_measures`]' result.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StillMeasures {
-    /// Σ|ρ' − ρ| / Σρ against the image, time-averaged.
+    /// Σ|ρ' − ρ| / Σρ against the image (cell counts; its floor is the sampling noise of the
+    /// herd drawn from the image, the `start` value).
     pub density_error: f64,
-    /// Polarization of the whole herd (eq. 12), time-averaged.
+    /// Σ(ρ' − Kρ)² / Σ(Kρ)², ρ' splatted and Kρ blurred alike (the fit's density term).
+    pub smooth_density_error: f64,
+    /// The density around an average animal, Σn²/(A Σn), over the image's (1: kept; < 1:
+    /// spread out; > 1: clumped).
+    pub crowding: f64,
+    /// Polarization of the whole herd (eq. 12).
     pub polarization: f64,
 }

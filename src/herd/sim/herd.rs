@@ -16,7 +16,8 @@ pub struct HerdSpec {
     pub density: f64,
     pub centre: [f64; 2],
     pub heading_deg: f64,
-    /// Standard deviation of the headings (degrees).
+    /// Standard deviation of the headings (degrees); infinite: headings uniform on the circle
+    /// (randomly aligned agents, as in a still of resting animals, paper §7.2.4).
     pub heading_spread_deg: f64,
 }
 
@@ -69,7 +70,10 @@ pub fn random_herd(
             continue;
         }
         let z: f64 = rng.sample(StandardNormal);
-        let a = (spec.heading_deg + spec.heading_spread_deg * z).to_radians();
+        let a = match spec.heading_spread_deg.is_infinite() {
+            true => (rng.gen::<f64>() * 2.0 - 1.0) * std::f64::consts::PI,
+            false => (spec.heading_deg + spec.heading_spread_deg * z).to_radians(),
+        };
         let zs: f64 = rng.sample(StandardNormal);
         let s = (speed.mean + speed.std * zs).clamp(0.0, speed.max);
         rows.push(AgentRow {

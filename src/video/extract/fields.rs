@@ -244,6 +244,23 @@ pub(super) struct Fields {
 }
 
 impl Sums {
+    /// The sums of a still (one frame, no flow): herd pixels per cell, and the direction
+    /// variance `dir_variance` (rad²) in every cell that holds herd pixels.
+    pub fn still(count: Vec<f64>, dir_variance: f64) -> Sums {
+        let var = count
+            .iter()
+            .map(|&n| if n > 0.0 { dir_variance } else { 0.0 })
+            .collect();
+        Sums {
+            fsum: vec![vec![[0.0; 2]; count.len()]],
+            var: vec![var],
+            count: vec![count],
+            speeds: Vec::new(),
+            first_flow: None,
+            previews: Vec::new(),
+        }
+    }
+
     /// Frame `i`'s flow from the previous grey `pg`: summed per cell over herd pixels (BL/s, y
     /// up), the pixels' speeds, and each cell's direction variance about its mean flow.
     #[allow(clippy::too_many_arguments)]

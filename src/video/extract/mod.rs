@@ -20,11 +20,13 @@ mod job;
 mod preview;
 mod register;
 mod report;
+mod still;
 
 pub use calibrate::Calibration;
 pub use camera::Similarity;
 pub use decode::quietly;
 pub use job::{run, ExtractJob, CENTRE_ANCHOR};
+pub use still::is_still;
 
 use crate::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
 use crate::error::{Error, Result};
@@ -82,6 +84,10 @@ pub struct ExtractConfig {
     /// Processing width limit: frames are scaled down so the longer side is at most this many
     /// pixels (flow and segmentation run there).
     pub max_side: usize,
+    /// A still image's direction variance (rad², paper §7.2.4): the uniform target of every
+    /// occupied cell, since one image shows no motion (the paper sets it by inspection; randomly
+    /// aligned animals: π²/3 ≈ 3.29). Required for a still, refused for a video.
+    pub dir_variance: Option<f64>,
 }
 
 /// Largest shift (video pixels) of a frame corner, in 90 % of the frames, under a registered
@@ -108,6 +114,7 @@ impl Default for ExtractConfig {
             frames: None,
             smooth: 9,
             max_side: 480,
+            dir_variance: None,
         }
     }
 }
@@ -156,6 +163,14 @@ impl ExtractConfig {
                 if !(v.is_finite() && v >= 0.0) {
                     return Err(Error::config(key, format!("{v} must be ≥ 0")));
                 }
+            }
+        }
+        if let Some(v) = self.dir_variance {
+            if !(v.is_finite() && (0.0..=std::f64::consts::PI.powi(2)).contains(&v)) {
+                return Err(Error::config(
+                    "dir_variance",
+                    format!("{v} rad² is out of range 0..=π² (9.87)"),
+                ));
             }
         }
         if self.max_side < 16 {
@@ -322,6 +337,15 @@ pub fn extract(
     preview_every: Option<usize>,
     mut progress: impl FnMut(&str, usize, usize),
 ) -> Result<Extraction> {
+    if is_still(path) {
+        return still::extract_still(path, cfg, preview_every.is_some());
+    }
+    if cfg.dir_variance.is_some() {
+        return Err(Error::config(
+            "dir_variance",
+            "is for a still image (a video's direction variance comes from its optical flow)",
+        ));
+    }
     let (mut vid, first, last) = open_range(path, cfg)?;
     let (w, h) = (vid.w, vid.h);
     let t_start = std::time::Instant::now();

@@ -1,0 +1,186 @@
+//! Fits from a single image (issue #17 item 2, paper §7.2.4) through the binary: `synth` writes a
+//! still of randomly aligned agents and its image, `extract` turns the image into a one-frame clip
+//! with the user's direction variance, `fit` fits a still as a stationary target; and the still's
+//! bad input (no animals, no direction variance, a still among video clips, field objectives).
+
+mod common;
+#[path = "common/score.rs"]
+mod score;
+use common::{fails, ok, s, small_clip};
+use herdfit::data::ClipFields;
+use std::path::{Path, PathBuf};
+
+/// A still of 200 randomly aligned agents at `density` agents/BL² on 16 × 16 cells of 3 BL, its
+/// image (12 px per BL) and the bare ground beside it.
+fn still(dir: &Path, density: f64) -> (PathBuf, PathBuf) {
+    let clip = dir.join("still");
+    let img = dir.join("still.png");
+    let d = density.to_string();
+    ok(&[
+        "synth",
+        "--agents",
+        "200",
+        "--frames",
+        "1",
+        "--grid",
+        "16x16",
+        "--cell-size",
+        "3",
+        "--density",
+        &d,
+        "--random-headings",
+        "--seed",
+        "1",
+        "--image",
+        s(&img),
+        "--out",
+        s(&clip),
+    ]);
+    (clip, img)
+}
+
+#[test]
+fn synth_writes_a_still_of_randomly_aligned_agents_and_its_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clip, img) = still(dir.path(), 1.0);
+    let c = ClipFields::load(&clip).unwrap();
+    assert_eq!(c.frames(), 1);
+    assert!((c.count(0) - 200.0).abs() < 1e-3, "{}", c.count(0));
+    // 200 agents at 1 per BL² fill a square of about 14 × 14 BL: about 22 cells of 9 BL².
+    let occupied = c.density.iter().filter(|&&r| r > 0.0).count();
+    assert!((18..=40).contains(&occupied), "{occupied} occupied cells");
+    // Randomly aligned: the herd's polarization is small, and cells of several agents show a
+    // spread of directions (rad²).
+    let rows = score::read_traj(&clip.join("trajectories.csv"));
+    let v: Vec<[f64; 2]> = rows[0].iter().map(|r| [r.vx, r.vy]).collect();
+    let pol = herdfit::measure::emergent::polarization(&v, &vec![1.0; v.len()]);
+    assert!(pol < 0.2, "polarization {pol}");
+    let mean_s = c.dir_variance.iter().filter(|&&x| x > 0.0).sum::<f32>()
+        / c.dir_variance.iter().filter(|&&x| x > 0.0).count() as f32;
+    assert!(mean_s > 1.0, "mean direction variance {mean_s} rad²");
+    let ground = dir.path().join("still-ground.png");
+    for p in [&img, &ground] {
+        let bytes = std::fs::read(p).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG", "{}", p.display());
+    }
+}
+
+#[test]
+fn extract_turns_a_still_image_into_a_one_frame_clip() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, img) = still(dir.path(), 0.5);
+    let out = dir.path().join("x");
+    let line = ok(&[
+        "extract",
+        s(&img),
+        "--out",
+        s(&out),
+        "--dir-variance",
+        "3.29",
+    ]);
+    assert!(line.contains("camera still"), "{line}");
+    let c = ClipFields::load(&out).unwrap();
+    assert_eq!(c.frames(), 1);
+    // 200 animals drawn 12 px long: the count within 10 %, cells of 3 BL within 5 %.
+    assert!((c.count(0) - 200.0).abs() < 20.0, "{} animals", c.count(0));
+    assert!(
+        (c.meta.cell_size - 3.0).abs() < 0.15,
+        "{}",
+        c.meta.cell_size
+    );
+    assert!(c.velocity.iter().all(|&v| v == 0.0));
+    assert_eq!(c.meta.speed.mean, 0.0);
+    for (&rho, &dv) in c.density.iter().zip(&c.dir_variance) {
+        assert_eq!(dv, if rho > 0.0 { 3.29 } else { 0.0 });
+    }
+}
+
+#[test]
+fn a_still_fit_keeps_the_density_without_aligning_the_herd() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clip, _) = still(dir.path(), 1.0);
+    let p = dir.path().join("p.json");
+    let line = ok(&[
+        "fit",
+        s(&clip),
+        "--out",
+        s(&p),
+        "--epochs",
+        "16",
+        "--no-uncertainty",
+    ]);
+    assert!(line.contains("still, start → fitted"), "{line}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    let st = &json["provenance"]["evaluation"]["still"];
+    let m = |set: &str, key: &str| st[set][key].as_f64().unwrap();
+    // The fitted herd matches the image's density better than the generic start by ≥ 30 %
+    // (the fit's own smoothed measure and the raw cell counts), keeps the density around an
+    // average animal within 10 % of the image's, and stays disordered.
+    assert!(
+        m("fitted", "smooth_density_error") < 0.7 * m("start", "smooth_density_error"),
+        "{st}"
+    );
+    assert!(
+        m("fitted", "density_error") < 0.7 * m("start", "density_error"),
+        "{st}"
+    );
+    assert!((m("fitted", "crowding") - 1.0).abs() < 0.1, "{st}");
+    assert!(m("fitted", "polarization") < 0.2, "{st}");
+    // The herd as drawn from the image reproduces it exactly (cell counts).
+    assert!(m("drawn", "density_error") < 1e-6, "{st}");
+}
+
+#[test]
+fn a_still_without_animals_or_direction_variance_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, img) = still(dir.path(), 0.5);
+    let out = dir.path().join("x");
+    let ground = dir.path().join("still-ground.png");
+    let e = fails(&[
+        "extract",
+        s(&ground),
+        "--out",
+        s(&out),
+        "--dir-variance",
+        "3.29",
+    ]);
+    assert!(
+        e.contains("still-ground.png") && e.contains("no animals"),
+        "{e}"
+    );
+    let e = fails(&[
+        "extract",
+        s(&img),
+        "--out",
+        s(&out),
+        "--background",
+        s(&img),
+        "--dir-variance",
+        "3.29",
+    ]);
+    assert!(e.contains("no animals"), "{e}");
+    let e = fails(&["extract", s(&img), "--out", s(&out)]);
+    assert!(
+        e.contains("still.png") && e.contains("--dir-variance"),
+        "{e}"
+    );
+    let e = fails(&["extract", s(&img), "--out", s(&out), "--dir-variance", "12"]);
+    assert!(e.contains("--dir-variance"), "{e}");
+    assert!(!out.exists(), "nothing written");
+}
+
+#[test]
+fn a_still_among_video_clips_and_field_objectives_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clip, _) = still(dir.path(), 0.5);
+    let video = small_clip(dir.path(), 40, 8, 1);
+    let p = dir.path().join("p.json");
+    let e = fails(&["fit", s(&clip), s(&video), "--out", s(&p)]);
+    assert!(e.contains(s(&video)) && e.contains("one frame"), "{e}");
+    let e = fails(&["fit", s(&clip), "--loss", "fields", "--out", s(&p)]);
+    assert!(e.contains("--loss") && e.contains("still"), "{e}");
+    let e = fails(&["fit", s(&clip), "--still-average", "0", "--out", s(&p)]);
+    assert!(e.contains("--still-average"), "{e}");
+    assert!(!p.exists(), "nothing written");
+}
