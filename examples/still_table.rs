@@ -1,7 +1,9 @@
 //! Fits from a single image (paper §7.2.4, issue #17): one synthetic frame of randomly aligned
 //! agents at three densities, each fitted as a still from the generic start with direction
 //! variance matching (E_var, eq. 8) and without it (λ_var = 0, every parameter from the density
-//! term), and measured after settling (RESULTS.md §8).
+//! term), and measured after settling (RESULTS.md §8); then the same frame as a rendered image
+//! through `extract --dir-variance 3.29` and fitted with E_var (measured against the extracted
+//! clip).
 //!
 //! `cargo run --release --example still_table [-- OUT_DIR]` (default `out/still_table/`)
 
@@ -9,6 +11,7 @@ use herdfit::herd::fit::job::{run, FitJob};
 use herdfit::herd::fit::FitConfig;
 use herdfit::herd::synth::{write_clip, SynthJob};
 use herdfit::progress::NoProgress;
+use herdfit::video::extract;
 use std::path::PathBuf;
 
 fn main() -> herdfit::Result<()> {
@@ -32,15 +35,33 @@ fn main() -> herdfit::Result<()> {
                 random_headings: true,
                 seed: 1,
                 out: clip.clone(),
+                image: Some(out.join(format!("still-{density}.png"))),
                 ..SynthJob::default()
             },
             &mut NoProgress,
         )?;
+        let image = out.join(format!("still-{density}.png"));
+        let extracted = out.join(format!("extracted-{density}"));
+        let ex = extract::run(
+            &extract::ExtractJob {
+                video: image,
+                out: extracted.clone(),
+                config: extract::ExtractConfig {
+                    dir_variance: Some(3.29),
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+            &mut NoProgress,
+        )?;
+        eprintln!("{density}: {}", ex.summary(&extracted));
         let mut rows = Vec::new();
-        for (name, var_weight, split) in [
-            ("fit with E_var", 1.0, true),
-            ("fit without E_var", 0.0, false),
-        ] {
+        let arms = [
+            ("fit with E_var", 1.0, true, &clip),
+            ("fit without E_var", 0.0, false, &clip),
+            ("extracted image: fit with E_var", 1.0, true, &extracted),
+        ];
+        for (name, var_weight, split, clip) in arms {
             let job = FitJob {
                 clips: vec![clip.clone()],
                 config: FitConfig {
@@ -49,7 +70,7 @@ fn main() -> herdfit::Result<()> {
                     split_gradients: split,
                     ..FitConfig::default()
                 },
-                out: out.join(format!("fit-{density}-{var_weight}.json")),
+                out: out.join(format!("fit-{density}-{}.json", rows.len())),
                 uncertainty: herdfit::herd::fit::identify::UncertaintyConfig {
                     enabled: false,
                     ..Default::default()
@@ -59,11 +80,16 @@ fn main() -> herdfit::Result<()> {
             let s = run(&job, &mut NoProgress)?;
             let (_, [drawn, start, fitted]) =
                 s.still.expect("a one-frame clip is fitted as a still");
-            if rows.is_empty() {
-                rows.push(("as drawn from the image (no step)", drawn));
-                rows.push(("generic start (unfitted)", start));
+            if rows.is_empty() || name.starts_with("extracted") {
+                let pre = if rows.is_empty() {
+                    ""
+                } else {
+                    "extracted image: "
+                };
+                rows.push((format!("{pre}as drawn from the image (no step)"), drawn));
+                rows.push((format!("{pre}generic start (unfitted)"), start));
             }
-            rows.push((name, fitted));
+            rows.push((name.to_string(), fitted));
         }
         for (name, m) in rows {
             println!(
