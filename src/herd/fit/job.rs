@@ -265,26 +265,12 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         job,
         &cfg,
     )?;
-    let still_eval = match &cfg.still {
-        None => None,
-        Some(s) => {
-            let m = |p: &Params| {
-                still_measures(clips[0], p, s, cfg.seed, job.eval_seeds, cfg.precision)
-            };
-            let ([drawn, before], [_, after]) = (m(&start_params)?, m(&res.params)?);
-            Some((*s, [drawn, before, after]))
-        }
-    };
+    let still_eval = still_evaluation(clips[0], &cfg, job, &start_params, &res.params)?;
     let names: Vec<String> = job.clips.iter().map(|p| p.display().to_string()).collect();
     let mut out = res.params.clone();
     let mut prov = provenance(&names, &cfg, &res, loss, errors, job.eval_seeds);
-    if let Some((_, [d, a, b])) = &still_eval {
-        prov["evaluation"]["still"] = serde_json::json!({
-            "what": "against the image: density error of cell counts and smoothed (the fit's density term), crowding (density around an average animal over the image's), polarization (eq. 12); averaged over the steps after settling and over the seeds; `drawn`: the herd as drawn from the image, before any step",
-            "drawn": d,
-            "start": a,
-            "fitted": b,
-        });
+    if let Some((_, m)) = &still_eval {
+        prov["evaluation"]["still"] = still_provenance(m);
     }
     if let Some(g) = &global {
         prov["global"] = serde_json::to_value(g)
@@ -323,6 +309,33 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         plot_warning,
         uncertainty,
         still: still_eval,
+    })
+}
+
+/// A still's measures with the start and the fitted set ([`still_measures`]: the herd as drawn,
+/// then after settling with each set); `None` for a video clip.
+fn still_evaluation(
+    clip: &ClipFields,
+    cfg: &FitConfig,
+    job: &FitJob,
+    start: &Params,
+    fitted: &Params,
+) -> Result<Option<(StillConfig, [StillMeasures; 3])>> {
+    let Some(s) = &cfg.still else {
+        return Ok(None);
+    };
+    let m = |p: &Params| still_measures(clip, p, s, cfg.seed, job.eval_seeds, cfg.precision);
+    let ([drawn, before], [_, after]) = (m(start)?, m(fitted)?);
+    Ok(Some((*s, [drawn, before, after])))
+}
+
+/// The provenance's `evaluation.still`.
+fn still_provenance([d, a, b]: &[StillMeasures; 3]) -> serde_json::Value {
+    serde_json::json!({
+        "what": "against the image: density error of cell counts and smoothed (the fit's density term), crowding (density around an average animal over the image's), polarization (eq. 12); averaged over the steps after settling and over the seeds; `drawn`: the herd as drawn from the image, before any step",
+        "drawn": d,
+        "start": a,
+        "fitted": b,
     })
 }
 
