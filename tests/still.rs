@@ -183,4 +183,19 @@ fn a_still_among_video_clips_and_field_objectives_are_refused() {
     let e = fails(&["fit", s(&clip), "--still-average", "0", "--out", s(&p)]);
     assert!(e.contains("--still-average"), "{e}");
     assert!(!p.exists(), "nothing written");
+    // A still has no held-out half to validate or ablate on.
+    let rep = dir.path().join("rep");
+    let truth = clip.join("truth.json");
+    let e = fails(&[
+        "validate",
+        s(&clip),
+        "--params",
+        s(&truth),
+        "--out",
+        s(&rep),
+    ]);
+    assert!(e.contains("still (one frame)"), "{e}");
+    let e = fails(&["ablate", s(&clip), "--out", s(&rep)]);
+    assert!(e.contains("still (one frame)"), "{e}");
+    assert!(!rep.exists(), "nothing written");
 }

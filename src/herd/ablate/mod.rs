@@ -231,6 +231,13 @@ pub fn ablate(
 pub fn run(job: &AblateJob, progress: &mut dyn Progress) -> Result<(AblationReport, String)> {
     job.config.check()?;
     let clip = ClipFields::load(&job.clip)?;
+    if clip.frames() == 1 {
+        return Err(Error::file(
+            &job.clip,
+            "is a still (one frame): the ablations fit and validate on halves of a clip; fit a \
+             still with `herdfit fit` (with and without E_var: --var-weight 0)",
+        ));
+    }
     let start = match &job.start {
         Some(p) => Params::load(p)?,
         None => Params::neutral(),

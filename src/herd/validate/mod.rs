@@ -231,6 +231,12 @@ pub fn validate(
     let (split, grid, seeds) = (cfg.split, cfg.coarse_grid, cfg.seeds);
     let nf = clip.frames();
     let start = ((nf as f64) * split).floor() as usize;
+    if nf == 1 {
+        return Err(Error::invalid(
+            "the clip is a still (one frame): it has no held-out part; `herdfit fit` scores a still \
+             itself (its parameter set's provenance.evaluation.still)",
+        ));
+    }
     if nf - start < 2 {
         return Err(Error::invalid(format!(
             "the held-out part {start}..{nf} has fewer than 2 frames"
