@@ -203,3 +203,13 @@ fn gradcheck_passes_through_the_fused_op_at_10_and_50_steps() {
         );
     }
 }
+
+#[path = "fused_step/body.rs"]
+mod body;
+
+/// The plain simulation step (`sim::plain_step`) has the bytes of the tensor-op step around the
+/// fused forces, in f64 (f32: `tests/fused_step_f32.rs`).
+#[test]
+fn plain_step_has_the_bytes_of_the_tensor_ops_in_f64() {
+    body::plain_step_has_the_bytes_of_the_tensor_ops(Precision::F64);
+}

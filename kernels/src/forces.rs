@@ -19,7 +19,8 @@
 //! parallel pass, so results do not depend on the thread count.
 
 use crate::geometry::P2;
-use crate::perception::{Perception, BRANCH_BEHIND, BRANCH_RIGHT};
+pub use crate::pairs::PairLists;
+use crate::perception::{BRANCH_BEHIND, BRANCH_RIGHT};
 use rayon::prelude::*;
 
 /// Number of per-force coefficients: `w`, `α`, `γ` for each of the four forces.
@@ -27,70 +28,6 @@ pub const N_COEF: usize = 12;
 
 /// Agents per rayon task: small herds stay on one thread, large ones split evenly.
 const MIN_AGENTS_PER_TASK: usize = 256;
-
-/// The visible pairs of one step in compressed rows (padding dropped), from a [`Perception`].
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct PairLists {
-    pub n: usize,
-    /// `nb_start[i]..nb_start[i + 1]` index `nb` and `nb_branch` for agent i (`n + 1` entries).
-    pub nb_start: Vec<u32>,
-    pub nb: Vec<u32>,
-    pub nb_branch: Vec<u8>,
-    /// `ob_start[i]..ob_start[i + 1]` index `ob_point` and `ob_branch` for agent i.
-    pub ob_start: Vec<u32>,
-    pub ob_point: Vec<P2>,
-    pub ob_branch: Vec<u8>,
-}
-
-impl PairLists {
-    /// The real (unmasked) entries of the padded lists of `p`, in list order.
-    pub fn from_perception(p: &Perception) -> Self {
-        let (n, k, ko) = (p.n, p.k, p.ko);
-        let real_nb = p.neighbour_mask.iter().filter(|&&m| m != 0).count();
-        let real_ob = p.obstacle_mask.iter().filter(|&&m| m != 0).count();
-        let mut out = PairLists {
-            n,
-            nb_start: Vec::with_capacity(n + 1),
-            nb: Vec::with_capacity(real_nb),
-            nb_branch: Vec::with_capacity(real_nb),
-            ob_start: Vec::with_capacity(n + 1),
-            ob_point: Vec::with_capacity(real_ob),
-            ob_branch: Vec::with_capacity(real_ob),
-        };
-        out.nb_start.push(0);
-        out.ob_start.push(0);
-        for i in 0..n {
-            for s in i * k..(i + 1) * k {
-                if p.neighbour_mask[s] != 0 {
-                    out.nb.push(p.neighbours[s]);
-                    out.nb_branch.push(p.neighbour_branch[s]);
-                }
-            }
-            out.nb_start.push(out.nb.len() as u32);
-            for s in i * ko..(i + 1) * ko {
-                if p.obstacle_mask[s] != 0 {
-                    out.ob_point.push(p.obstacle_points[s]);
-                    out.ob_branch.push(p.obstacle_branch[s]);
-                }
-            }
-            out.ob_start.push(out.ob_point.len() as u32);
-        }
-        out
-    }
-
-    /// Number of agent–neighbour pairs.
-    pub fn pairs(&self) -> usize {
-        self.nb.len()
-    }
-
-    fn neighbours(&self, i: usize) -> std::ops::Range<usize> {
-        self.nb_start[i] as usize..self.nb_start[i + 1] as usize
-    }
-
-    fn obstacles(&self, i: usize) -> std::ops::Range<usize> {
-        self.ob_start[i] as usize..self.ob_start[i + 1] as usize
-    }
-}
 
 /// Positions and unit headings of the herd, one entry per agent.
 #[derive(Clone, Copy, Debug)]

@@ -10,6 +10,7 @@ pub mod geometry;
 pub mod grid;
 pub mod lift;
 pub mod obstacles;
+pub mod pairs;
 pub mod perception;
 
 pub use forces::{

@@ -83,7 +83,8 @@ struct Cand {
 /// Reused per-thread buffers (no allocation per agent).
 #[derive(Default)]
 struct Scratch {
-    keys: Vec<(u64, u32)>,
+    /// `d2` bits above the index: one integer compare orders by distance, then index.
+    keys: Vec<u128>,
     cand: Vec<Cand>,
     pts: Vec<(f64, P2)>,
 }
@@ -300,12 +301,13 @@ fn view_of(i: usize, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) 
         let d2 = (pos[j][0] - p[0]).powi(2) + (pos[j][1] - p[1]).powi(2);
         // Coincident agents have no bearing: they are not perceived.
         if d2 < r2 && d2 > 1e-18 && j != i {
-            keys.push((d2.to_bits(), j as u32));
+            keys.push((d2.to_bits() as u128) << 32 | j as u128);
         }
     });
     keys.sort_unstable();
     sc.cand.clear();
-    sc.cand.extend(keys.iter().map(|&(b, j)| {
+    sc.cand.extend(keys.iter().map(|&key| {
+        let (b, j) = ((key >> 32) as u64, key as u32);
         let q = pos[j as usize];
         Cand {
             d2: f64::from_bits(b),

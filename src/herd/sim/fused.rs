@@ -19,19 +19,20 @@
 // `backend.rs`).
 #![allow(deprecated)]
 
-use super::{ForceTensors, HerdState, StepDecisions};
+use super::{ForceTensors, HerdState, Model, StepDecisions, NORM_EPS};
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::{
     BalancedCheckpointing, CheckpointStrategy, NoCheckpointing,
 };
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::ndarray::NdArrayTensor;
 use burn::backend::ops::FloatTensorOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, DispatchKindConversion, DispatchTensor, NdArray, TensorMetadata};
 use burn::tensor::{read_sync, DType, Tensor, TensorData};
 use herdfit_kernels::{
-    forces_backward, forces_forward, AgentsRef, Coefficients, PairLists, N_COEF,
+    forces_backward, forces_forward, AgentsRef, Coefficients, PairLists, N_COEF, P2,
 };
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -65,7 +66,24 @@ impl ForceKernel {
 
 type NdDevice = <NdArray as burn::backend::BackendTypes>::Device;
 
+/// The values of an ndarray tensor as f64. Contiguous f32 / f64 storage is widened straight from
+/// its slice (the same values: f32 → f64 is exact) instead of burn's element-by-element
+/// conversion through `TensorData` (its cost per step: BENCHMARKS.md, "Profile of one fused
+/// step").
 fn read(t: FloatTensor<NdArray>) -> Vec<f64> {
+    match &t {
+        NdArrayTensor::F32(s) => {
+            if let Some(v) = s.view().as_slice() {
+                return v.iter().map(|&x| x as f64).collect();
+            }
+        }
+        NdArrayTensor::F64(s) => {
+            if let Some(v) = s.view().as_slice() {
+                return v.to_vec();
+            }
+        }
+        _ => {}
+    }
     let data = read_sync(NdArray::float_into_data(t)).expect("ndarray tensors are always readable");
     data.try_into_vec_as::<f64>()
         .expect("float tensors convert to f64")
@@ -76,6 +94,25 @@ fn upload(v: Vec<f64>, shape: Vec<usize>, dtype: DType) -> FloatTensor<NdArray> 
         TensorData::new(v, shape).convert_dtype(dtype),
         &NdDevice::default(),
     )
+}
+
+/// The values of a rank-1 tensor on the ndarray backend (plain or autodiff) by [`read`], or
+/// `None` on other backends.
+pub(super) fn read_ndarray(t: &Tensor<1>) -> Option<Vec<f64>> {
+    if let Ok(p) = t.clone().try_into_primitive::<NdArray>() {
+        return Some(read(p));
+    }
+    fn on<C: CheckpointStrategy>(t: &Tensor<1>) -> Option<Vec<f64>>
+    where
+        DispatchTensor: DispatchKindConversion<Autodiff<NdArray, C>>,
+    {
+        let p = t
+            .clone()
+            .try_into_primitive::<Autodiff<NdArray, C>>()
+            .ok()?;
+        Some(read(p.primitive().clone()))
+    }
+    on::<NoCheckpointing>(t).or_else(|| on::<BalancedCheckpointing>(t))
 }
 
 /// Inputs saved for the backward pass (plain values, f64).
@@ -226,4 +263,133 @@ pub fn fused_forces(
         on_ndarray(f, s, dec)?
     };
     Some((out.clone().narrow(1, 0, 1), out.narrow(1, 1, 1)))
+}
+
+/// The element type of a plain step: it computes in the tensors' own type (f32 or f64), so every
+/// operation rounds as the tensor op it replaces does.
+trait Elem:
+    Copy + std::ops::Add<Output = Self> + std::ops::Mul<Output = Self> + std::ops::Div<Output = Self>
+{
+    /// Rounds an f64 as burn does when it stores one in a tensor of this type.
+    fn of(v: f64) -> Self;
+    fn sqrt(self) -> Self;
+    fn wide(self) -> f64;
+}
+
+impl Elem for f32 {
+    fn of(v: f64) -> Self {
+        v as f32
+    }
+    fn sqrt(self) -> Self {
+        f32::sqrt(self)
+    }
+    fn wide(self) -> f64 {
+        self as f64
+    }
+}
+
+impl Elem for f64 {
+    fn of(v: f64) -> Self {
+        v
+    }
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    fn wide(self) -> f64 {
+        self
+    }
+}
+
+/// What a plain step reads: the saved inputs of the force op, its output, old and new speeds.
+struct PlainInputs<'a> {
+    st: &'a Saved,
+    force: &'a [f64],
+    speed: &'a [f64],
+    next_speed: &'a [f64],
+}
+
+/// Eq. 2, the leaders' directions and the position update on plain values of type `T`, in the
+/// order of the tensor ops of [`Model::step_with`]: u = v·d + F·Δt (F plus the extra force),
+/// d' = u / √(u_x² + u_y² + ε), d' ← d'·follow + guide where any agent leads, p' = p + d'·(v'·Δt).
+fn plain_step_as<T: Elem>(
+    model: &Model,
+    inp: &PlainInputs<'_>,
+    dec: &StepDecisions,
+    extra: Option<&[P2]>,
+) -> [Vec<f64>; 4] {
+    let st = inp.st;
+    let n = st.lists.n;
+    let (dt, eps) = (T::of(model.dt), T::of(NORM_EPS));
+    let lead = dec.leader.iter().any(|&l| l);
+    let mut out: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(n));
+    for i in 0..n {
+        let (mut fx, mut fy) = (T::of(inp.force[2 * i]), T::of(inp.force[2 * i + 1]));
+        if let Some(e) = extra {
+            fx = fx + T::of(e[i][0]);
+            fy = fy + T::of(e[i][1]);
+        }
+        let v = T::of(inp.speed[i]);
+        let ux = v * T::of(st.hx[i]) + fx * dt;
+        let uy = v * T::of(st.hy[i]) + fy * dt;
+        let norm = (ux * ux + uy * uy + eps).sqrt();
+        let (mut hx, mut hy) = (ux / norm, uy / norm);
+        if lead {
+            let follow = T::of(if dec.leader[i] { 0.0 } else { 1.0 });
+            hx = hx * follow + T::of(dec.guide[i][0]);
+            hy = hy * follow + T::of(dec.guide[i][1]);
+        }
+        let step = T::of(inp.next_speed[i]) * dt;
+        out[0].push((T::of(st.x[i]) + hx * step).wide());
+        out[1].push((T::of(st.y[i]) + hy * step).wide());
+        out[2].push(hx.wide());
+        out[3].push(hy.wide());
+    }
+    out
+}
+
+/// On a plain ndarray device (no autodiff): the whole step of [`Model::step_with`] — the fused
+/// forces of eq. 3–5, eq. 2, the leaders, the OU speeds of eq. 6 and the position update — on
+/// plain values read once, in the tensors' element type and the tensor ops' order, so the new
+/// state has the same bytes as the tensor-op step around the fused forces; `None` on other
+/// devices (the caller runs the tensor ops).
+pub fn plain_step(
+    model: &Model,
+    f: &ForceTensors,
+    s: &HerdState,
+    dec: &StepDecisions,
+    extra: Option<&[P2]>,
+) -> Option<HerdState> {
+    if s.x.device().is_autodiff() {
+        return None;
+    }
+    let prims = primitives::<NdArray>(f, s)?;
+    let speed = read(s.speed.clone().try_into_primitive::<NdArray>().ok()?);
+    let dtype = prims[0].dtype();
+    let coef_rows = prims[4].shape()[0];
+    if !matches!(dtype, DType::F32 | DType::F64) {
+        return None;
+    }
+    let st = saved(prims.map(read), coef_rows, dtype, dec);
+    let force = st.forward();
+    let next_speed = model.next_speeds(&speed, dec);
+    let inp = PlainInputs {
+        st: &st,
+        force: &force,
+        speed: &speed,
+        next_speed: &next_speed,
+    };
+    let [x, y, hx, hy] = if dtype == DType::F32 {
+        plain_step_as::<f32>(model, &inp, dec, extra)
+    } else {
+        plain_step_as::<f64>(model, &inp, dec, extra)
+    };
+    let n = st.lists.n;
+    let up = |v: Vec<f64>| Tensor::from_primitive::<NdArray>(upload(v, vec![n], dtype));
+    Some(HerdState {
+        x: up(x),
+        y: up(y),
+        hx: up(hx),
+        hy: up(hy),
+        speed: up(next_speed),
+    })
 }

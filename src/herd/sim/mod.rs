@@ -19,7 +19,7 @@ mod reference;
 mod rollout;
 mod world;
 
-pub use fused::{fused_forces, ForceKernel};
+pub use fused::{fused_forces, plain_step, ForceKernel};
 pub use herd::{random_herd, HerdSpec};
 pub use rollout::{Decide, Guided, StepHooks};
 pub use world::{obstacle_map, Guidance, World};
@@ -71,6 +71,9 @@ fn mat_tensor(v: Vec<f64>, rows: usize, cols: usize, device: &Device) -> Tensor<
 
 /// Reads a rank-1 tensor back as f64 values.
 pub fn read_vec(t: &Tensor<1>) -> Result<Vec<f64>> {
+    if let Some(v) = fused::read_ndarray(t) {
+        return Ok(v);
+    }
     t.clone()
         .try_into_vec_as::<f64>()
         .map_err(|e| Error::Internal(format!("tensor read-back failed: {e:?}")))
@@ -437,7 +440,9 @@ impl Model {
     }
 
     /// [`Model::step`] with an extra per-agent force added to F of eq. 3 (the hook of §7.5, e.g.
-    /// predator avoidance); no gradient flows through it.
+    /// predator avoidance); no gradient flows through it. With the fused kernel on a plain
+    /// ndarray device (simulation, no autodiff) the whole step runs on plain values with the same
+    /// bytes as these tensor ops (`fused::plain_step`).
     pub fn step_with(
         &self,
         f: &ForceTensors,
@@ -451,6 +456,11 @@ impl Model {
                 "decisions are for {} agents, the herd has {n}",
                 dec.perception.n
             )));
+        }
+        if self.force_kernel.is_fused() {
+            if let Some(next) = fused::plain_step(self, f, s, dec, extra) {
+                return Ok(next);
+            }
         }
         let device = s.x.device();
         let (mut fx, mut fy) = self.forces(f, s, dec);
