@@ -1,7 +1,7 @@
 //! Criterion benchmarks of the flock's steady flight (#19): one key shape for 40 birds (eq. 2
 //! draw + Levenberg–Marquardt continuation on eq. 4, analytic Jacobian) against the same key shape
 //! with the former solver budget of 400 × N evaluations per run (the peer: the same key shape,
-//! failed runs taking their full budget), one solve of eq. 4 with the analytic against a
+//! failed runs taking their full budget), the key shape after it, one solve of eq. 4 with the analytic against a
 //! finite-difference Jacobian, e_i of 40 birds by the pair kernel against `power::savings`, and
 //! one initiation step of 41 birds (HPR perception for every bird, separation, eq. 5–6).
 //!
@@ -114,6 +114,13 @@ fn key_shape(c: &mut Criterion) {
     // One solve of the key shape's final equations from the previous positions.
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let k = steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng);
+    // The key shape after it (from a key shape on a uniform layout, as every later one is).
+    g.bench_function("second_key_shape", |b| {
+        b.iter(|| {
+            let mut rng = ChaCha8Rng::seed_from_u64(8);
+            steady::next_key(&k, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng)
+        })
+    });
     let x: Vec<f64> = k.pos.iter().map(|p| p[0]).collect();
     let y0: Vec<f64> = s
         .first

@@ -156,6 +156,11 @@ impl Chain {
     }
 }
 
+/// A continuation step's solver run is abandoned once an iterate moves a bird this many times
+/// `max_key_step` from the step's start: its end point could be accepted only if the run came
+/// back within `max_key_step` (RESULTS.md §3: no accepted step did so in the sweep).
+const LEASH: f64 = 10.0;
+
 /// Continuation of eq. 4 from (x0, ξ0), solved by y0, to (x1, ξ1): both interpolated linearly,
 /// Levenberg–Marquardt warm-started at every step, a failed step (error above `solve_tol` or a
 /// bird moving more than `max_key_step`) halved down to 1/256. Returns how far it got, its y and
@@ -179,7 +184,8 @@ pub fn continuation(
     while t < 1.0 && dt >= 1.0 / 256.0 {
         let tn = (t + dt).min(1.0);
         let s = solve::solve(
-            PositionProblem::new(lerp(x0, x1, tn), lerp(xi0, xi1, tn), 0, y.clone()),
+            PositionProblem::new(lerp(x0, x1, tn), lerp(xi0, xi1, tn), 0, y.clone())
+                .with_leash(LEASH * cfg.max_key_step),
             cfg.solve_evaluations,
         );
         solves += 1;

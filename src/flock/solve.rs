@@ -35,6 +35,8 @@ pub struct PositionProblem {
     pairs: Pairs,
     /// e and the pairs' ∂g/∂t at the current y, once evaluated.
     cache: RefCell<Option<(Vec<f64>, Vec<f64>)>>,
+    /// The start y and how far from it (wingspans, any bird) the solver may go.
+    leash: Option<(Vec<f64>, f64)>,
 }
 
 impl PositionProblem {
@@ -49,7 +51,15 @@ impl PositionProblem {
             anchor,
             y: y0,
             cache: RefCell::new(None),
+            leash: None,
         }
+    }
+
+    /// The same problem, abandoned (residuals `None`, the solver stops) as soon as an iterate
+    /// moves a bird more than `d` wingspans from the start.
+    pub fn with_leash(mut self, d: f64) -> Self {
+        self.leash = Some((self.y.clone(), d));
+        self
     }
 
     /// e and the pairs' ∂g/∂t at the current y (evaluated once per y).
@@ -129,6 +139,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for PositionProblem {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
+        if let Some((y0, d)) = &self.leash {
+            if self.y.iter().zip(y0).any(|(a, b)| (a - b).abs() > *d) {
+                return None;
+            }
+        }
         let r = self.residual_vec();
         r.iter()
             .all(|v| v.is_finite())
