@@ -1,13 +1,16 @@
 //! Criterion benchmarks of the flock's steady flight (#19): one key shape for 40 birds (eq. 2
-//! draw + Levenberg–Marquardt continuation on eq. 4, analytic Jacobian) against the same solve
-//! with a finite-difference Jacobian (the peer), and one initiation step of 41 birds (HPR
-//! perception for every bird, separation, eq. 5–6).
+//! draw + Levenberg–Marquardt continuation on eq. 4, analytic Jacobian) against the same key shape
+//! with the former solver budget of 400 × N evaluations per run (the peer: the same key shape,
+//! failed runs taking their full budget), the key shape after it, one solve of eq. 4 with the analytic against a
+//! finite-difference Jacobian, e_i of 40 birds by the pair kernel against `power::savings`, and
+//! one initiation step of 41 birds (HPR perception for every bird, separation, eq. 5–6).
 //!
 //! `cargo bench --bench flock`
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use herdfit::flock::extract::{extract, ExtractConfig};
 use herdfit::flock::initiation::{random_start, Initiation, InitiationConfig, Target};
+use herdfit::flock::pairs::Pairs;
 use herdfit::flock::solve::PositionProblem;
 use herdfit::flock::{power, steady, synth};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -98,9 +101,26 @@ fn key_shape(c: &mut Criterion) {
             steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng)
         })
     });
-    // The peer: one solve of the key shape's final equations from the previous positions.
+    let old = steady::SteadyConfig {
+        solve_evaluations: 400 * 40,
+        ..cfg.clone()
+    };
+    g.bench_function("analytic_jacobian_budget_400n", |b| {
+        b.iter(|| {
+            let mut rng = ChaCha8Rng::seed_from_u64(7);
+            steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &old, &mut rng)
+        })
+    });
+    // One solve of the key shape's final equations from the previous positions.
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let k = steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng);
+    // The key shape after it (from a key shape on a uniform layout, as every later one is).
+    g.bench_function("second_key_shape", |b| {
+        b.iter(|| {
+            let mut rng = ChaCha8Rng::seed_from_u64(8);
+            steady::next_key(&k, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng)
+        })
+    });
     let x: Vec<f64> = k.pos.iter().map(|p| p[0]).collect();
     let y0: Vec<f64> = s
         .first
@@ -138,6 +158,13 @@ fn key_shape(c: &mut Criterion) {
     let mut g = c.benchmark_group("flock_savings");
     g.bench_function("e_i_40_birds", |b| {
         b.iter(|| power::savings_unchecked(&pos))
+    });
+    let xs: Vec<f64> = pos.iter().map(|p| p[0]).collect();
+    let ys: Vec<f64> = pos.iter().map(|p| p[1]).collect();
+    let pairs = Pairs::new(&xs);
+    let (mut e, mut dg) = (vec![0.0; xs.len()], Vec::new());
+    g.bench_function("e_i_and_dg_40_birds_pairs", |b| {
+        b.iter(|| pairs.eval(&ys, &mut e, &mut dg))
     });
     g.finish();
 }

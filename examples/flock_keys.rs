@@ -4,7 +4,7 @@
 //! from the previous key shape. The sweep behind RESULTS.md §3 (the test
 //! `levenberg_marquardt_reproduces_every_key_shape` checks 2 keys per N).
 //!
-//! `cargo run --release --example flock_keys -- [KEYS]` (default 5).
+//! `cargo run --release --example flock_keys -- [KEYS] [N]` (default 5 keys, every N).
 
 use herdfit::flock::{keys, steady, synth};
 use rand::SeedableRng;
@@ -22,13 +22,20 @@ struct Row {
     max_move: f64,
     box_use: f64,
     seconds: f64,
+    solves: usize,
+    evaluations: usize,
+    fingerprint: f64,
 }
 
 fn main() {
     let nkeys: usize = std::env::args()
         .nth(1)
         .map_or(5, |a| a.parse().expect("KEYS"));
-    let cases = synth::key_shape_cases();
+    let only: Option<usize> = std::env::args().nth(2).map(|a| a.parse().expect("N"));
+    let cases: Vec<_> = synth::key_shape_cases()
+        .into_iter()
+        .filter(|(_, n)| only.is_none_or(|o| o == *n))
+        .collect();
     let out: Vec<Row> = cases
         .par_iter()
         .map(|(ex, n)| {
@@ -47,6 +54,9 @@ fn main() {
                 max_move: 0.0,
                 box_use: 0.0,
                 seconds: 0.0,
+                solves: 0,
+                evaluations: 0,
+                fingerprint: 0.0,
             };
             for _ in 0..nkeys {
                 let bx = keys::eq2_box(&prev.xi_target, &range, &cfg);
@@ -57,6 +67,16 @@ fn main() {
                     r.worst = r.worst.max((a - b).abs() / b);
                 }
                 r.reproduced += k.reproduced as usize;
+                r.solves += k.solves;
+                r.evaluations += k.evaluations;
+                // A weighted sum of every key's positions: equal to rounding between two builds
+                // exactly when they drew and solved the same key shapes.
+                r.fingerprint += k
+                    .pos
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (i + 1) as f64 * (p[0] + 0.5 * p[1]))
+                    .sum::<f64>();
                 r.rejected += k.draws_rejected;
                 r.acceptance += k.chain_acceptance / nkeys as f64;
                 let mut mv = 0.0;
@@ -81,11 +101,11 @@ fn main() {
         .collect();
     println!(
         "N   keys  reproduced  worst|ξ−ξ̂|/ξ̂  rejected draws  chain acceptance  mean|Δξ|/ξ  max|Δξ|/ξ  \
-         mean box use  s/key"
+         mean box use  s/key  solves/key  evals/key  fingerprint"
     );
     for r in out {
         println!(
-            "{:>2}  {:>4}  {:>10}  {:>13.2e}  {:>14}  {:>16.2}  {:>10.3}  {:>9.3}  {:>12.2}  {:>5.3}",
+            "{:>2}  {:>4}  {:>10}  {:>13.2e}  {:>14}  {:>16.2}  {:>10.3}  {:>9.3}  {:>12.2}  {:>5.3}  {:>10.1}  {:>9.0}  {:.12e}",
             r.n,
             nkeys,
             r.reproduced,
@@ -95,7 +115,10 @@ fn main() {
             r.mean_move,
             r.max_move,
             r.box_use,
-            r.seconds / nkeys as f64
+            r.seconds / nkeys as f64,
+            r.solves as f64 / nkeys as f64,
+            r.evaluations as f64 / nkeys as f64,
+            r.fingerprint
         );
     }
 }

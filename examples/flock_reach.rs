@@ -35,7 +35,7 @@ fn main() {
                 let (draw, _) = steady::draw_xi(&prev.xi_target, &range, &cfg, &mut drng);
                 let s = solve::solve(
                     PositionProblem::new(x.clone(), draw.clone(), 0, y0.clone()),
-                    400,
+                    cfg.solve_evaluations,
                 );
                 best_err = best_err.min(s.max_relative_error);
                 if s.max_relative_error <= cfg.solve_tol {

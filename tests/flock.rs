@@ -224,7 +224,7 @@ fn levenberg_marquardt_reproduces_every_key_shape() {
     let out: Vec<(usize, f64, usize)> = cases
         .par_iter()
         .map(|(ex, n)| {
-            // 1 key shape per N (N = 41 takes ~30 s of CPU); the sweep is `cargo run --release --example flock_keys`
+            // 1 key shape per N (N = 41 takes ~0.1 s, RESULTS.md §3); the sweep is `cargo run --release --example flock_keys`
             // (RESULTS.md §3).
             let (w, r) = check_keys(ex, *n, 1, 11 + *n as u64);
             (*n, w, r)

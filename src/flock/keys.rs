@@ -14,6 +14,7 @@
 //! chain's), with the straight-line continuation as a fallback; a draw it cannot reproduce to
 //! `solve_tol` is rejected and the chain draws again (bounded, counted in the key shape).
 
+use super::pairs::Pairs;
 use super::power;
 use super::solve::{self, PositionProblem};
 use super::steady::{KeyShape, SteadyConfig};
@@ -46,31 +47,18 @@ pub fn layout(nl: usize, nr: usize, gap: f64) -> Vec<f64> {
     x
 }
 
-/// ξ (eq. 1 and §5 Step 3's ξ_i = e_i / E) and ∂ξ/∂y (the leader's y held), N × (N − 1), on
-/// lateral positions `x` with E = `total` (eq. 3).
-fn xi_and_jacobian(x: &[f64], y: &[f64], total: f64) -> (Vec<f64>, DMatrix<f64>) {
-    let n = x.len();
-    let mut xi = vec![0.0; n];
-    let mut j = DMatrix::zeros(n, n - 1);
-    for i in 0..n {
-        let mut diag = 0.0;
-        for k in 0..n {
-            if k == i {
-                continue;
-            }
-            let (dx, dy) = (x[k] - x[i], y[k] - y[i]);
-            xi[i] += power::g(dx, dy) / total;
-            let d = power::dg_dt(dx, dy) / total;
-            diag -= d;
-            if k != 0 {
-                j[(i, k - 1)] = d;
-            }
-        }
-        if i != 0 {
-            j[(i, i - 1)] += diag;
-        }
-    }
-    (xi, j)
+/// ξ (eq. 1 and §5 Step 3's ξ_i = e_i / E) on the layout of `pairs` with E = `total` (eq. 3),
+/// keeping the pairs' ∂g/∂t in `dg` for [`jacobian`].
+fn xi_of(pairs: &Pairs, y: &[f64], total: f64, dg: &mut Vec<f64>) -> Vec<f64> {
+    let mut xi = vec![0.0; pairs.len()];
+    pairs.eval(y, &mut xi, dg);
+    xi.iter_mut().for_each(|v| *v /= total);
+    xi
+}
+
+/// ∂ξ/∂y (the leader's y held), N × (N − 1), from [`xi_of`]'s `dg`.
+fn jacobian(pairs: &Pairs, dg: &[f64], total: f64) -> DMatrix<f64> {
+    pairs.jacobian(dg, &vec![1.0 / total; pairs.len()], 0)
 }
 
 /// Relative violation of the box: Σ max(0, lo − ξ, ξ − hi) / hi.
@@ -83,7 +71,7 @@ fn violation(xi: &[f64], bx: &[[f64; 2]]) -> f64 {
 
 /// ½ ln det(JᵀJ): the log volume element of y ↦ ξ (−∞ where J loses rank).
 fn log_volume(j: &DMatrix<f64>) -> f64 {
-    match (j.transpose() * j).cholesky() {
+    match j.tr_mul(j).cholesky() {
         Some(c) => c.l_dirty().diagonal().iter().map(|d| d.ln()).sum(),
         None => f64::NEG_INFINITY,
     }
@@ -102,11 +90,12 @@ struct Chain {
 }
 
 impl Chain {
-    fn new(x: &[f64], y: Vec<f64>, total: f64, bx: &[[f64; 2]]) -> Self {
-        let (xi, j) = xi_and_jacobian(x, &y, total);
+    fn new(pairs: &Pairs, y: Vec<f64>, total: f64, bx: &[[f64; 2]]) -> Self {
+        let mut dg = Vec::new();
+        let xi = xi_of(pairs, &y, total, &mut dg);
         Chain {
             viol: violation(&xi, bx),
-            logv: log_volume(&j),
+            logv: log_volume(&jacobian(pairs, &dg, total)),
             y,
             xi,
             scale: 0.05,
@@ -120,15 +109,23 @@ impl Chain {
     /// outside (the previous key's ξ just off a box face by solver rounding) first accepts any
     /// move that does not increase the violation. The proposal scale adapts towards 30 %
     /// acceptance with a decaying gain.
-    fn run(&mut self, x: &[f64], total: f64, bx: &[[f64; 2]], steps: usize, rng: &mut impl Rng) {
-        let m = (x.len() - 1) as f64;
+    fn run(
+        &mut self,
+        pairs: &Pairs,
+        total: f64,
+        bx: &[[f64; 2]],
+        steps: usize,
+        rng: &mut impl Rng,
+    ) {
+        let m = (pairs.len() - 1) as f64;
+        let mut dg = Vec::new();
         for s in 0..steps {
             let mut y = self.y.clone();
             for v in y.iter_mut().skip(1) {
                 let z: f64 = StandardNormal.sample(rng);
                 *v += self.scale / m.sqrt() * z;
             }
-            let (xi, j) = xi_and_jacobian(x, &y, total);
+            let xi = xi_of(pairs, &y, total, &mut dg);
             let viol = violation(&xi, bx);
             self.proposed += 1;
             // The proposal's log volume, once: the Metropolis test needs it inside the box, and
@@ -139,14 +136,14 @@ impl Chain {
             } else if viol > 0.0 {
                 false
             } else {
-                let l = log_volume(&j);
+                let l = log_volume(&jacobian(pairs, &dg, total));
                 logv = Some(l);
                 let u: f64 = rng.gen();
                 l.is_finite() && u.ln() < l - self.logv
             };
             let gain = 1.0 / (1.0 + s as f64).sqrt();
             if ok {
-                self.logv = logv.unwrap_or_else(|| log_volume(&j));
+                self.logv = logv.unwrap_or_else(|| log_volume(&jacobian(pairs, &dg, total)));
                 self.y = y;
                 self.xi = xi;
                 self.viol = viol;
@@ -158,6 +155,11 @@ impl Chain {
         }
     }
 }
+
+/// A continuation step's solver run is abandoned once an iterate moves a bird this many times
+/// `max_key_step` from the step's start: its end point could be accepted only if the run came
+/// back within `max_key_step` (RESULTS.md §3: no accepted step did so in the sweep).
+const LEASH: f64 = 10.0;
 
 /// Continuation of eq. 4 from (x0, ξ0), solved by y0, to (x1, ξ1): both interpolated linearly,
 /// Levenberg–Marquardt warm-started at every step, a failed step (error above `solve_tol` or a
@@ -182,8 +184,9 @@ pub fn continuation(
     while t < 1.0 && dt >= 1.0 / 256.0 {
         let tn = (t + dt).min(1.0);
         let s = solve::solve(
-            PositionProblem::new(lerp(x0, x1, tn), lerp(xi0, xi1, tn), 0, y.clone()),
-            400,
+            PositionProblem::new(lerp(x0, x1, tn), lerp(xi0, xi1, tn), 0, y.clone())
+                .with_leash(LEASH * cfg.max_key_step),
+            cfg.solve_evaluations,
         );
         solves += 1;
         evals += s.evaluations;
@@ -237,12 +240,13 @@ pub fn next_key(
         continuation(&x0, &x1, &prev.xi_target, &prev.xi_target, y0, cfg);
     let x: Vec<f64> = x0.iter().zip(&x1).map(|(a, b)| a + ta * (b - a)).collect();
     let total = power::total_abreast(&x);
-    let mut chain = Chain::new(&x, ya.clone(), total, &bx);
+    let pairs = Pairs::new(&x);
+    let mut chain = Chain::new(&pairs, ya.clone(), total, &bx);
     let steps = cfg.draw_steps * (x.len() - 1);
     let mut rejected = 0;
     let mut best: Option<(f64, Vec<f64>, Vec<f64>, f64)> = None;
     for _ in 0..=cfg.draw_retries {
-        chain.run(&x, total, &bx, steps, rng);
+        chain.run(&pairs, total, &bx, steps, rng);
         if chain.viol > 0.0 {
             rejected += 1;
             continue;
@@ -250,7 +254,7 @@ pub fn next_key(
         let draw = chain.xi.clone();
         let s = solve::solve(
             PositionProblem::new(x.clone(), draw.clone(), 0, ya.clone()),
-            400,
+            cfg.solve_evaluations,
         );
         solves += 1;
         evals += s.evaluations;

@@ -16,6 +16,7 @@ mod frames;
 pub mod hpr;
 pub mod initiation;
 pub mod keys;
+pub mod pairs;
 pub mod power;
 pub mod ransac;
 #[cfg(feature = "video")]

@@ -9,11 +9,14 @@
 //! independent conditions. Residuals are relative, `r_i = (e_i / E − ξ̂_i) / ξ̂_i`, so the
 //! solver's tolerance is the criterion (|ξ_i − ξ̂_i| / ξ̂_i). The Jacobian is analytic
 //! ([`power::dg_dt`]): ∂e_i/∂y_k = g'(x_ik, y_k − y_i) for k ≠ i, −Σ_j g'(x_ij, y_j − y_i) for
-//! k = i.
+//! k = i. Both come from one pass over the pairs ([`Pairs::eval`]): the residuals' pass keeps the
+//! derivatives for the Jacobian the solver asks for next at the same y.
 
+use super::pairs::Pairs;
 use super::power;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use std::cell::RefCell;
 
 /// One instance of eq. 4.
 #[derive(Clone, Debug)]
@@ -26,8 +29,14 @@ pub struct PositionProblem {
     pub total: f64,
     /// The bird whose y is held.
     pub anchor: usize,
-    /// Current longitudinal positions (the anchor's included).
-    pub y: Vec<f64>,
+    /// Current longitudinal positions (the anchor's included; changed only through
+    /// `set_params`, which keeps the cache true).
+    y: Vec<f64>,
+    pairs: Pairs,
+    /// e and the pairs' ∂g/∂t at the current y, once evaluated.
+    cache: RefCell<Option<(Vec<f64>, Vec<f64>)>>,
+    /// The start y and how far from it (wingspans, any bird) the solver may go.
+    leash: Option<(Vec<f64>, f64)>,
 }
 
 impl PositionProblem {
@@ -35,12 +44,33 @@ impl PositionProblem {
     pub fn new(x: Vec<f64>, xi: Vec<f64>, anchor: usize, y0: Vec<f64>) -> Self {
         let total = power::total_abreast(&x);
         PositionProblem {
+            pairs: Pairs::new(&x),
             x,
             xi,
             total,
             anchor,
             y: y0,
+            cache: RefCell::new(None),
+            leash: None,
         }
+    }
+
+    /// The same problem, abandoned (residuals `None`, the solver stops) as soon as an iterate
+    /// moves a bird more than `d` wingspans from the start.
+    pub fn with_leash(mut self, d: f64) -> Self {
+        self.leash = Some((self.y.clone(), d));
+        self
+    }
+
+    /// e and the pairs' ∂g/∂t at the current y (evaluated once per y).
+    fn evaluated<T>(&self, f: impl FnOnce(&[f64], &[f64]) -> T) -> T {
+        let mut c = self.cache.borrow_mut();
+        let (e, dg) = c.get_or_insert_with(|| {
+            let (mut e, mut dg) = (vec![0.0; self.x.len()], Vec::new());
+            self.pairs.eval(&self.y, &mut e, &mut dg);
+            (e, dg)
+        });
+        f(e, dg)
     }
 
     fn unknown(&self, k: usize) -> usize {
@@ -51,10 +81,14 @@ impl PositionProblem {
         }
     }
 
+    /// Current longitudinal positions (the anchor's included).
+    pub fn y(&self) -> &[f64] {
+        &self.y
+    }
+
     /// e_i at the current y.
     pub fn savings(&self) -> Vec<f64> {
-        let pos: Vec<[f64; 2]> = self.x.iter().zip(&self.y).map(|(&x, &y)| [x, y]).collect();
-        power::savings_unchecked(&pos)
+        self.evaluated(|e, _| e.to_vec())
     }
 
     /// Largest |ξ_i − ξ̂_i| / ξ̂_i at the current y.
@@ -66,35 +100,18 @@ impl PositionProblem {
     }
 
     fn residual_vec(&self) -> Vec<f64> {
-        self.savings()
-            .iter()
-            .zip(&self.xi)
-            .map(|(e, xi)| (e / self.total - xi) / xi)
-            .collect()
+        self.evaluated(|e, _| {
+            e.iter()
+                .zip(&self.xi)
+                .map(|(e, xi)| (e / self.total - xi) / xi)
+                .collect()
+        })
     }
 
     /// The analytic Jacobian, N × (N − 1).
     pub fn jacobian_matrix(&self) -> DMatrix<f64> {
-        let n = self.x.len();
-        let mut j = DMatrix::zeros(n, n - 1);
-        for i in 0..n {
-            let s = 1.0 / (self.total * self.xi[i]);
-            let mut diag = 0.0;
-            for k in 0..n {
-                if k == i {
-                    continue;
-                }
-                let d = power::dg_dt(self.x[k] - self.x[i], self.y[k] - self.y[i]);
-                diag -= d;
-                if k != self.anchor {
-                    j[(i, self.unknown(k))] = d * s;
-                }
-            }
-            if i != self.anchor {
-                j[(i, self.unknown(i))] = diag * s;
-            }
-        }
-        j
+        let scale: Vec<f64> = self.xi.iter().map(|v| 1.0 / (self.total * v)).collect();
+        self.evaluated(|_, dg| self.pairs.jacobian(dg, &scale, self.anchor))
     }
 }
 
@@ -104,6 +121,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for PositionProblem {
     type ParameterStorage = Owned<f64, Dyn>;
 
     fn set_params(&mut self, p: &DVector<f64>) {
+        *self.cache.get_mut() = None;
         for k in 0..self.y.len() {
             if k != self.anchor {
                 self.y[k] = p[self.unknown(k)];
@@ -121,6 +139,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for PositionProblem {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
+        if let Some((y0, d)) = &self.leash {
+            if self.y.iter().zip(y0).any(|(a, b)| (a - b).abs() > *d) {
+                return None;
+            }
+        }
         let r = self.residual_vec();
         r.iter()
             .all(|v| v.is_finite())
@@ -144,14 +167,16 @@ pub struct Solved {
     pub evaluations: usize,
 }
 
-/// Solves eq. 4 from `problem.y` by Levenberg–Marquardt (tolerances 1e-15, up to
-/// `patience` × (N − 1) evaluations).
-pub fn solve(problem: PositionProblem, patience: usize) -> Solved {
+/// Solves eq. 4 from the problem's y by Levenberg–Marquardt (tolerances 1e-15), giving up after
+/// `max_evaluations` residual evaluations (rounded up to a multiple of N, the crate's patience
+/// unit).
+pub fn solve(problem: PositionProblem, max_evaluations: usize) -> Solved {
+    let n = problem.x.len().max(1);
     let lm = LevenbergMarquardt::new()
         .with_ftol(1e-15)
         .with_xtol(1e-15)
         .with_gtol(1e-15)
-        .with_patience(patience);
+        .with_patience(max_evaluations.div_ceil(n).max(1));
     let (p, report) = lm.minimize(problem);
     let err = p.max_relative_error();
     Solved {
@@ -201,7 +226,7 @@ mod tests {
         let pos: Vec<[f64; 2]> = x.iter().zip(&y).map(|(&a, &b)| [a, b]).collect();
         let xi = power::relative(&power::savings(&pos).unwrap());
         let start: Vec<f64> = y.iter().map(|v| 0.9 * v).collect();
-        let s = solve(PositionProblem::new(x, xi, 0, start), 200);
+        let s = solve(PositionProblem::new(x, xi, 0, start), 200 * 15);
         assert!(s.max_relative_error < 1e-9, "{}", s.max_relative_error);
         let d =
             s.y.iter()

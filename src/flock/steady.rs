@@ -36,6 +36,9 @@ pub struct SteadyConfig {
     pub mirror: bool,
     /// Largest |ξ − ξ̂|/ξ̂ accepted from the solver.
     pub solve_tol: f64,
+    /// Residual evaluations after which one Levenberg–Marquardt run of eq. 4 gives up (a run
+    /// that reproduces its target from a warm start needs far fewer: RESULTS.md §3).
+    pub solve_evaluations: usize,
     /// Largest longitudinal move of a bird in one continuation step of the solver, wingspans.
     pub max_key_step: f64,
     /// Metropolis steps per free bird for one draw of ξ̂ restricted to the reachable set.
@@ -57,6 +60,7 @@ impl Default for SteadyConfig {
             min_gap: power::VORTEX_SPAN + 0.05,
             mirror: false,
             solve_tol: 1e-9,
+            solve_evaluations: 40,
             max_key_step: 3.0,
             draw_steps: 8,
             draw_retries: 4,
@@ -92,6 +96,9 @@ impl SteadyConfig {
         }
         if !(self.max_key_step.is_finite() && self.max_key_step > 0.0) {
             return bad("max_key_step", self.max_key_step, "must be > 0");
+        }
+        if self.solve_evaluations == 0 {
+            return bad("solve_evaluations", 0.0, "must be ≥ 1");
         }
         if self.draw_steps == 0 {
             return bad("draw_steps", 0.0, "must be ≥ 1");
