@@ -420,33 +420,74 @@ pub fn extract(
     }
     let fields = sums.fields(&grid, cfg.smooth, body_len, body_px_proc);
     let (mean, std_bp) = fields.speed;
+    let speed = ClipSpeed {
+        mean,
+        // §6.2: v_σ = v_σ^bp / √N_bp.
+        std: std_bp / body_px.sqrt(),
+        density_table: speed_density_table(&fields.samples),
+    };
+    let source = serde_json::json!({
+        "video": path.display().to_string(),
+        "first_frame": first,
+    });
+    let meta = clip_meta(
+        (&grid, &geom),
+        cfg,
+        &calib,
+        (vid.fps, frames),
+        speed,
+        source,
+    );
+    finish(meta, fields, obstacles, calib, camera, sums.previews)
+}
+
+/// The clip metadata of an extraction: grid and scale from the calibration, the provenance
+/// (`source` — what was read — with the settings and the calibration).
+fn clip_meta(
+    (grid, geom): (&background::CellGrid, &background::Geometry),
+    cfg: &ExtractConfig,
+    calib: &Calibration,
+    (fps, frames): (f64, usize),
+    speed: ClipSpeed,
+    source: serde_json::Value,
+) -> ClipMeta {
+    let mut provenance = serde_json::json!({
+        "source": "extract",
+        "video_size": [geom.w, geom.h],
+        "processing_scale": geom.scale,
+        "settings": cfg,
+        "calibration": calib,
+    });
+    if let (Some(p), serde_json::Value::Object(src)) = (provenance.as_object_mut(), source) {
+        p.extend(src);
+    }
+    ClipMeta {
+        schema: CLIP_SCHEMA.into(),
+        fps,
+        cell_size: grid.cell_px / calib.body_length_px,
+        nx: grid.nx,
+        ny: grid.ny,
+        frames,
+        origin: [0.0, 0.0],
+        body_length_px: Some(calib.body_length_px),
+        body_pixel_coverage: Some(calib.body_pixels),
+        speed,
+        provenance,
+    }
+}
+
+/// The extraction's clip (validated) from its metadata, fields and obstacle cells, with what it
+/// came from.
+fn finish(
+    meta: ClipMeta,
+    fields: fields::Fields,
+    obstacles: ndarray::Array2<u8>,
+    calibration: Calibration,
+    camera: Vec<Similarity>,
+    previews: Vec<(String, Vec<u8>)>,
+) -> Result<Extraction> {
     let clip = ClipFields {
-        meta: ClipMeta {
-            schema: CLIP_SCHEMA.into(),
-            fps: vid.fps,
-            cell_size: grid.cell_px / body_len,
-            nx: grid.nx,
-            ny: grid.ny,
-            frames,
-            origin: [0.0, 0.0],
-            body_length_px: Some(body_len),
-            body_pixel_coverage: Some(body_px),
-            speed: ClipSpeed {
-                mean,
-                // §6.2: v_σ = v_σ^bp / √N_bp.
-                std: std_bp / body_px.sqrt(),
-                density_table: speed_density_table(&fields.samples),
-            },
-            provenance: serde_json::json!({
-                "source": "extract",
-                "video": path.display().to_string(),
-                "video_size": [w, h],
-                "first_frame": first,
-                "processing_scale": geom.scale,
-                "settings": cfg,
-                "calibration": &calib,
-            }),
-        },
+        meta,
         density: fields.density,
         velocity: fields.velocity,
         dir_variance: fields.dir_variance,
@@ -455,8 +496,8 @@ pub fn extract(
     clip.validate()?;
     Ok(Extraction {
         clip,
-        calibration: calib,
+        calibration,
         camera,
-        previews: sums.previews,
+        previews,
     })
 }

@@ -16,7 +16,7 @@ use super::decode::cv;
 use super::fields::{Segmenter, Sums};
 use super::preview::preview_png;
 use super::{ExtractConfig, Extraction};
-use crate::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
+use crate::data::ClipSpeed;
 use crate::error::{Error, Result};
 use opencv::core::Mat;
 use opencv::prelude::*;
@@ -161,43 +161,21 @@ pub(super) fn extract_still(path: &Path, cfg: &ExtractConfig, preview: bool) -> 
         )],
     };
     let fields = sums.fields(&grid, 1, body_len, body_px_proc);
-    let clip = ClipFields {
-        meta: ClipMeta {
-            schema: CLIP_SCHEMA.into(),
-            // A still has no frame rate of its own: the fit steps it at the usual 25 fps.
-            fps: 25.0,
-            cell_size: grid.cell_px / body_len,
-            nx: grid.nx,
-            ny: grid.ny,
-            frames: 1,
-            origin: [0.0, 0.0],
-            body_length_px: Some(body_len),
-            body_pixel_coverage: Some(calib.body_pixels),
-            // No motion is seen: the fit takes the start set's speed model.
-            speed: ClipSpeed {
-                mean: 0.0,
-                std: 0.0,
-                density_table: Vec::new(),
-            },
-            provenance: serde_json::json!({
-                "source": "extract",
-                "still": path.display().to_string(),
-                "video_size": [w, h],
-                "processing_scale": geom.scale,
-                "settings": cfg,
-                "calibration": &calib,
-            }),
-        },
-        density: fields.density,
-        velocity: fields.velocity,
-        dir_variance: fields.dir_variance,
-        obstacles,
+    // No motion is seen: the fit takes the start set's speed model. A still has no frame rate of
+    // its own: the fit steps it at the usual 25 fps.
+    let speed = ClipSpeed {
+        mean: 0.0,
+        std: 0.0,
+        density_table: Vec::new(),
     };
-    clip.validate()?;
-    Ok(Extraction {
-        clip,
-        calibration: calib,
-        camera: vec![Similarity::IDENTITY],
+    let source = serde_json::json!({"still": path.display().to_string()});
+    let meta = super::clip_meta((&grid, &geom), cfg, &calib, (25.0, 1), speed, source);
+    super::finish(
+        meta,
+        fields,
+        obstacles,
+        calib,
+        vec![Similarity::IDENTITY],
         previews,
-    })
+    )
 }
