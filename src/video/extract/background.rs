@@ -200,6 +200,17 @@ impl CellGrid {
     pub fn cells(&self) -> usize {
         self.nx * self.ny
     }
+
+    /// Herd pixels per cell of a processing-resolution mask (non-zero = herd).
+    pub fn herd_pixels(&self, herd: &[u8]) -> Vec<f64> {
+        let mut count = vec![0.0f64; self.cells()];
+        for (&on, &c) in herd.iter().zip(&self.cell_of) {
+            if on > 0 {
+                count[c as usize] += 1.0;
+            }
+        }
+        count
+    }
 }
 
 /// Obstacle cells from `cfg.obstacles` (a mask image the size of the video frame, non-zero =

@@ -85,6 +85,24 @@ impl<'a> Segmenter<'a> {
         })
     }
 
+    /// The segmenter of the fields: the calibration's threshold, opening and smallest
+    /// component.
+    pub fn calibrated(
+        geom: &'a Geometry<'a>,
+        background: &'a [u8],
+        cfg: &ExtractConfig,
+        calib: &super::Calibration,
+    ) -> Result<Self> {
+        Segmenter::new(
+            geom,
+            background,
+            cfg,
+            calib.threshold,
+            calib.opening,
+            calib.min_component_px,
+        )
+    }
+
     /// The herd mask (255 = herd) of the stabilised BGR frame `px` with valid pixels `vm`.
     pub fn mask(&self, px: &[u8], vm: &[u8]) -> Result<Vec<u8>> {
         let fail = cv(self.geom.path);
@@ -200,11 +218,7 @@ pub(super) fn pass_c(
         for i in 0..frames {
             let Ok(item) = rx.recv() else { break };
             let (st, herd, grey) = item?;
-            for (&on, &c) in herd.iter().zip(&grid.cell_of) {
-                if on > 0 {
-                    sums.count[i][c as usize] += 1.0;
-                }
-            }
+            sums.count[i] = grid.herd_pixels(&herd);
             if let Some(pg) = &prev_grey {
                 sums.flow(i, pg, &grey, &herd, grid, to_bl_s, path)?;
             }

@@ -396,14 +396,7 @@ pub fn extract(
     let grid = background::CellGrid::new(&geom, calib.grid);
     let obstacles = background::obstacle_cells(cfg, &geom, &grid)?;
     let body_px_proc = body_px * geom.scale * geom.scale;
-    let seg = fields::Segmenter::new(
-        &geom,
-        &bg,
-        cfg,
-        calib.threshold,
-        calib.opening,
-        calib.min_component_px,
-    )?;
+    let seg = fields::Segmenter::calibrated(&geom, &bg, cfg, &calib)?;
     let sums = fields::pass_c(
         &mut vid,
         &geom,

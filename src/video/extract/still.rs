@@ -125,21 +125,9 @@ pub(super) fn extract_still(path: &Path, cfg: &ExtractConfig, preview: bool) -> 
     }
     let grid = CellGrid::new(&geom, calib.grid);
     let obstacles = obstacle_cells(cfg, &geom, &grid)?;
-    let seg = Segmenter::new(
-        &geom,
-        &bg,
-        cfg,
-        calib.threshold,
-        calib.opening,
-        calib.min_component_px,
-    )?;
+    let seg = Segmenter::calibrated(&geom, &bg, cfg, &calib)?;
     let herd = seg.mask(&px, &vm)?;
-    let mut count = vec![0.0f64; grid.cells()];
-    for (&on, &c) in herd.iter().zip(&grid.cell_of) {
-        if on > 0 {
-            count[c as usize] += 1.0;
-        }
-    }
+    let count = grid.herd_pixels(&herd);
     if count.iter().all(|&n| n == 0.0) {
         return Err(Error::file(
             path,
