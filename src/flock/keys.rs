@@ -18,7 +18,7 @@ use super::pairs::Pairs;
 use super::power;
 use super::solve::{self, PositionProblem};
 use super::steady::{KeyShape, SteadyConfig};
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -161,10 +161,50 @@ impl Chain {
 /// back within `max_key_step` (RESULTS.md §3: no accepted step did so in the sweep).
 const LEASH: f64 = 10.0;
 
-/// Continuation of eq. 4 from (x0, ξ0), solved by y0, to (x1, ξ1): both interpolated linearly,
-/// Levenberg–Marquardt warm-started at every step, a failed step (error above `solve_tol` or a
-/// bird moving more than `max_key_step`) halved down to 1/256. Returns how far it got, its y and
-/// error, solver runs and evaluations.
+/// The continuation sizes each step so that the tangent predicts a largest move of this fraction
+/// of `max_key_step` (the path bends, so a step sized for the whole of it fails about half the
+/// time: RESULTS.md §3).
+const PREDICTED_MOVE: f64 = 0.7;
+
+/// The smallest continuation step in t; a failed step of this size ends the continuation.
+const MIN_STEP: f64 = 1.0 / 256.0;
+
+/// The problem of eq. 4 at t of the straight line from (x0, ξ0) to (x1, ξ1).
+fn on_line(line: [&[f64]; 4], t: f64, y: Vec<f64>) -> PositionProblem {
+    let lerp = |a: &[f64], b: &[f64]| -> Vec<f64> {
+        a.iter().zip(b).map(|(p, q)| p + t * (q - p)).collect()
+    };
+    PositionProblem::new(lerp(line[0], line[1]), lerp(line[2], line[3]), 0, y)
+}
+
+/// The tangent dy/dt of the solution path of eq. 4 along `line` at a solved point (t, y): the
+/// least-squares solution of J ẏ = −∂r/∂t (J = ∂r/∂y with the leader held, from the normal
+/// equations; ∂r/∂t by a forward difference of 1e-6 in t). None where JᵀJ is singular.
+fn tangent(line: [&[f64]; 4], t: f64, y: &[f64]) -> Option<Vec<f64>> {
+    let h = 1e-6;
+    let p = on_line(line, t, y.to_vec());
+    let q = on_line(line, t + h, y.to_vec());
+    let rt = DVector::from_iterator(
+        y.len(),
+        q.residual_vec()
+            .iter()
+            .zip(p.residual_vec())
+            .map(|(a, b)| (a - b) / h),
+    );
+    let j = p.jacobian_matrix();
+    let d = j.tr_mul(&j).cholesky()?.solve(&-(j.tr_mul(&rt)));
+    let mut v = vec![0.0; y.len()];
+    v[1..].copy_from_slice(d.as_slice());
+    v.iter().all(|a| a.is_finite()).then_some(v)
+}
+
+/// Continuation of eq. 4 from (x0, ξ0), solved by y0, to (x1, ξ1): both interpolated linearly
+/// in t, an Euler–Newton predictor–corrector. From each solved point the tangent
+/// ([`tangent`]) sizes the next step (its largest predicted move `PREDICTED_MOVE` ×
+/// `max_key_step`, at most twice the last step, at least `MIN_STEP`) and predicts the start of
+/// Levenberg–Marquardt there; a step whose solve misses `solve_tol` or moves a bird more than
+/// `max_key_step` from the last point is halved, and one of `MIN_STEP` that fails ends the
+/// continuation. Returns how far it got, its y and error, solver runs and evaluations.
 pub fn continuation(
     x0: &[f64],
     x1: &[f64],
@@ -173,19 +213,28 @@ pub fn continuation(
     y0: Vec<f64>,
     cfg: &SteadyConfig,
 ) -> (f64, Vec<f64>, f64, usize, usize) {
-    let lerp = |a: &[f64], b: &[f64], t: f64| -> Vec<f64> {
-        a.iter().zip(b).map(|(p, q)| p + t * (q - p)).collect()
-    };
+    let line = [x0, x1, xi0, xi1];
     let (mut t, mut dt) = (0.0f64, 1.0f64);
     let mut y = y0;
     let (mut solves, mut evals) = (0, 0);
-    let mut err =
-        PositionProblem::new(x0.to_vec(), xi0.to_vec(), 0, y.clone()).max_relative_error();
-    while t < 1.0 && dt >= 1.0 / 256.0 {
+    let mut err = on_line(line, 0.0, y.clone()).max_relative_error();
+    let mut tan = tangent(line, t, &y);
+    let mut fresh = true;
+    while t < 1.0 {
+        if fresh {
+            if let Some(v) = &tan {
+                let fastest = v.iter().map(|a| a.abs()).fold(0.0, f64::max);
+                dt = (PREDICTED_MOVE * cfg.max_key_step / fastest).min(2.0 * dt);
+            }
+            dt = dt.clamp(MIN_STEP, 1.0);
+        }
         let tn = (t + dt).min(1.0);
+        let start = match &tan {
+            Some(v) => y.iter().zip(v).map(|(a, b)| a + (tn - t) * b).collect(),
+            None => y.clone(),
+        };
         let s = solve::solve(
-            PositionProblem::new(lerp(x0, x1, tn), lerp(xi0, xi1, tn), 0, y.clone())
-                .with_leash(LEASH * cfg.max_key_step),
+            on_line(line, tn, start).with_leash_around(y.clone(), LEASH * cfg.max_key_step),
             cfg.solve_evaluations,
         );
         solves += 1;
@@ -199,9 +248,13 @@ pub fn continuation(
             t = tn;
             y = s.y;
             err = s.max_relative_error;
-            dt = (2.0 * dt).min(1.0);
+            tan = tangent(line, t, &y);
+            fresh = true;
+        } else if dt <= MIN_STEP {
+            break;
         } else {
-            dt *= 0.5;
+            dt = (0.5 * dt).max(MIN_STEP);
+            fresh = false;
         }
     }
     (t, y, err, solves, evals)

@@ -57,8 +57,15 @@ impl PositionProblem {
 
     /// The same problem, abandoned (residuals `None`, the solver stops) as soon as an iterate
     /// moves a bird more than `d` wingspans from the start.
-    pub fn with_leash(mut self, d: f64) -> Self {
-        self.leash = Some((self.y.clone(), d));
+    pub fn with_leash(self, d: f64) -> Self {
+        let y0 = self.y.clone();
+        self.with_leash_around(y0, d)
+    }
+
+    /// The same problem, abandoned as soon as an iterate moves a bird more than `d` wingspans
+    /// from `origin` (a continuation's last point when the solver starts from a prediction).
+    pub fn with_leash_around(mut self, origin: Vec<f64>, d: f64) -> Self {
+        self.leash = Some((origin, d));
         self
     }
 
@@ -99,7 +106,8 @@ impl PositionProblem {
             .fold(0.0, f64::max)
     }
 
-    fn residual_vec(&self) -> Vec<f64> {
+    /// The residuals r_i = (e_i / E − ξ̂_i) / ξ̂_i at the current y.
+    pub fn residual_vec(&self) -> Vec<f64> {
         self.evaluated(|e, _| {
             e.iter()
                 .zip(&self.xi)
@@ -167,15 +175,21 @@ pub struct Solved {
     pub evaluations: usize,
 }
 
-/// Solves eq. 4 from the problem's y by Levenberg–Marquardt (tolerances 1e-15), giving up after
-/// `max_evaluations` residual evaluations (rounded up to a multiple of N, the crate's patience
-/// unit).
+/// The crate's stop tolerances (ftol, xtol, gtol). A run that solves eq. 4 converges
+/// quadratically, so the step after which its relative step falls below this leaves ξ at
+/// rounding (|ξ − ξ̂|/ξ̂ of order 1e-14, far below `SteadyConfig::solve_tol`); at 1e-15 the crate
+/// went on for 3–6 more evaluations of rounding noise before it stopped (RESULTS.md §3).
+pub const STOP_TOL: f64 = 1e-12;
+
+/// Solves eq. 4 from the problem's y by Levenberg–Marquardt (tolerances [`STOP_TOL`]), giving up
+/// after `max_evaluations` residual evaluations (rounded up to a multiple of N, the crate's
+/// patience unit).
 pub fn solve(problem: PositionProblem, max_evaluations: usize) -> Solved {
     let n = problem.x.len().max(1);
     let lm = LevenbergMarquardt::new()
-        .with_ftol(1e-15)
-        .with_xtol(1e-15)
-        .with_gtol(1e-15)
+        .with_ftol(STOP_TOL)
+        .with_xtol(STOP_TOL)
+        .with_gtol(STOP_TOL)
         .with_patience(max_evaluations.div_ceil(n).max(1));
     let (p, report) = lm.minimize(problem);
     let err = p.max_relative_error();

@@ -45,7 +45,9 @@ pub struct SteadyConfig {
     pub draw_steps: usize,
     /// Draws rejected (eq. 4 not solved to `solve_tol`) before a key shape gives up.
     pub draw_retries: usize,
-    /// Smallest distance between two birds of Step 1's shapes, wingspans.
+    /// Smallest distance between two birds of Step 1's shapes, wingspans: 1 b (the initiation's
+    /// bound between converged birds) plus a margin, because converged birds sit up to a few
+    /// hundredths of a wingspan off their places (RESULTS.md §3).
     pub min_pair: f64,
 }
 
@@ -64,7 +66,7 @@ impl Default for SteadyConfig {
             max_key_step: 3.0,
             draw_steps: 8,
             draw_retries: 4,
-            min_pair: 1.0,
+            min_pair: 1.05,
         }
     }
 }
