@@ -7,7 +7,10 @@
 //! second half with the same seeds (common random numbers): the whole grid's coarse density
 //! error and each zone's density, polarization, angular momentum and aspect-ratio errors.
 //!
-//! `cargo run --release --example zones -- [EPOCHS] [OUT]` (default 6, `out/zones/`)
+//! `cargo run --release --example zones -- [EPOCHS] [OUT] [SPEEDS]` (default 6, `out/zones/`, no
+//! fixed speeds). `SPEEDS` = `A,B` gives the zones fixed speeds A and B BL/s (paper §7.2.4, the
+//! seals' water and land): the clip is generated with them, the zone fit is told them, and a
+//! second zone fit without them is validated beside it.
 
 use herdfit::herd::fit::job::{run, FitJob};
 use herdfit::herd::fit::zone_job::run_zones;
@@ -31,16 +34,25 @@ fn main() -> herdfit::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let epochs: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let out = Path::new(args.get(2).map_or("out/zones", String::as_str)).to_path_buf();
+    let speeds: Option<[f64; 2]> = args.get(3).map(|s| {
+        let v: Vec<f64> = s.split(',').filter_map(|x| x.parse().ok()).collect();
+        assert_eq!(v.len(), 2, "SPEEDS is A,B (BL/s)");
+        [v[0], v[1]]
+    });
     std::fs::create_dir_all(&out).map_err(|e| herdfit::Error::file(&out, e.to_string()))?;
     // 16 × 8 cells of 3 BL; the zones meet at x = 21 BL (between cell columns 6 and 7).
     let zones = vec![
         ZoneSpec {
             name: "herding".into(),
             polygon: vec![[0.0, 0.0], [21.0, 0.0], [21.0, 24.0], [0.0, 24.0]],
+            speed: speeds.map(|s| s[0]),
+            ..ZoneSpec::default()
         },
         ZoneSpec {
             name: "loose".into(),
             polygon: vec![[21.0, 0.0], [48.0, 0.0], [48.0, 24.0], [21.0, 24.0]],
+            speed: speeds.map(|s| s[1]),
+            ..ZoneSpec::default()
         },
     ];
     let mut base = Params::default();
@@ -61,18 +73,35 @@ fn main() -> herdfit::Result<()> {
             .map(|(z, p)| NamedSet {
                 name: z.name.clone(),
                 polygon: z.polygon.clone(),
+                colour: None,
+                speed: z.speed,
                 params: p.clone(),
             })
             .collect(),
+        mask: None,
         provenance: None,
     };
     let (truth_path, zones_path) = (out.join("truth-sets.json"), out.join("zones.json"));
     write(&truth_path, &bundle)?;
     let zfile = ZonesFile {
         schema: herdfit::herd::fit::zones::ZONES_SCHEMA.into(),
+        mask: None,
         zones: zones.clone(),
     };
     write(&zones_path, &zfile)?;
+    // The same zones without their speeds (the fit that is not told them).
+    let plain_path = out.join("zones-no-speed.json");
+    let plain = ZonesFile {
+        zones: zones
+            .iter()
+            .map(|z| ZoneSpec {
+                speed: None,
+                ..z.clone()
+            })
+            .collect(),
+        ..zfile.clone()
+    };
+    write(&plain_path, &plain)?;
     base.save(&out.join("base.json"))?;
     let clip_dir = out.join("clip");
     write_clip(
@@ -131,6 +160,8 @@ fn main() -> herdfit::Result<()> {
             .iter()
             .map(|s| NamedSet {
                 params: p.clone(),
+                // One set for the whole clip: no zone speeds either.
+                speed: None,
                 ..s.clone()
             })
             .collect(),
@@ -146,12 +177,30 @@ fn main() -> herdfit::Result<()> {
         }
         s.params = s.params.with_vec(&v);
     }
-    let sets = vec![
+    let mut unspeeded = None;
+    if speeds.is_some() {
+        let t0 = std::time::Instant::now();
+        let job = FitJob {
+            out: out.join("zone-fit-no-speed.json"),
+            zones: Some(plain_path.clone()),
+            ..single_job.clone()
+        };
+        run_zones(&job, &mut NoProgress)?;
+        println!(
+            "zone fit without the speeds: {:.1} s",
+            t0.elapsed().as_secs_f64()
+        );
+        unspeeded = Some(ParamSets::load(&job.out)?);
+    }
+    let mut sets = vec![
         ("zone fit".to_string(), of(&zone_fit, &out)?),
         ("single fit".to_string(), of(&repeat(&single), &out)?),
         ("truth".to_string(), of(&bundle, &out)?),
         ("truth ±0.06".to_string(), of(&moved, &out)?),
     ];
+    if let Some(b) = &unspeeded {
+        sets.insert(1, ("zone fit, speeds not given".to_string(), of(b, &out)?));
+    }
     let vcfg = ValidateConfig {
         seeds: 4,
         ..ValidateConfig::default()

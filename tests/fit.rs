@@ -753,6 +753,7 @@ fn the_clip_speed_model_reproduces_the_clip_speed_spread() {
         world: World {
             obstacles: None,
             guidance: Guidance::None,
+            fixed_speed: None,
         },
         dt: 0.04,
         force_kernel: herdfit::herd::sim::ForceKernel::default(),
@@ -821,6 +822,7 @@ fn leader_guidance_smooths_away_the_flanks_inward_drift() {
         let w = World {
             obstacles: None,
             guidance: g,
+            fixed_speed: None,
         };
         w.guidance_at([ix as f64 + 0.5, iy as f64 + 0.5])
             .unwrap_or([0.0, 0.0])

@@ -148,6 +148,7 @@ fn obstacle_points_push_away() {
     let world = World {
         obstacles: Some(map),
         guidance: Guidance::None,
+        fixed_speed: None,
     };
     let m = model(only(3, 0.5, 0.5), world);
     let f = forces(
@@ -225,6 +226,7 @@ fn leader_rule_and_guidance() {
     let guided = World {
         obstacles: None,
         guidance: Guidance::Uniform([0.0, 2.0]),
+        fixed_speed: None,
     };
     let m = model(Params::default(), guided.clone());
     let d = m.decide(&snap, &mut rng);
@@ -292,6 +294,7 @@ fn replay_reproduces_a_live_run_exactly() {
         World {
             obstacles: None,
             guidance: Guidance::Uniform([1.0, 0.3]),
+            fixed_speed: None,
         },
     );
     let rows = random_rows(120, 4);

@@ -25,6 +25,7 @@ pub fn clip_model(params: Params, clip: &ClipFields) -> Model {
         world: World {
             obstacles: Some(obstacle_map(&g, &clip.obstacles)),
             guidance: Guidance::None,
+            fixed_speed: None,
         },
         dt: 1.0 / clip.meta.fps,
         force_kernel: crate::herd::sim::ForceKernel::default(),
@@ -68,7 +69,10 @@ pub fn run_from_fields_zoned(
 ) -> Result<Vec<AgentRow>> {
     let mut params = params.clone();
     params.speed = SpeedModel::of_clip(clip, &params.speed);
-    let model = clip_model(params, clip);
+    let mut model = clip_model(params, clip);
+    if let Some(z) = zones {
+        model.world.fixed_speed = z.zones.speed_map(&z.grid);
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rows = start_herd(&model, clip, first, settle, &mut rng, device)?;
     if rows.is_empty() {

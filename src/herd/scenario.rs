@@ -37,6 +37,7 @@ pub fn default_scenario(params: Params, agents: usize, seed: u64) -> Result<Scen
     let world = World {
         obstacles: Some(map),
         guidance: Guidance::Uniform([0.98, 0.2]),
+        fixed_speed: None,
     };
     let init = random_herd(&spec, &params.speed, &world, seed)?;
     Ok(Scenario {
@@ -76,6 +77,7 @@ pub fn bench_model(
     let world = World {
         obstacles: None,
         guidance: Guidance::Uniform([1.0, 0.0]),
+        fixed_speed: None,
     };
     let init = random_herd(&HerdSpec::standard(agents), &params.speed, &world, seed)?;
     Ok((

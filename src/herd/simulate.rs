@@ -148,6 +148,7 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
     let world = World {
         obstacles: None,
         guidance: cfg.guidance.map_or(Guidance::None, Guidance::Uniform),
+        fixed_speed: None,
     };
     let rows = match &job.run.herd {
         Some(h) => h.rows(&params, &world, cfg.seed)?,

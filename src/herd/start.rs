@@ -5,7 +5,7 @@
 use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::params::ALIGNMENT;
+use crate::herd::params::{SpeedModel, ALIGNMENT};
 use crate::herd::sim::{theta_tensor, ForceTensors, Guidance, HerdState, Model};
 use crate::measure::fields::{cell_counts, field_errors};
 use burn::tensor::Device;
@@ -279,6 +279,27 @@ pub fn start_herd(
     device: &Device,
 ) -> Result<Vec<AgentRow>> {
     let mut rows = init_herd(clip, f, &model.params.speed, rng);
+    if let Some(m) = &model.world.fixed_speed {
+        fix_speeds(&mut rows, m, &model.params.speed);
+    }
     settle(model, clip, &mut rows, settle_cfg, device)?;
     Ok(rows)
+}
+
+/// Agents standing in a zone of fixed speed (§7.2.4) start around that speed instead of the
+/// clip's mean: the same deviation from the mean, the zone's speed as the mean (eq. 6's
+/// stationary spread kept).
+pub fn fix_speeds(rows: &mut [AgentRow], map: &crate::herd::sim::SpeedMap, sm: &SpeedModel) {
+    for r in rows {
+        let Some(m) = map.at([r.x, r.y]) else {
+            continue;
+        };
+        let s = r.vx.hypot(r.vy);
+        if s > 0.0 {
+            let cap = sm.max.max(m + 4.0 * sm.stationary_std());
+            let k = (s - sm.mean + m).clamp(0.0, cap) / s;
+            r.vx *= k;
+            r.vy *= k;
+        }
+    }
 }

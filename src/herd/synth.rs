@@ -141,8 +141,12 @@ pub fn synthesise_zoned(
         } else {
             Guidance::Uniform(dir)
         },
+        fixed_speed: zones.and_then(|z| z.zones.speed_map(&z.grid)),
     };
-    let init = random_herd(&spec, &cfg.params.speed, &world, cfg.seed)?;
+    let mut init = random_herd(&spec, &cfg.params.speed, &world, cfg.seed)?;
+    if let Some(m) = &world.fixed_speed {
+        crate::herd::start::fix_speeds(&mut init, m, &cfg.params.speed);
+    }
     let ids: Vec<u64> = init.iter().map(|r| r.id).collect();
     let model = Model {
         params: cfg.params.clone(),

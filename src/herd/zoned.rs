@@ -31,12 +31,15 @@ impl ZoneSets {
     ) -> Result<ZoneSets> {
         let file = ZonesFile {
             schema: ZONES_SCHEMA.into(),
+            mask: bundle.mask.clone(),
             zones: bundle
                 .sets
                 .iter()
                 .map(|s| crate::herd::fit::zones::ZoneSpec {
                     name: s.name.clone(),
                     polygon: s.polygon.clone(),
+                    colour: s.colour.clone(),
+                    speed: s.speed,
                 })
                 .collect(),
         };
@@ -52,6 +55,12 @@ impl ZoneSets {
     pub fn bundle(&self, provenance: Option<serde_json::Value>) -> ParamSets {
         ParamSets {
             schema: PARAM_SETS_SCHEMA.into(),
+            // Absolute, so that the bundle finds its mask from wherever it is read.
+            mask: self
+                .zones
+                .mask
+                .as_ref()
+                .map(|m| std::fs::canonicalize(m).unwrap_or_else(|_| m.clone())),
             sets: self
                 .zones
                 .specs
@@ -60,6 +69,8 @@ impl ZoneSets {
                 .map(|(z, p)| NamedSet {
                     name: z.name.clone(),
                     polygon: z.polygon.clone(),
+                    colour: z.colour.clone(),
+                    speed: z.speed,
                     params: p.clone(),
                 })
                 .collect(),

@@ -4,7 +4,7 @@ use crate::cli::args::with_flags;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::{Settle, GUIDANCE_SCALE};
-use crate::herd::validate::{run, ValidateConfig, ValidateJob};
+use crate::herd::validate::{run, zone_report, ValidateConfig, ValidateJob};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -12,10 +12,12 @@ use std::path::PathBuf;
 pub struct ValidateArgs {
     #[arg(value_name = "CLIP/")]
     pub clip: PathBuf,
-    /// The parameter set to validate (e.g. the fit's output).
+    /// The parameter set to validate (e.g. the fit's output), or a zone fit's parameter-set
+    /// bundle (validated zone by zone, each agent with its zone's set and speed).
     #[arg(long, value_name = "P.json")]
     pub params: PathBuf,
-    /// A baseline to compare with (e.g. the fit's starting parameters).
+    /// A baseline to compare with (e.g. the fit's starting parameters); with a bundle, another
+    /// bundle of the same zones or one set played in every zone.
     #[arg(long, value_name = "P0.json")]
     pub baseline: Option<PathBuf>,
     /// Fraction of the clip before the held-out part.
@@ -67,7 +69,16 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             ensemble_mean: a.ensemble_mean,
         },
     };
-    let (_, md) = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
+    // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.
+    let md = if zone_report::is_bundle(&job.params) {
+        zone_report::run_bundle(&job, &mut Bars::default())
+            .map_err(|e| with_flags(e, &[]))?
+            .1
+    } else {
+        run(&job, &mut Bars::default())
+            .map_err(|e| with_flags(e, &[]))?
+            .1
+    };
     print!("{md}");
     println!("wrote {}", job.out.display());
     Ok(())

@@ -243,6 +243,7 @@ pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result
                 ny: g.ny,
                 dirs: navf.clone(),
             },
+            fixed_speed: None,
         },
         dt: 1.0 / f.fps,
         force_kernel: crate::herd::sim::ForceKernel::default(),

@@ -23,6 +23,7 @@ pub mod run;
 pub mod still;
 pub mod target;
 pub mod zone_job;
+mod zone_mask;
 pub mod zones;
 
 pub use crate::herd::eval::{clip_model, evaluate};

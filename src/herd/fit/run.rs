@@ -309,6 +309,9 @@ impl<'a> FitRun<'a> {
         speed_params.speed = SpeedModel::of_clip(clip, &self.init.speed);
         let mut model = clip_model(speed_params.with_vec(&learnt.theta), clip);
         model.force_kernel = cfg.force_kernel;
+        if let Some(z) = self.zones {
+            model.world.fixed_speed = z.speed_map(&clip.grid());
+        }
         let mut herds = self.start_herds(&model, clip, a, rng)?;
         let mut f = a;
         while f + 1 < b {

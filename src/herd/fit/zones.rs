@@ -13,20 +13,33 @@ use std::path::{Path, PathBuf};
 /// Schema tag of a zones file.
 pub const ZONES_SCHEMA: &str = "herdfit.zones/1";
 
-/// One zone: its name and its polygon.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// One zone: its name, its polygon (or its colour in the file's mask image) and optionally a
+/// fixed speed.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ZoneSpec {
     pub name: String,
-    /// Corners in the clip's coordinates (BL, y up), a closed ring.
+    /// Corners in the clip's coordinates (BL, y up), a closed ring (zones without a mask).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub polygon: Vec<[f64; 2]>,
+    /// The zone's colour in the mask image, `#rrggbb` (zones with a mask).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour: Option<String>,
+    /// A fixed mean speed v_μ (BL/s) of eq. 6 inside the zone (the paper's seals: 3.0 in water,
+    /// 0.5 on land); without it the clip's speed model applies.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed: Option<f64>,
 }
 
-/// A zones file (`herdfit.zones/1`).
+/// A zones file (`herdfit.zones/1`): polygons, or a mask image whose colours name the zones.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ZonesFile {
     pub schema: String,
+    /// A mask image stretched over the clip's grid (row 0 of the image at the top), path
+    /// relative to the zones file; each zone names its `colour` in it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask: Option<PathBuf>,
     pub zones: Vec<ZoneSpec>,
 }
 
@@ -39,7 +52,12 @@ pub struct Zones {
     pub nx: usize,
     /// The file the zones came from (for messages).
     pub file: PathBuf,
+    /// The mask image the cells were assigned from (resolved), if any.
+    pub mask: Option<PathBuf>,
 }
+
+/// The largest fixed zone speed accepted (BL/s).
+pub const MAX_ZONE_SPEED: f64 = 100.0;
 
 impl Zones {
     /// Reads a zones file and assigns the clip's cells; errors name the file and the key.
@@ -70,11 +88,41 @@ impl Zones {
             return Err(bad("zones: give at least one zone".into()));
         }
         for (k, z) in file.zones.iter().enumerate() {
-            if let Some(m) = crate::data::polygon::polygon_problem(&z.polygon) {
-                return Err(bad(format!("zones[{k}].polygon ('{}'): {m}", z.name)));
-            }
             if file.zones[..k].iter().any(|o| o.name == z.name) {
                 return Err(bad(format!("zones[{k}].name: '{}' is used twice", z.name)));
+            }
+            if let Some(v) = z.speed {
+                if !(v.is_finite() && v > 0.0 && v <= MAX_ZONE_SPEED) {
+                    return Err(bad(format!(
+                        "zones[{k}].speed ('{}'): {v} is not a speed in (0, {MAX_ZONE_SPEED}] BL/s",
+                        z.name
+                    )));
+                }
+            }
+        }
+        if let Some(mask) = &file.mask {
+            let mask = match path.parent() {
+                Some(d) if mask.is_relative() => d.join(mask),
+                _ => mask.clone(),
+            };
+            let cell_zone = super::zone_mask::assign(&file.zones, &mask, path, g, obstacles)?;
+            return Ok(Zones {
+                specs: file.zones,
+                cell_zone,
+                nx: g.nx,
+                file: path.to_path_buf(),
+                mask: Some(mask),
+            });
+        }
+        for (k, z) in file.zones.iter().enumerate() {
+            if z.colour.is_some() {
+                return Err(bad(format!(
+                    "zones[{k}].colour ('{}'): a colour needs a mask image (\"mask\")",
+                    z.name
+                )));
+            }
+            if let Some(m) = crate::data::polygon::polygon_problem(&z.polygon) {
+                return Err(bad(format!("zones[{k}].polygon ('{}'): {m}", z.name)));
             }
         }
         let mut cell_zone = vec![None; g.nx * g.ny];
@@ -113,7 +161,24 @@ impl Zones {
             cell_zone,
             nx: g.nx,
             file: path.to_path_buf(),
+            mask: None,
         })
+    }
+
+    /// The fixed zone speeds as a per-cell map of grid `g` (the grid the zones were assigned
+    /// on), or `None` when no zone fixes its speed.
+    pub fn speed_map(&self, g: &crate::data::Grid) -> Option<crate::herd::sim::SpeedMap> {
+        self.specs
+            .iter()
+            .any(|z| z.speed.is_some())
+            .then(|| crate::herd::sim::SpeedMap {
+                grid: *g,
+                speed: self
+                    .cell_zone
+                    .iter()
+                    .map(|z| z.and_then(|k| self.specs[k].speed))
+                    .collect(),
+            })
     }
 
     /// The number of zones.
@@ -166,13 +231,18 @@ impl Zones {
 /// Schema tag of a parameter-set bundle.
 pub const PARAM_SETS_SCHEMA: &str = "herdfit.param-sets/1";
 
-/// One named parameter set of a bundle, with the polygon of the zone it was fitted on.
+/// One named parameter set of a bundle, with the zone it was fitted on (its polygon or mask
+/// colour, and its fixed speed).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NamedSet {
     pub name: String,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub polygon: Vec<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed: Option<f64>,
     pub params: crate::herd::params::Params,
 }
 
@@ -182,6 +252,9 @@ pub struct NamedSet {
 #[serde(deny_unknown_fields)]
 pub struct ParamSets {
     pub schema: String,
+    /// The mask image of the zones the sets were fitted on (zones by colour), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask: Option<PathBuf>,
     pub sets: Vec<NamedSet>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub provenance: Option<serde_json::Value>,

@@ -22,7 +22,7 @@ mod world;
 pub use fused::{fused_forces, plain_step, ForceKernel};
 pub use herd::{random_herd, HerdSpec};
 pub use rollout::{Decide, Guided, StepHooks};
-pub use world::{obstacle_map, Guidance, World};
+pub use world::{obstacle_map, Guidance, SpeedMap, World};
 
 use crate::data::agents::AgentRow;
 use crate::data::atomic::write_atomic;
@@ -158,6 +158,10 @@ pub struct StepDecisions {
     pub guide: Vec<P2>,
     /// Standard-normal draws of eq. 6.
     pub xi: Vec<f64>,
+    /// Per agent, the fixed v_μ of eq. 6 of the zone it stands in ([`World::fixed_speed`]);
+    /// empty when the world fixes no speed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fixed_speed: Vec<Option<f64>>,
 }
 
 /// Schema tag of recording files.
@@ -386,11 +390,16 @@ impl Model {
             }
         }
         let xi = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+        let fixed_speed = match &self.world.fixed_speed {
+            Some(m) => snap.pos.iter().map(|&p| m.at(p)).collect(),
+            None => Vec::new(),
+        };
         StepDecisions {
             perception,
             leader,
             guide,
             xi,
+            fixed_speed,
         }
     }
 
@@ -418,7 +427,8 @@ impl Model {
     }
 
     /// New speeds by the OU process of eq. 6, v' = v − θ(v − v_μ(ρ_i))Δt + v_σ√Δt ξ, with v_μ(ρ)
-    /// from the speed–density table (§6.2), clamped to [0, v_max]. Plain values: no gradient.
+    /// from the speed–density table (§6.2), or the agent's zone's fixed speed where the decisions
+    /// record one (§7.2.4), clamped to [0, v_max]. Plain values: no gradient.
     pub fn next_speeds(&self, speed: &[f64], dec: &StepDecisions) -> Vec<f64> {
         let sm = &self.params.speed;
         let dt = self.dt;
@@ -426,9 +436,16 @@ impl Model {
             .iter()
             .zip(&dec.perception.density)
             .zip(&dec.xi)
-            .map(|((&v, &rho), &xi)| {
-                let v1 = v - sm.reversion * (v - sm.mean_at(rho)) * dt + sm.std * dt.sqrt() * xi;
-                v1.clamp(0.0, sm.max)
+            .enumerate()
+            .map(|(i, ((&v, &rho), &xi))| {
+                // A fixed zone speed may lie above the clip's cap: the cap then leaves the
+                // zone's speeds the clip's room above their mean (4 stationary STDs).
+                let (mean, cap) = match dec.fixed_speed.get(i) {
+                    Some(&Some(m)) => (m, sm.max.max(m + 4.0 * sm.stationary_std())),
+                    _ => (sm.mean_at(rho), sm.max),
+                };
+                let v1 = v - sm.reversion * (v - mean) * dt + sm.std * dt.sqrt() * xi;
+                v1.clamp(0.0, cap)
             })
             .collect()
     }

@@ -24,11 +24,30 @@ pub enum Guidance {
     },
 }
 
-/// Obstacles and guidance of a run.
+/// Obstacles, guidance and fixed zone speeds of a run.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct World {
     pub obstacles: Option<ObstacleMap>,
     pub guidance: Guidance,
+    /// Zones whose speed is fixed (paper §7.2.4: the seals' 3.0 BL/s in water, 0.5 on land):
+    /// there v_μ of eq. 6 is the zone's speed instead of the clip's mean or speed–density table.
+    pub fixed_speed: Option<SpeedMap>,
+}
+
+/// A fixed mean speed v_μ (BL/s) per cell of a grid (row-major, row 0 at the bottom); `None`
+/// where the speed model of the parameter set applies.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpeedMap {
+    pub grid: Grid,
+    pub speed: Vec<Option<f64>>,
+}
+
+impl SpeedMap {
+    /// The fixed speed at `p`, or `None` outside the grid or where none is fixed.
+    pub fn at(&self, p: P2) -> Option<f64> {
+        let (ix, iy) = self.grid.cell_of(p)?;
+        self.speed.get(iy * self.grid.nx + ix).copied().flatten()
+    }
 }
 
 impl World {
@@ -89,6 +108,7 @@ mod tests {
         let w = World {
             obstacles: None,
             guidance: Guidance::Uniform([3.0, 4.0]),
+            fixed_speed: None,
         };
         assert_eq!(w.guidance_at([9.0, 9.0]), Some([0.6, 0.8]));
         let w = World {
@@ -100,6 +120,7 @@ mod tests {
                 ny: 1,
                 dirs: vec![[0.0, 0.0], [0.0, -2.0]],
             },
+            fixed_speed: None,
         };
         assert_eq!(w.guidance_at([1.0, 1.0]), None);
         assert_eq!(w.guidance_at([3.0, 1.0]), Some([0.0, -1.0]));

@@ -18,6 +18,7 @@ use crate::measure::rasterise;
 use serde::Serialize;
 
 mod report;
+pub mod zone_report;
 pub mod zones;
 
 pub use report::{markdown, run, ValidateJob};
