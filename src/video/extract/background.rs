@@ -3,7 +3,8 @@
 //! cells over the first frame and the obstacle cells of a mask image.
 
 use super::camera::Similarity;
-use super::decode::{cv, Video};
+use super::decode::{cv, forward, Video};
+use super::profile;
 use super::ExtractConfig;
 use crate::data::obstacle_polygons::ObstaclePolygons;
 use crate::error::{Error, Result};
@@ -118,20 +119,37 @@ pub(super) fn background(
         frames: Vec::with_capacity(pick.len()),
     };
     let ones = geom.ones()?;
-    for (i, cam) in camera.iter().enumerate() {
-        let Some(f) = vid.next()? else { break };
-        if pick.contains(&i) {
-            let (mut o, mut m) = (Mat::default(), Mat::default());
-            geom.warp(&f, cam, &mut o, imgproc::INTER_LINEAR)?;
-            geom.warp(&ones, cam, &mut m, imgproc::INTER_NEAREST)?;
-            sample.frames.push((
-                i,
-                o.data_bytes().map_err(&fail)?.to_vec(),
-                m.data_bytes().map_err(&fail)?.to_vec(),
-            ));
+    // A second thread decodes while this one warps the sampled frames.
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Mat>>(4);
+    std::thread::scope(|scope| -> Result<()> {
+        let producer = scope.spawn(move || {
+            for _ in 0..camera.len() {
+                if !forward(&tx, profile::time("B decode", || vid.next())) {
+                    return;
+                }
+            }
+        });
+        for (i, cam) in camera.iter().enumerate() {
+            let Ok(f) = rx.recv() else { break };
+            let f = f?;
+            if pick.contains(&i) {
+                let t = profile::start();
+                let (mut o, mut m) = (Mat::default(), Mat::default());
+                geom.warp(&f, cam, &mut o, imgproc::INTER_LINEAR)?;
+                geom.warp(&ones, cam, &mut m, imgproc::INTER_NEAREST)?;
+                sample.frames.push((
+                    i,
+                    o.data_bytes().map_err(&fail)?.to_vec(),
+                    m.data_bytes().map_err(&fail)?.to_vec(),
+                ));
+                profile::stop("B warp sample", t);
+            }
+            progress("background", i + 1, frames);
         }
-        progress("background", i + 1, frames);
-    }
+        drop(rx);
+        let _ = producer.join();
+        Ok(())
+    })?;
     if let Some(bg) = &cfg.background {
         let img = geom.image(bg, imgcodecs::IMREAD_COLOR)?;
         let mut out = Mat::default();
@@ -143,23 +161,42 @@ pub(super) fn background(
         .iter()
         .filter(|(i, _, _)| median_of.contains(i))
         .collect();
-    let mut bg = vec![0u8; geom.pw * geom.ph * 3];
-    let mut vals = Vec::with_capacity(stack.len());
-    for p in 0..geom.pw * geom.ph {
-        for c in 0..3 {
-            vals.clear();
-            for (_, s, m) in &stack {
-                if m[p] > 0 {
-                    vals.push(s[p * 3 + c]);
+    let t = profile::start();
+    let bg = median(&stack, geom.pw * geom.ph);
+    profile::stop("B median", t);
+    Ok((bg, sample))
+}
+
+/// The per-pixel, per-channel median (the upper one of an even count) of the BGR frames of
+/// `stack` over the pixels their masks mark valid (0 where none is), for `pixels` pixels; the
+/// two halves of the frame on two threads.
+fn median(stack: &[&(usize, Vec<u8>, Vec<u8>)], pixels: usize) -> Vec<u8> {
+    let mut bg = vec![0u8; pixels * 3];
+    let half = pixels / 2;
+    let (lo, hi) = bg.split_at_mut(half * 3);
+    let part = |out: &mut [u8], from: usize| {
+        let mut vals = Vec::with_capacity(stack.len());
+        for (k, px) in out.chunks_exact_mut(3).enumerate() {
+            let p = from + k;
+            for (c, o) in px.iter_mut().enumerate() {
+                vals.clear();
+                for (_, s, m) in stack {
+                    if m[p] > 0 {
+                        vals.push(s[p * 3 + c]);
+                    }
+                }
+                if !vals.is_empty() {
+                    let mid = vals.len() / 2;
+                    *o = *vals.select_nth_unstable(mid).1;
                 }
             }
-            if !vals.is_empty() {
-                vals.sort_unstable();
-                bg[p * 3 + c] = vals[vals.len() / 2];
-            }
         }
-    }
-    Ok((bg, sample))
+    };
+    std::thread::scope(|scope| {
+        scope.spawn(|| part(hi, half));
+        part(lo, 0);
+    });
+    bg
 }
 
 /// The grid of an extraction: square cells of max(W, H) / N video pixels over the first frame,

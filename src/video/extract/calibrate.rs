@@ -14,6 +14,7 @@
 
 use super::background::{Geometry, Sample};
 use super::fields::{difference, Segmenter};
+use super::profile;
 use super::{ExtractConfig, UserCount, AUTO_CELL_BL};
 use crate::data::clip::BODY_WIDTH_BL;
 use crate::error::{Error, Result};
@@ -56,12 +57,34 @@ pub struct Calibration {
     pub areas: Vec<f64>,
 }
 
+/// `f` of every sampled frame, in the sample's order: the first half of the frames on this
+/// thread, the second on another.
+fn per_frame<T: Send>(
+    sample: &Sample,
+    f: impl Fn(&(usize, Vec<u8>, Vec<u8>)) -> T + Sync,
+) -> Vec<T> {
+    let (a, b) = sample.frames.split_at(sample.frames.len() / 2);
+    let f = &f;
+    std::thread::scope(|scope| {
+        let second = scope.spawn(move || b.iter().map(f).collect::<Vec<T>>());
+        let mut out: Vec<T> = a.iter().map(f).collect();
+        match second.join() {
+            Ok(v) => out.extend(v),
+            Err(e) => std::panic::resume_unwind(e),
+        }
+        out
+    })
+}
+
 /// Herd masks of the sampled frames under `seg`, and their components.
 fn sample_blobs(seg: &Segmenter, sample: &Sample, w: usize) -> Result<Vec<Blob>> {
-    let mut all = Vec::new();
-    for (_, px, vm) in &sample.frames {
+    let per = per_frame(sample, |(_, px, vm)| -> Result<Vec<Blob>> {
         let mut m = seg.mask(px, vm)?;
-        all.extend(blobs(&mut m, w, MIN_COMPONENT, false));
+        Ok(blobs(&mut m, w, MIN_COMPONENT, false))
+    });
+    let mut all = Vec::new();
+    for b in per {
+        all.extend(b?);
     }
     Ok(all)
 }
@@ -80,16 +103,22 @@ pub(super) fn calibrate(
 ) -> Result<Calibration> {
     let (pw, scale) = (geom.pw, geom.scale);
     let path = geom.path;
+    let t = profile::start();
     let (threshold, threshold_from) = match cfg.background_threshold {
         Some(t) => (t, "given".to_string()),
         None => {
             let mut hist = [0u64; 256];
-            for (_, px, vm) in &sample.frames {
+            let per = per_frame(sample, |(_, px, vm)| {
+                let mut h = [0u64; 256];
                 for p in 0..geom.pw * geom.ph {
                     if vm[p] > 0 {
-                        hist[difference(px, bg, p) as usize] += 1;
+                        h[difference(px, bg, p) as usize] += 1;
                     }
                 }
+                h
+            });
+            for h in per {
+                hist.iter_mut().zip(h).for_each(|(a, b)| *a += b);
             }
             let t = threshold(&hist).ok_or_else(|| {
                 Error::file(
@@ -104,25 +133,30 @@ pub(super) fn calibrate(
             (t, "Otsu above the noise floor".to_string())
         }
     };
+    profile::stop("K Otsu", t);
+    let t = profile::start();
     // Stage 1: the mask at half the herd's contrast (the 90th percentile of the difference of
     // herd pixels) gives the body's length and width — where a blurred edge crosses half its
     // contrast is the true edge — and so whether to open the mask.
     let raw = Segmenter::new(geom, bg, cfg, threshold, false, 1)?;
-    let mut diffs = Vec::new();
-    for (_, px, vm) in &sample.frames {
+    let per = per_frame(sample, |(_, px, vm)| -> Result<Vec<u8>> {
         let m = raw.mask(px, vm)?;
-        diffs.extend(
-            m.iter()
-                .enumerate()
-                .filter(|(_, &v)| v > 0)
-                .map(|(p, _)| difference(px, bg, p)),
-        );
+        Ok(m.iter()
+            .enumerate()
+            .filter(|(_, &v)| v > 0)
+            .map(|(p, _)| difference(px, bg, p))
+            .collect())
+    });
+    let mut diffs = Vec::new();
+    for d in per {
+        diffs.extend(d?);
     }
     diffs.sort_unstable();
     let contrast = diffs.get(diffs.len() * 9 / 10).map_or(0.0, |&v| v as f64);
     let length_threshold = threshold.max(contrast / 2.0);
+    profile::stop("K contrast masks", t);
     let raw = Segmenter::new(geom, bg, cfg, length_threshold, false, 1)?;
-    let first = sample_blobs(&raw, sample, pw)?;
+    let first = profile::time("K length masks + blobs", || sample_blobs(&raw, sample, pw))?;
     let no_animals = || {
         Error::file(
             path,
@@ -133,7 +167,7 @@ pub(super) fn calibrate(
             ),
         )
     };
-    let size1 = body_size(&first);
+    let size1 = profile::time("K length mode (KDE)", || body_size(&first));
     let (body_length_px, body_length_from, opening) = match (cfg.body_length_px, size1) {
         (Some(l), _) => (l, "given".to_string(), l * BODY_WIDTH_BL * scale >= 6.0),
         (None, Some((b, n))) => (
@@ -145,8 +179,8 @@ pub(super) fn calibrate(
     };
     // Stage 2: the mask as the fields see it gives N_bp.
     let seg = Segmenter::new(geom, bg, cfg, threshold, opening, 1)?;
-    let comps = sample_blobs(&seg, sample, pw)?;
-    let size2 = body_size(&comps);
+    let comps = profile::time("K N_bp masks + blobs", || sample_blobs(&seg, sample, pw))?;
+    let size2 = profile::time("K N_bp mode (KDE)", || body_size(&comps));
     let (body_pixels, body_pixels_from, isolated) = match (cfg.body_pixels, &cfg.count, size2) {
         (Some(n), _, _) => (n, "given".to_string(), 0),
         (None, Some(c), _) => {
@@ -364,10 +398,14 @@ pub(super) fn body_size(blobs: &[Blob]) -> Option<(Blob, usize)> {
     let bw = 0.12;
     let steps = (((hi - lo) / 0.01).ceil() as usize).max(1);
     let mut mode = (f64::NEG_INFINITY, lo);
+    // Terms beyond 12 bandwidths (e^-72 < 1e-31, where the density at the mode is ≥ 1) are
+    // left out of the sum, which otherwise keeps its order.
+    let reach = 12.0 * bw;
     for k in 0..=steps {
         let x = lo + (hi - lo) * k as f64 / steps as f64;
         let dens: f64 = logs
             .iter()
+            .filter(|&&v| (v - x).abs() <= reach)
             .map(|&v| (-(v - x).powi(2) / (2.0 * bw * bw)).exp())
             .sum();
         if dens > mode.0 {

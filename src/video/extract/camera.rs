@@ -44,11 +44,15 @@ impl Similarity {
     }
 
     pub(super) fn apply(&self, p: [f64; 2]) -> [f64; 2] {
+        self.mapper()(p)
+    }
+
+    /// [`Similarity::apply`] with the rotation and zoom worked out once (the same arithmetic,
+    /// for mapping many points).
+    pub(super) fn mapper(&self) -> impl Fn([f64; 2]) -> [f64; 2] {
         let (c, s) = (self.angle.cos() * self.scale, self.angle.sin() * self.scale);
-        [
-            c * p[0] - s * p[1] + self.t[0],
-            s * p[0] + c * p[1] + self.t[1],
-        ]
+        let t = self.t;
+        move |p| [c * p[0] - s * p[1] + t[0], s * p[0] + c * p[1] + t[1]]
     }
 
     /// The least-squares similarity mapping points `from` onto `to` (2-D Umeyama).

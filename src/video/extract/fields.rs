@@ -9,6 +9,7 @@ use super::calibrate::blobs;
 use super::camera::Similarity;
 use super::decode::{cv, forward, Video};
 use super::preview::preview_png;
+use super::profile;
 use super::ExtractConfig;
 use crate::error::Result;
 use ndarray::{Array3, Array4};
@@ -153,22 +154,78 @@ impl<'a> Segmenter<'a> {
     fn frame(&self, f: &Mat, cam: &Similarity) -> Result<Stage> {
         let fail = cv(self.geom.path);
         let (mut st, mut valid) = (Mat::default(), Mat::default());
+        let t = profile::start();
         self.geom.warp(f, cam, &mut st, imgproc::INTER_LINEAR)?;
         self.geom
             .warp(&self.ones, cam, &mut valid, imgproc::INTER_NEAREST)?;
+        profile::stop("C warp", t);
+        let t = profile::start();
         let herd = self.mask(
             st.data_bytes().map_err(&fail)?,
             valid.data_bytes().map_err(&fail)?,
         )?;
+        profile::stop("C mask", t);
         let mut grey = Mat::default();
         imgproc::cvt_color(&st, &mut grey, imgproc::COLOR_BGR2GRAY, 0).map_err(&fail)?;
         Ok((st, herd, grey))
     }
 }
 
-/// Pass C over the `frames` frames from `first`: a second thread decodes, stabilises and segments
-/// frames while this one runs the optical flow and accumulates the cells. One preview every
-/// `preview_every` frames when given.
+/// Two threads computing the Farneback flow of consecutive stabilised greys, frame `i`'s (from
+/// frame `i − 1`) on thread `i % 2`: the flows are the same whichever thread runs them.
+struct FlowWorkers {
+    jobs: [std::sync::mpsc::SyncSender<(Mat, Mat)>; 2],
+    results: [std::sync::mpsc::Receiver<Result<Mat>>; 2],
+}
+
+impl FlowWorkers {
+    fn start<'scope>(
+        scope: &'scope std::thread::Scope<'scope, '_>,
+        path: &'scope std::path::Path,
+    ) -> FlowWorkers {
+        let worker = || {
+            let (job_tx, job_rx) = std::sync::mpsc::sync_channel::<(Mat, Mat)>(1);
+            let (res_tx, res_rx) = std::sync::mpsc::sync_channel::<Result<Mat>>(1);
+            scope.spawn(move || {
+                for (pg, grey) in job_rx {
+                    let mut flow = Mat::default();
+                    let r = profile::time("C Farneback", || {
+                        video::calc_optical_flow_farneback(
+                            &pg, &grey, &mut flow, 0.5, 2, 13, 2, 5, 1.1, 0,
+                        )
+                    });
+                    if res_tx.send(r.map(|_| flow).map_err(cv(path))).is_err() {
+                        return;
+                    }
+                }
+            });
+            (job_tx, res_rx)
+        };
+        let (a, b) = (worker(), worker());
+        FlowWorkers {
+            jobs: [a.0, b.0],
+            results: [a.1, b.1],
+        }
+    }
+
+    /// Starts frame `i`'s flow from the previous grey `pg` to `grey`.
+    fn send(&self, i: usize, pg: Mat, grey: Mat) -> Result<()> {
+        self.jobs[i % 2]
+            .send((pg, grey))
+            .map_err(|_| crate::error::Error::Internal("a flow thread ended".into()))
+    }
+
+    /// Frame `i`'s flow (the flows of one thread arrive in the order they were sent).
+    fn recv(&self, i: usize) -> Result<Mat> {
+        self.results[i % 2]
+            .recv()
+            .map_err(|_| crate::error::Error::Internal("a flow thread ended".into()))?
+    }
+}
+
+/// Pass C over the `frames` frames from `first`: a thread decodes, stabilises and segments frames,
+/// two more compute the optical flows of alternate frame pairs, and this one accumulates the
+/// cells in frame order. One preview every `preview_every` frames when given.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn pass_c(
     vid: &mut Video,
@@ -195,15 +252,15 @@ pub(super) fn pass_c(
         previews: Vec::new(),
     };
     let mut prev_grey: Option<Mat> = None;
-    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Stage>>(4);
     std::thread::scope(|scope| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Stage>>(4);
         let producer = {
             let tx = tx.clone();
             let vid = &mut *vid;
             scope.spawn(move || {
                 for cam in camera.iter() {
                     let item = (|| -> Result<Option<Stage>> {
-                        let Some(f) = vid.next()? else {
+                        let Some(f) = profile::time("C decode", || vid.next())? else {
                             return Ok(None);
                         };
                         seg.frame(&f, cam).map(Some)
@@ -215,21 +272,50 @@ pub(super) fn pass_c(
             })
         };
         drop(tx);
-        for i in 0..frames {
-            let Ok(item) = rx.recv() else { break };
-            let (st, herd, grey) = item?;
-            sums.count[i] = grid.herd_pixels(&herd);
-            if let Some(pg) = &prev_grey {
-                sums.flow(i, pg, &grey, &herd, grid, to_bl_s, path)?;
+        let flows = FlowWorkers::start(scope, path);
+        // Frames whose flow is being computed: (index, stabilised frame, herd mask, has a flow).
+        let mut pending = std::collections::VecDeque::new();
+        type Pending = (usize, Mat, Vec<u8>, bool);
+        let mut finish = |sums: &mut Sums, (j, st, herd, flowing): Pending| -> Result<()> {
+            if flowing {
+                let flow = profile::time("C wait for flow", || flows.recv(j))?;
+                profile::time("C flow sums", || {
+                    sums.flow(j, &flow, &herd, grid, to_bl_s, path)
+                })?;
             }
             if let Some(every) = preview_every {
-                if i % every.max(1) == 0 {
-                    let png = preview_png(&st, &herd, &sums.count[i], &sums.fsum[i], grid, geom)?;
-                    sums.previews.push((format!("preview-{i:05}.png"), png));
+                if j % every.max(1) == 0 {
+                    let png = preview_png(&st, &herd, &sums.count[j], &sums.fsum[j], grid, geom)?;
+                    sums.previews.push((format!("preview-{j:05}.png"), png));
                 }
             }
+            progress("fields", j + 1, frames);
+            Ok(())
+        };
+        for i in 0..frames {
+            let Ok(item) = profile::time("C wait for frame", || rx.recv()) else {
+                break;
+            };
+            let (st, herd, grey) = item?;
+            sums.count[i] = grid.herd_pixels(&herd);
+            let flowing = match prev_grey.take() {
+                Some(pg) => {
+                    flows.send(i, pg, grey.try_clone().map_err(cv(path))?)?;
+                    true
+                }
+                None => false,
+            };
             prev_grey = Some(grey);
-            progress("fields", i + 1, frames);
+            pending.push_back((i, st, herd, flowing));
+            // At most one flow in progress on each worker.
+            while pending.len() > 2 || pending.front().is_some_and(|p| !p.3) {
+                if let Some(p) = pending.pop_front() {
+                    finish(&mut sums, p)?;
+                }
+            }
+        }
+        while let Some(p) = pending.pop_front() {
+            finish(&mut sums, p)?;
         }
         drop(rx);
         let _ = producer.join();
@@ -275,23 +361,19 @@ impl Sums {
         }
     }
 
-    /// Frame `i`'s flow from the previous grey `pg`: summed per cell over herd pixels (BL/s, y
-    /// up), the pixels' speeds, and each cell's direction variance about its mean flow.
-    #[allow(clippy::too_many_arguments)]
+    /// Frame `i`'s flow `flow` (Farneback, from the previous grey): summed per cell over herd
+    /// pixels (BL/s, y up), the pixels' speeds, and each cell's direction variance about its mean
+    /// flow.
     fn flow(
         &mut self,
         i: usize,
-        pg: &Mat,
-        grey: &Mat,
+        flow: &Mat,
         herd: &[u8],
         grid: &CellGrid,
         to_bl_s: f64,
         path: &std::path::Path,
     ) -> Result<()> {
         let fail = cv(path);
-        let mut flow = Mat::default();
-        video::calc_optical_flow_farneback(pg, grey, &mut flow, 0.5, 2, 13, 2, 5, 1.1, 0)
-            .map_err(&fail)?;
         let fl: &[opencv::core::Vec2f] = flow.data_typed().map_err(&fail)?;
         let mut sum = vec![[0.0f64; 2]; grid.cells()];
         for p in 0..grid.cell_of.len() {

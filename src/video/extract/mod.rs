@@ -18,6 +18,7 @@ mod decode;
 mod fields;
 mod job;
 mod preview;
+mod profile;
 mod register;
 mod report;
 mod still;
@@ -350,8 +351,10 @@ pub fn extract(
     let (w, h) = (vid.w, vid.h);
     let t_start = std::time::Instant::now();
     let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
+    let t = profile::start();
     let (camera, camera_kind, cross_check) =
         camera_pass(&mut vid, path, cfg, (first, last), &mut progress)?;
+    profile::stop("A camera pass (total)", t);
     let frames = camera.len();
     if debug {
         eprintln!("pass A (camera) done at {:?}", t_start.elapsed());
@@ -370,6 +373,7 @@ pub fn extract(
         Some(c) => Some(c.frame - first),
         None => None,
     };
+    let t = profile::start();
     let (bg, sample) = background::background(
         &mut vid,
         &geom,
@@ -379,10 +383,13 @@ pub fn extract(
         count_at,
         &mut progress,
     )?;
+    profile::stop("B background (total)", t);
     if debug {
         eprintln!("background done at {:?}", t_start.elapsed());
     }
+    let t = profile::start();
     let mut calib = calibrate::calibrate(cfg, &geom, &bg, &sample, count_at)?;
+    profile::stop("K calibration (total)", t);
     drop(sample);
     calib.camera = camera_kind.to_string();
     calib.registration_vs_anchors_px = cross_check;
@@ -397,6 +404,7 @@ pub fn extract(
     let obstacles = background::obstacle_cells(cfg, &geom, &grid)?;
     let body_px_proc = body_px * geom.scale * geom.scale;
     let seg = fields::Segmenter::calibrated(&geom, &bg, cfg, &calib)?;
+    let t = profile::start();
     let sums = fields::pass_c(
         &mut vid,
         &geom,
@@ -408,6 +416,7 @@ pub fn extract(
         preview_every,
         &mut progress,
     )?;
+    profile::stop("C fields pass (total)", t);
     if debug {
         eprintln!("fields done at {:?}", t_start.elapsed());
     }
@@ -431,7 +440,9 @@ pub fn extract(
         speed,
         source,
     );
-    finish(meta, fields, obstacles, calib, camera, sums.previews)
+    let out = finish(meta, fields, obstacles, calib, camera, sums.previews);
+    profile::report(t_start.elapsed());
+    out
 }
 
 /// The clip metadata of an extraction: grid and scale from the calibration, the provenance

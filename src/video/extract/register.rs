@@ -20,6 +20,7 @@
 
 use super::camera::Similarity;
 use super::decode::{cv, downscaled, forward, Video};
+use super::profile;
 use super::ExtractConfig;
 use crate::error::{Error, Result};
 use opencv::core::{Mat, Point2f, Scalar, Size, TermCriteria, Vector, CV_8UC1};
@@ -38,11 +39,16 @@ const BUCKETS: (usize, usize) = (8, 6);
 pub(super) const MIN_INLIERS: usize = 12;
 /// RANSAC samples per frame.
 const SAMPLES: usize = 120;
+/// Lucas–Kanade window (processing pixels) and pyramid levels above the frame.
+const LK_WIN: i32 = 21;
+const LK_LEVELS: i32 = 3;
 
-/// A key frame: its grey image and features (processing pixels), its camera (key frame →
+/// A key frame: its grey image's pyramid and features (processing pixels), its camera (key frame →
 /// reference frame, processing pixels) and how many features it started with.
 struct Key {
-    grey: Mat,
+    /// The grey's LK pyramid with its derivatives, built once for every frame registered on it
+    /// (what `calc_optical_flow_pyr_lk` would otherwise rebuild from `grey` each time).
+    pyr: Vector<Mat>,
     pts: Vec<[f64; 2]>,
     cam: Similarity,
     start: usize,
@@ -94,8 +100,20 @@ impl Key {
                 pts.push([p.x as f64, p.y as f64]);
             }
         }
+        let mut pyr = Vector::<Mat>::new();
+        video::build_optical_flow_pyramid(
+            &grey,
+            &mut pyr,
+            Size::new(LK_WIN, LK_WIN),
+            LK_LEVELS,
+            true,
+            opencv::core::BORDER_REFLECT_101,
+            opencv::core::BORDER_CONSTANT,
+            true,
+        )
+        .map_err(&fail)?;
         Ok(Key {
-            grey,
+            pyr,
             start: pts.len(),
             pts,
             cam,
@@ -218,7 +236,6 @@ fn ransac(from: &[[f64; 2]], to: &[[f64; 2]], seed: u64) -> Option<(Similarity, 
     if n < 2 {
         return None;
     }
-    let inliers = |s: &Similarity| inliers_at(from, to, s, INLIER_PX);
     let count = |v: &[bool]| v.iter().filter(|&&b| b).count();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut best: Option<(usize, Similarity)> = None;
@@ -234,7 +251,7 @@ fn ransac(from: &[[f64; 2]], to: &[[f64; 2]], seed: u64) -> Option<(Similarity, 
         if !(0.5..2.0).contains(&s.scale) {
             continue;
         }
-        let k = count(&inliers(&s));
+        let k = count_inliers(from, to, &s, INLIER_PX);
         if best.as_ref().is_none_or(|b| k > b.0) {
             best = Some((k, s));
         }
@@ -244,7 +261,7 @@ fn ransac(from: &[[f64; 2]], to: &[[f64; 2]], seed: u64) -> Option<(Similarity, 
     // them remain: an animal that has moved only a fraction of a pixel from its key frame does
     // not pull the fit.
     let mut fit = s;
-    let n1 = count(&inliers_at(from, to, &fit, INLIER_PX));
+    let n1 = count_inliers(from, to, &fit, INLIER_PX);
     for tol in [INLIER_PX, 0.6, 0.35] {
         let keep = inliers_at(from, to, &fit, tol);
         if count(&keep) < MIN_INLIERS.max(n1 / 2) {
@@ -259,18 +276,31 @@ fn ransac(from: &[[f64; 2]], to: &[[f64; 2]], seed: u64) -> Option<(Similarity, 
             .unzip();
         fit = Similarity::fit(&f, &t);
     }
-    Some((fit, inliers(&fit)))
+    Some((fit, inliers_at(from, to, &fit, INLIER_PX)))
+}
+
+/// Whether `fit` maps `p` to within `tol` pixels of `q`.
+fn within(map: &impl Fn([f64; 2]) -> [f64; 2], p: [f64; 2], q: [f64; 2], tol: f64) -> bool {
+    let r = map(p);
+    (r[0] - q[0]).hypot(r[1] - q[1]) <= tol
 }
 
 /// Which pairs `fit` maps to within `tol` pixels.
 fn inliers_at(from: &[[f64; 2]], to: &[[f64; 2]], fit: &Similarity, tol: f64) -> Vec<bool> {
+    let map = fit.mapper();
     from.iter()
         .zip(to)
-        .map(|(p, q)| {
-            let r = fit.apply(*p);
-            (r[0] - q[0]).hypot(r[1] - q[1]) <= tol
-        })
+        .map(|(p, q)| within(&map, *p, *q, tol))
         .collect()
+}
+
+/// How many pairs `fit` maps to within `tol` pixels.
+fn count_inliers(from: &[[f64; 2]], to: &[[f64; 2]], fit: &Similarity, tol: f64) -> usize {
+    let map = fit.mapper();
+    from.iter()
+        .zip(to)
+        .filter(|(p, q)| within(&map, **p, **q, tol))
+        .count()
 }
 
 /// Registers `grey` against `key` starting from the previous frame's camera `prev` (processing
@@ -308,20 +338,23 @@ fn register(
         0.01,
     )
     .map_err(&fail)?;
+    let t_lk = profile::start();
     video::calc_optical_flow_pyr_lk(
-        &key.grey,
+        &key.pyr,
         grey,
         &src,
         &mut dst,
         &mut status,
         &mut err,
-        Size::new(21, 21),
-        3,
+        Size::new(LK_WIN, LK_WIN),
+        LK_LEVELS,
         crit,
         video::OPTFLOW_USE_INITIAL_FLOW,
         1e-4,
     )
     .map_err(&fail)?;
+    profile::stop("A LK", t_lk);
+    let t_ransac = profile::start();
     let (w, h) = (grey.cols() as f64, grey.rows() as f64);
     let mut idx = Vec::new();
     let (mut from, mut to) = (Vec::new(), Vec::new());
@@ -333,7 +366,9 @@ fn register(
             to.push(key.pts[i]);
         }
     }
-    let Some((s, keep)) = ransac(&from, &to, seed) else {
+    let fit = ransac(&from, &to, seed);
+    profile::stop("A RANSAC", t_ransac);
+    let Some((s, keep)) = fit else {
         return Ok(None);
     };
     let n_in = keep.iter().filter(|&&k| k).count();
@@ -394,13 +429,15 @@ pub(super) fn camera_path(
             let mut k = 0usize;
             while first + k < last {
                 let item = (|| -> Result<Option<Mat>> {
-                    let Some(frame) = vid.next()? else {
+                    let Some(frame) = profile::time("A decode", || vid.next())? else {
                         return Ok(None);
                     };
+                    let t = profile::start();
                     let small = downscaled(&frame, scale, path)?;
                     let mut grey = Mat::default();
                     imgproc::cvt_color(&small, &mut grey, imgproc::COLOR_BGR2GRAY, 0)
                         .map_err(cv(path))?;
+                    profile::stop("A downscale + grey", t);
                     Ok(Some(grey))
                 })();
                 if !forward(&tx, item) {
@@ -409,18 +446,21 @@ pub(super) fn camera_path(
                 k += 1;
             }
         });
-        while let Ok(item) = rx.recv() {
+        while let Ok(item) = profile::time("A wait for frame", || rx.recv()) {
             let grey = item?;
             let i = raw.len();
-            stillness.add(i, &grey, path)?;
+            profile::time("A stillness sample", || stillness.add(i, &grey, path))?;
             match &mut key {
                 None => {
-                    key = Some(Key::new(grey, Similarity::IDENTITY, path)?);
+                    key = Some(profile::time("A key frame (GFTT)", || {
+                        Key::new(grey, Similarity::IDENTITY, path)
+                    })?);
                     raw.push(Similarity::IDENTITY);
                 }
                 Some(k) => {
                     let prev = *raw.last().unwrap_or(&Similarity::IDENTITY);
-                    let mut got = register(k, &grey, &prev, i as u64, path)?;
+                    let mut got =
+                        profile::time("A register", || register(k, &grey, &prev, i as u64, path))?;
                     if got.is_none() {
                         // The key frame has worn out: start one on the last registered frame
                         // and try again.
