@@ -200,7 +200,7 @@ fn tangent(line: [&[f64]; 4], t: f64, y: &[f64]) -> Option<Vec<f64>> {
 
 /// Continuation of eq. 4 from (x0, ξ0), solved by y0, to (x1, ξ1): both interpolated linearly
 /// in t, an Euler–Newton predictor–corrector. From each solved point the tangent
-/// ([`tangent`]) sizes the next step (its largest predicted move `PREDICTED_MOVE` ×
+/// (`tangent`) sizes the next step (its largest predicted move `PREDICTED_MOVE` ×
 /// `max_key_step`, at most twice the last step, at least `MIN_STEP`) and predicts the start of
 /// Levenberg–Marquardt there; a step whose solve misses `solve_tol` or moves a bird more than
 /// `max_key_step` from the last point is halved, and one of `MIN_STEP` that fails ends the

@@ -269,7 +269,7 @@ impl std::fmt::Display for DemoSummary {
         writeln!(
             f,
             "held-out frames {}..{}, start → fitted (change):",
-            self.report.frames[0], self.report.frames[1]
+            self.report.run.frames[0], self.report.run.frames[1]
         )?;
         let names = ["density error", "velocity error", "Σ 4 measure errors"];
         for (n, (fit, start)) in names.iter().zip(held_out(&self.report)) {

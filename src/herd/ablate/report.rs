@@ -65,8 +65,8 @@ impl AblationReport {
         AblationReport {
             schema: ABLATION_SCHEMA.into(),
             clip: clip.to_string(),
-            fit_frames: [0, validation.frames[0]],
-            heldout_frames: validation.frames,
+            fit_frames: [0, validation.run.frames[0]],
+            heldout_frames: validation.run.frames,
             settings: cfg.clone(),
             video,
             video_per_frame: validation.video_per_frame.clone(),

@@ -147,10 +147,11 @@ impl SetReport {
 /// Schema tag of validation reports (`report.json`).
 pub const VALIDATION_SCHEMA: &str = "herdfit.validation/1";
 
-/// The whole report.
+/// What every validation report states of its run (flattened into its JSON): the schema, the
+/// clip, the held-out frames, the split, the coarse grid and the seeds.
 #[derive(Clone, Debug, Serialize)]
-pub struct Report {
-    /// [`VALIDATION_SCHEMA`].
+pub struct HeldOut {
+    /// [`VALIDATION_SCHEMA`], or the zone report's.
     pub schema: String,
     pub clip: String,
     pub frames: [usize; 2],
@@ -158,6 +159,13 @@ pub struct Report {
     /// The coarse grid of the errors ([`ValidateConfig::coarse_grid`]).
     pub grid: usize,
     pub seeds: usize,
+}
+
+/// The whole report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    #[serde(flatten)]
+    pub run: HeldOut,
     /// Whether the seeds' mean prediction was compared ([`ValidateConfig::ensemble_mean`]).
     pub ensemble_mean: bool,
     /// The video's per-frame measures: [polarization, ang. momentum centroid, frame centre,
@@ -354,12 +362,14 @@ pub fn validate(
     }
     Ok((
         Report {
-            schema: VALIDATION_SCHEMA.into(),
-            clip: clip_name.to_string(),
-            frames: [start, nf],
-            split,
-            grid,
-            seeds,
+            run: HeldOut {
+                schema: VALIDATION_SCHEMA.into(),
+                clip: clip_name.to_string(),
+                frames: [start, nf],
+                split,
+                grid,
+                seeds,
+            },
             ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),
             sets: reports,

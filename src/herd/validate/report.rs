@@ -18,13 +18,13 @@ pub fn markdown(r: &Report) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "# herdfit validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid, {}.\n\n",
-        r.clip,
-        r.frames[0],
-        r.frames[1],
-        r.split,
-        r.seeds,
-        r.grid,
-        r.grid,
+        r.run.clip,
+        r.run.frames[0],
+        r.run.frames[1],
+        r.run.split,
+        r.run.seeds,
+        r.run.grid,
+        r.run.grid,
         if r.ensemble_mean {
             "of the seeds' mean prediction"
         } else {
@@ -197,7 +197,7 @@ pub fn run(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Report, St
                 &clip,
                 &run.fields,
                 &run.frames,
-                report.frames[0],
+                report.run.frames[0],
             )?;
         }
     }
@@ -213,7 +213,7 @@ use crate::plot::PALETTE as COLOURS;
 /// held-out frames), `errors.png` (each set's density and velocity errors) and one error map
 /// per set.
 fn plots(report: &Report, out: &AtomicDir) -> Result<()> {
-    let start = report.frames[0];
+    let start = report.run.frames[0];
     let at = |k: usize| (start + k) as f64;
     let video = |m: usize| -> Vec<(f64, f64)> {
         let rows = report.video_per_frame.iter().enumerate();

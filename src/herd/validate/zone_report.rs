@@ -6,7 +6,7 @@
 
 use super::report::ValidateJob;
 use super::zones::{validate_zones, ZoneSetReport};
-use super::ValidateConfig;
+use super::{HeldOut, ValidateConfig};
 use crate::data::atomic::AtomicDir;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
@@ -23,12 +23,8 @@ pub const ZONE_VALIDATION_SCHEMA: &str = "herdfit.zone-validation/1";
 /// A zone validation report (`report.json`).
 #[derive(Clone, Debug, Serialize)]
 pub struct ZoneReport {
-    pub schema: String,
-    pub clip: String,
-    pub frames: [usize; 2],
-    pub split: f64,
-    pub grid: usize,
-    pub seeds: usize,
+    #[serde(flatten)]
+    pub run: HeldOut,
     /// Per zone: its name, its cells and its fixed speed (BL/s), if any.
     pub zones: Vec<ZoneInfo>,
     pub sets: Vec<ZoneSetReport>,
@@ -96,12 +92,14 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
     let z = &fitted.zones;
     let nf = clip.frames();
     let report = ZoneReport {
-        schema: ZONE_VALIDATION_SCHEMA.into(),
-        clip: job.clip.display().to_string(),
-        frames: [held_out_start(nf, &job.config), nf],
-        split: job.config.split,
-        grid: job.config.coarse_grid,
-        seeds: job.config.seeds,
+        run: HeldOut {
+            schema: ZONE_VALIDATION_SCHEMA.into(),
+            clip: job.clip.display().to_string(),
+            frames: [held_out_start(nf, &job.config), nf],
+            split: job.config.split,
+            grid: job.config.coarse_grid,
+            seeds: job.config.seeds,
+        },
         zones: z
             .specs
             .iter()
@@ -149,7 +147,13 @@ fn held_out_start(frames: usize, cfg: &ValidateConfig) -> usize {
 pub fn markdown(r: &ZoneReport) -> String {
     let mut s = format!(
         "# herdfit zone validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), whole-grid errors on a {}×{} coarse grid; each agent plays its zone's set.\n\n| zone | cells | fixed speed (BL/s) |\n|---|---:|---:|\n",
-        r.clip, r.frames[0], r.frames[1], r.split, r.seeds, r.grid, r.grid
+        r.run.clip,
+        r.run.frames[0],
+        r.run.frames[1],
+        r.run.split,
+        r.run.seeds,
+        r.run.grid,
+        r.run.grid
     );
     for z in &r.zones {
         let v = z.speed.map_or("—".into(), |v| format!("{v}"));
