@@ -161,6 +161,16 @@ pub struct HeldOut {
     pub seeds: usize,
 }
 
+impl HeldOut {
+    /// "Clip `C`, held-out frames a..b (split s), k seed(s), errors on a g×g coarse grid".
+    pub fn summary(&self) -> String {
+        format!(
+            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid",
+            self.clip, self.frames[0], self.frames[1], self.split, self.seeds, self.grid, self.grid
+        )
+    }
+}
+
 /// The whole report.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {

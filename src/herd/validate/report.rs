@@ -17,14 +17,8 @@ use std::path::{Path, PathBuf};
 pub fn markdown(r: &Report) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "# herdfit validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid, {}.\n\n",
-        r.run.clip,
-        r.run.frames[0],
-        r.run.frames[1],
-        r.run.split,
-        r.run.seeds,
-        r.run.grid,
-        r.run.grid,
+        "# herdfit validation\n\n{}, {}.\n\n",
+        r.run.summary(),
         if r.ensemble_mean {
             "of the seeds' mean prediction"
         } else {

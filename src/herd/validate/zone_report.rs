@@ -146,14 +146,8 @@ fn held_out_start(frames: usize, cfg: &ValidateConfig) -> usize {
 /// The zone report as Markdown: the whole grid's errors per set, then every zone's.
 pub fn markdown(r: &ZoneReport) -> String {
     let mut s = format!(
-        "# herdfit zone validation\n\nClip `{}`, held-out frames {}..{} (split {}), {} seed(s), whole-grid errors on a {}×{} coarse grid; each agent plays its zone's set.\n\n| zone | cells | fixed speed (BL/s) |\n|---|---:|---:|\n",
-        r.run.clip,
-        r.run.frames[0],
-        r.run.frames[1],
-        r.run.split,
-        r.run.seeds,
-        r.run.grid,
-        r.run.grid
+        "# herdfit zone validation\n\n{} (whole grid); each agent plays its zone's set.\n\n| zone | cells | fixed speed (BL/s) |\n|---|---:|---:|\n",
+        r.run.summary()
     );
     for z in &r.zones {
         let v = z.speed.map_or("—".into(), |v| format!("{v}"));
