@@ -158,6 +158,12 @@ impl SpeedModel {
         }
     }
 
+    /// The speed cap where a zone fixes the mean speed at `fixed` (§7.2.4): `max`, or more when
+    /// the zone's speed lies above it, leaving it the room of 4 stationary STDs.
+    pub fn cap_with_fixed(&self, fixed: f64) -> f64 {
+        self.max.max(fixed + 4.0 * self.stationary_std())
+    }
+
     /// v_μ(ρ): linear interpolation in the speed–density table, clamped at its ends; the global
     /// mean when there is no table (eq. 6, §6.2).
     pub fn mean_at(&self, density: f64) -> f64 {

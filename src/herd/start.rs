@@ -296,8 +296,7 @@ pub fn fix_speeds(rows: &mut [AgentRow], map: &crate::herd::sim::SpeedMap, sm: &
         };
         let s = r.vx.hypot(r.vy);
         if s > 0.0 {
-            let cap = sm.max.max(m + 4.0 * sm.stationary_std());
-            let k = (s - sm.mean + m).clamp(0.0, cap) / s;
+            let k = (s - sm.mean + m).clamp(0.0, sm.cap_with_fixed(m)) / s;
             r.vx *= k;
             r.vy *= k;
         }

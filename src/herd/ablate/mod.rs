@@ -183,7 +183,7 @@ pub fn ablate(
 ) -> Result<(Vec<Variant>, crate::herd::validate::Report)> {
     cfg.check()?;
     let nf = clip.frames();
-    let held = ((nf as f64) * cfg.validate.split).floor() as usize;
+    let held = cfg.validate.held_out_start(nf);
     let fit_cfg = FitConfig {
         frames: 0..held,
         ..cfg.fit.clone()

@@ -438,10 +438,8 @@ impl Model {
             .zip(&dec.xi)
             .enumerate()
             .map(|(i, ((&v, &rho), &xi))| {
-                // A fixed zone speed may lie above the clip's cap: the cap then leaves the
-                // zone's speeds the clip's room above their mean (4 stationary STDs).
                 let (mean, cap) = match dec.fixed_speed.get(i) {
-                    Some(&Some(m)) => (m, sm.max.max(m + 4.0 * sm.stationary_std())),
+                    Some(&Some(m)) => (m, sm.cap_with_fixed(m)),
                     _ => (sm.mean_at(rho), sm.max),
                 };
                 let v1 = v - sm.reversion * (v - mean) * dt + sm.std * dt.sqrt() * xi;

@@ -224,6 +224,11 @@ impl Default for ValidateConfig {
 }
 
 impl ValidateConfig {
+    /// The first held-out frame of a clip of `frames` frames: ⌊frames · split⌋.
+    pub fn held_out_start(&self, frames: usize) -> usize {
+        ((frames as f64) * self.split).floor() as usize
+    }
+
     /// Checks the ranges; errors name the key.
     pub fn check(&self) -> Result<()> {
         if !(self.split.is_finite() && (0.0..1.0).contains(&self.split)) {
@@ -249,7 +254,7 @@ pub fn validate(
     cfg.check()?;
     let (split, grid, seeds) = (cfg.split, cfg.coarse_grid, cfg.seeds);
     let nf = clip.frames();
-    let start = ((nf as f64) * split).floor() as usize;
+    let start = cfg.held_out_start(nf);
     if nf == 1 {
         return Err(Error::invalid(
             "the clip is a still (one frame): it has no held-out part; `herdfit fit` scores a still \

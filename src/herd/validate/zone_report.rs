@@ -6,7 +6,7 @@
 
 use super::report::ValidateJob;
 use super::zones::{validate_zones, ZoneSetReport};
-use super::{HeldOut, ValidateConfig};
+use super::HeldOut;
 use crate::data::atomic::AtomicDir;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
@@ -95,7 +95,7 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
         run: HeldOut {
             schema: ZONE_VALIDATION_SCHEMA.into(),
             clip: job.clip.display().to_string(),
-            frames: [held_out_start(nf, &job.config), nf],
+            frames: [job.config.held_out_start(nf), nf],
             split: job.config.split,
             grid: job.config.coarse_grid,
             seeds: job.config.seeds,
@@ -136,11 +136,6 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
     )?;
     out.commit()?;
     Ok((report, md))
-}
-
-/// The first held-out frame.
-fn held_out_start(frames: usize, cfg: &ValidateConfig) -> usize {
-    ((frames as f64) * cfg.split).floor() as usize
 }
 
 /// The zone report as Markdown: the whole grid's errors per set, then every zone's.

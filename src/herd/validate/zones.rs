@@ -87,7 +87,7 @@ pub fn validate_zones(
 ) -> Result<Vec<ZoneSetReport>> {
     cfg.check()?;
     let nf = clip.frames();
-    let start = ((nf as f64) * cfg.split).floor() as usize;
+    let start = cfg.held_out_start(nf);
     if nf - start < 2 || cfg.warmup > start {
         return Err(Error::invalid(format!(
             "the held-out part {start}..{nf} (warm-up {}) does not fit the clip",
