@@ -3,8 +3,10 @@
 //! flag but `--out`, and again with three `--anchor` rectangles on ground the herd never covers
 //! (found from the trajectories), scored against the trajectories.
 //!
-//! `cargo build --release && cargo run --release --example extract_table` (the `herdfit` binary of
-//! `target/release` runs every command; HERDFIT_BIN overrides).
+//! `cargo build --release && cargo run --release --example extract_table [-- FILTER [FLAG…]]`
+//! (the `herdfit` binary of `target/release` runs every command; HERDFIT_BIN overrides). FILTER
+//! keeps the videos whose name (`still-800-10`, `moving-200-16`, …) contains it; the flags that
+//! follow are added to every extraction (e.g. `--density-by pixels`).
 
 #[path = "../tests/common/score.rs"]
 mod score;
@@ -57,6 +59,9 @@ fn main() {
     let bin = std::env::var_os("HERDFIT_BIN")
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("target/release/herdfit"));
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let filter = args.first().cloned().unwrap_or_default();
+    let extra = args.get(1..).unwrap_or_default().to_vec();
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     println!("| camera | agents | px/BL | frame | extraction | count error | density r | heading error | mean speed error | body length (px) |");
@@ -65,6 +70,9 @@ fn main() {
         for (agents, grid) in [(200, "20x12"), (800, "40x24")] {
             for px in [16.0, 10.0] {
                 let name = format!("{}-{agents}-{px}", if moving { "moving" } else { "still" });
+                if !name.contains(&filter) {
+                    continue;
+                }
                 let clip = d.join(&name);
                 let video = d.join(format!("{name}.avi"));
                 let mut args: Vec<String> = [
@@ -109,6 +117,7 @@ fn main() {
                         "--out".into(),
                         out.display().to_string(),
                     ];
+                    a.extend(extra.iter().cloned());
                     if with_anchors {
                         for r in &anchor_set {
                             a.extend(["--anchor".into(), r.clone()]);
@@ -116,7 +125,7 @@ fn main() {
                     }
                     run(&bin, &a);
                     let ex = ClipFields::load(&out).unwrap();
-                    let sc = score(&ex, &truth, synth.meta.speed.mean);
+                    let sc = score(&ex, &truth, synth.meta.speed.mean, px);
                     println!(
                         "| {} | {agents} | {px} | {}×{} | {} | {:.1} % | {:.3} | {:.2}° | {:.1} % | {:.2} |",
                         if moving { "moving" } else { "static" },

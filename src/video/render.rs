@@ -218,10 +218,12 @@ fn draw_agents(
     );
     const SHIFT: i32 = 4;
     let sub = (1 << SHIFT) as f64;
-    let axes = Size::new(
-        (0.5 * s * sub).round() as i32,
-        (0.5 * BODY_WIDTH_BL * s * sub).round() as i32,
-    );
+    // OpenCV strokes the outline of a filled anti-aliased ellipse with a one-pixel line centred
+    // on it, which makes the body a pixel longer and wider than its axes (measured: 11 × 6 px
+    // at half intensity for axes of 10 × 4 px); half a pixel off each half-axis draws the body
+    // at its size.
+    let half = |len: f64| ((0.5 * len - 0.5).max(0.0) * sub).round() as i32;
+    let axes = Size::new(half(s), half(BODY_WIDTH_BL * s));
     for a in agents {
         let p = world_to_px(grid, s, h, [a.x, a.y]);
         let angle = -a.vy.atan2(a.vx).to_degrees();

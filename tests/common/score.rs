@@ -58,10 +58,36 @@ fn angle(u: [f64; 2], v: [f64; 2]) -> f64 {
 }
 
 /// The [`Score`] of `extracted` against the trajectories `truth_traj` (true mean speed
-/// `truth_speed`, BL/s).
+/// `truth_speed`, BL/s) of a video drawn at `px_per_bl` pixels per body length.
+///
+/// The clip's cells are regions of the first frame, its lengths in the *estimated* body length,
+/// so the truth is placed where it is in that frame: each true position (BL) is taken to video
+/// pixels at `px_per_bl` and back to the clip's units at the estimated length. (Rasterised in its
+/// own BL, a 5 % error in the estimated length would shift the truth by 5 % of the frame against
+/// the cells it is compared with; the length's error shows in the speed error instead.)
 #[allow(clippy::needless_range_loop)]
-pub fn score(extracted: &ClipFields, truth_traj: &[Vec<AgentRow>], truth_speed: f64) -> Score {
+pub fn score(
+    extracted: &ClipFields,
+    truth_traj: &[Vec<AgentRow>],
+    truth_speed: f64,
+    px_per_bl: f64,
+) -> Score {
     let m = &extracted.meta;
+    let k = px_per_bl / m.body_length_px.unwrap_or(px_per_bl);
+    let placed: Vec<Vec<AgentRow>> = truth_traj
+        .iter()
+        .map(|f| {
+            f.iter()
+                .map(|a| AgentRow {
+                    x: a.x * k,
+                    y: a.y * k,
+                    vx: a.vx * k,
+                    vy: a.vy * k,
+                    ..*a
+                })
+                .collect()
+        })
+        .collect();
     let grid = Grid {
         origin: [0.0, 0.0],
         cell_size: m.cell_size,
@@ -69,7 +95,7 @@ pub fn score(extracted: &ClipFields, truth_traj: &[Vec<AgentRow>], truth_speed: 
         ny: m.ny,
     };
     let truth = rasterise(
-        truth_traj,
+        &placed,
         grid,
         m.fps,
         Array2::zeros((m.ny, m.nx)),

@@ -9,7 +9,9 @@
 //!   single animals are the mode of the distribution of log-area (a kernel density, bandwidth
 //!   0.12): isolated animals all have nearly the same area while merged groups spread over 2, 3,
 //!   … times it. N_bp is the median area of the components within ×0.7–1.4 of the mode; L is the
-//!   median full major axis 4 √λ₁ of their second moments (exact for a filled ellipse).
+//!   median full major axis 4 √λ₁ of their second moments (exact for a filled ellipse). When
+//!   the mode is at the smallest components looked at (fragments of badly contrasted bodies,
+//!   ground texture: OpenCV's `vtest.avi`), the area-weighted median is taken.
 //! - Or from a user count: N_bp = herd pixels of one frame / the animals counted on it.
 
 use super::background::{Geometry, Sample};
@@ -170,10 +172,10 @@ pub(super) fn calibrate(
     let size1 = profile::time("K length mode (KDE)", || body_size(&first));
     let (body_length_px, body_length_from, opening) = match (cfg.body_length_px, size1) {
         (Some(l), _) => (l, "given".to_string(), l * BODY_WIDTH_BL * scale >= 6.0),
-        (None, Some((b, n))) => (
-            b.major / scale,
-            format!("median major axis of {n} isolated animals"),
-            b.minor >= 6.0,
+        (None, Some(size)) => (
+            size.blob.major / scale,
+            format!("median major axis of {}", size.what()),
+            size.blob.minor >= 6.0,
         ),
         (None, None) => return Err(no_animals()),
     };
@@ -200,10 +202,10 @@ pub(super) fn calibrate(
                 0,
             )
         }
-        (None, None, Some((b, n))) => (
-            b.area / (scale * scale),
-            format!("median area of {n} isolated animals"),
-            n,
+        (None, None, Some(size)) => (
+            size.blob.area / (scale * scale),
+            format!("median area of {}", size.what()),
+            size.n,
         ),
         (None, None, None) => return Err(no_animals()),
     };
@@ -383,13 +385,103 @@ pub(super) fn threshold(hist: &[u64; 256]) -> Option<f64> {
     Some(t.max(floor))
 }
 
+/// Body size from the components of the sampled frames ([`body_size`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct BodySize {
+    /// Median area, major and minor axis of the components taken as single animals.
+    pub blob: Blob,
+    /// How many components that was.
+    pub n: usize,
+    /// Their share of all the components' pixels.
+    pub share: f64,
+    /// Whether they were found by the area-weighted median rather than the mode.
+    pub weighted: bool,
+}
+
 /// The single animals among `blobs`: the median area (N_bp), major axis (L) and minor axis of
-/// the components near the mode of log-area, and how many components that was.
-pub(super) fn body_size(blobs: &[Blob]) -> Option<(Blob, usize)> {
+/// the components within ×0.7–1.4 of the mode of log-area. When the most common component is no
+/// larger than twice [`MIN_COMPONENT`], or the components at the mode hold less than
+/// [`MIN_SHARE`] of the pixels — fragments and ground texture, not animals — the components
+/// around the area-weighted median are taken instead: the size below which half the herd pixels
+/// lie (animals that vary in size, as walkers at different distances do, have no sharp mode).
+pub(super) fn body_size(blobs: &[Blob]) -> Option<BodySize> {
     if blobs.is_empty() {
         return None;
     }
     let logs: Vec<f64> = blobs.iter().map(|b| b.area.ln()).collect();
+    let total: f64 = blobs.iter().map(|b| b.area).sum();
+    let around = |m: f64| -> (Vec<Blob>, f64) {
+        let near: Vec<Blob> = blobs
+            .iter()
+            .copied()
+            .filter(|b| b.area >= 0.7 * m && b.area <= 1.4 * m)
+            .collect();
+        let share = near.iter().map(|b| b.area).sum::<f64>() / total;
+        (near, share)
+    };
+    let m = log_area_mode(&logs).exp();
+    let (mut near, mut share) = around(m);
+    let weighted = m <= 2.0 * MIN_COMPONENT as f64 || share < MIN_SHARE;
+    if weighted {
+        let mut areas: Vec<f64> = blobs.iter().map(|b| b.area).collect();
+        areas.sort_by(f64::total_cmp);
+        let mut below = 0.0;
+        let half = areas
+            .iter()
+            .copied()
+            .find(|&a| {
+                below += a;
+                below >= total / 2.0
+            })
+            .unwrap_or(m);
+        (near, share) = around(half);
+    }
+    if near.is_empty() {
+        return None;
+    }
+    let med = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let blob = Blob {
+        area: med(&mut near.iter().map(|b| b.area).collect()),
+        major: med(&mut near.iter().map(|b| b.major).collect()),
+        minor: med(&mut near.iter().map(|b| b.minor).collect()),
+    };
+    Some(BodySize {
+        blob,
+        n: near.len(),
+        share,
+        weighted,
+    })
+}
+
+impl BodySize {
+    /// "N isolated animals (S % of the herd pixels)", naming the weighted median when it was used.
+    fn what(&self) -> String {
+        let pct = 100.0 * self.share;
+        if self.weighted {
+            format!(
+                "{} components around the area-weighted median ({pct:.0} % of the herd pixels; \
+                 the most common components were fragments)",
+                self.n
+            )
+        } else {
+            format!(
+                "{} isolated animals ({pct:.0} % of the herd pixels)",
+                self.n
+            )
+        }
+    }
+}
+
+/// Smallest share of the herd pixels the components at the mode of log-area must hold to be
+/// taken for single animals ([`body_size`]).
+pub(super) const MIN_SHARE: f64 = 0.1;
+
+/// The mode of a kernel density (Gaussian, bandwidth 0.12) of `logs` on a grid of 0.01 over
+/// their range.
+fn log_area_mode(logs: &[f64]) -> f64 {
     let (lo, hi) = logs
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
@@ -412,24 +504,7 @@ pub(super) fn body_size(blobs: &[Blob]) -> Option<(Blob, usize)> {
             mode = (dens, x);
         }
     }
-    let m = mode.1.exp();
-    let near: Vec<Blob> = blobs
-        .iter()
-        .copied()
-        .filter(|b| b.area >= 0.7 * m && b.area <= 1.4 * m)
-        .collect();
-    if near.is_empty() {
-        return None;
-    }
-    let med = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    let n = near.len();
-    let area = med(&mut near.iter().map(|b| b.area).collect());
-    let major = med(&mut near.iter().map(|b| b.major).collect());
-    let minor = med(&mut near.iter().map(|b| b.minor).collect());
-    Some((Blob { area, major, minor }, n))
+    mode.1
 }
 
 /// N_bp from a user count: `pixels` herd pixels on the counted frame.
@@ -502,10 +577,33 @@ mod tests {
                 minor: 10.0,
             });
         }
-        let (b, n) = body_size(&v).unwrap();
+        let size = body_size(&v).unwrap();
+        let (b, n) = (size.blob, size.n);
         assert_eq!(n, 10);
+        assert!(!size.weighted);
+        assert!((size.share - 975.0 / 1880.0).abs() < 1e-12, "{size:?}");
         assert!((b.area - 100.0).abs() <= 1.0);
         assert_eq!((b.major, b.minor), (20.0, 6.0));
+        // Two hundred fragments of 4–7 px around thirty walkers of ~600 px: the walkers hold
+        // most of the pixels and win.
+        let mut v: Vec<Blob> = (0..200)
+            .map(|k| Blob {
+                area: 4.0 + (k % 4) as f64,
+                major: 3.0,
+                minor: 1.5,
+            })
+            .collect();
+        v.extend((0..30).map(|k| Blob {
+            area: 585.0 + k as f64,
+            major: 50.0,
+            minor: 16.0,
+        }));
+        let size = body_size(&v).unwrap();
+        let (b, n) = (size.blob, size.n);
+        assert!(size.weighted);
+        assert_eq!(n, 30);
+        assert!((b.area - 600.0).abs() <= 1.0, "{b:?}");
+        assert_eq!((b.major, b.minor), (50.0, 16.0));
     }
 
     #[test]
