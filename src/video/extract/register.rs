@@ -433,10 +433,11 @@ pub(super) fn camera_path(
                         return Ok(None);
                     };
                     let t = profile::start();
-                    let small = downscaled(&frame, scale, path)?;
-                    let mut grey = Mat::default();
-                    imgproc::cvt_color(&small, &mut grey, imgproc::COLOR_BGR2GRAY, 0)
+                    // Grey first: the area average then runs over one channel, not three.
+                    let mut full = Mat::default();
+                    imgproc::cvt_color(&frame, &mut full, imgproc::COLOR_BGR2GRAY, 0)
                         .map_err(cv(path))?;
+                    let grey = downscaled(&full, scale, path)?;
                     profile::stop("A downscale + grey", t);
                     Ok(Some(grey))
                 })();
