@@ -581,7 +581,7 @@ mod tests {
         let (b, n) = (size.blob, size.n);
         assert_eq!(n, 10);
         assert!(!size.weighted);
-        assert!((size.share - 975.0 / 1880.0).abs() < 1e-12, "{size:?}");
+        assert!((size.share - 995.0 / 1900.0).abs() < 1e-12, "{size:?}");
         assert!((b.area - 100.0).abs() <= 1.0);
         assert_eq!((b.major, b.minor), (20.0, 6.0));
         // Two hundred fragments of 4–7 px around thirty walkers of ~600 px: the walkers hold
