@@ -12,6 +12,7 @@
 //! segmentation, flow, per-cell sums and fields), `preview`, and `job` (the files).
 
 mod background;
+mod body_size;
 mod calibrate;
 mod camera;
 mod decode;
