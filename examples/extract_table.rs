@@ -6,7 +6,7 @@
 //! `cargo build --release && cargo run --release --example extract_table [-- FILTER [FLAG…]]`
 //! (the `herdfit` binary of `target/release` runs every command; HERDFIT_BIN overrides). FILTER
 //! keeps the videos whose name (`still-800-10`, `moving-200-16`, …) contains it; the flags that
-//! follow are added to every extraction (e.g. `--density-by pixels`).
+//! follow are added to every extraction (e.g. `--static-camera`).
 
 #[path = "../tests/common/score.rs"]
 mod score;

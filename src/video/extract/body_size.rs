@@ -1,6 +1,6 @@
 //! The body size of an extraction's animals from the connected components of the sampled herd
 //! masks (paper §4: N_bp, the pixels per animal, and the body length L): the mode of log-area,
-//! or the area-weighted median when the mode is fragments (module docs of `calibrate`).
+//! or the components around the area-weighted median when the mode is fragments.
 
 use super::calibrate::{Blob, MIN_COMPONENT};
 
@@ -96,7 +96,7 @@ impl BodySize {
 
 /// Smallest share of the herd pixels the components at the mode of log-area must hold to be
 /// taken for single animals ([`body_size`]).
-pub(super) const MIN_SHARE: f64 = 0.1;
+const MIN_SHARE: f64 = 0.1;
 
 /// The mode of a kernel density (Gaussian, bandwidth 0.12) of `logs` on a grid of 0.01 over
 /// their range.

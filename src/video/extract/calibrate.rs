@@ -10,12 +10,13 @@
 //!   0.12): isolated animals all have nearly the same area while merged groups spread over 2, 3,
 //!   … times it. N_bp is the median area of the components within ×0.7–1.4 of the mode; L is the
 //!   median full major axis 4 √λ₁ of their second moments (exact for a filled ellipse). When
-//!   the mode is at the smallest components looked at (fragments of badly contrasted bodies,
-//!   ground texture: OpenCV's `vtest.avi`), the area-weighted median is taken.
+//!   the mode is at the smallest components looked at, or its components hold under 10 % of the
+//!   herd pixels (fragments of badly contrasted bodies, ground texture: OpenCV's `vtest.avi`),
+//!   the components around the area-weighted median are taken (`body_size.rs`).
 //! - Or from a user count: N_bp = herd pixels of one frame / the animals counted on it.
 
 use super::background::{Geometry, Sample};
-pub(super) use super::body_size::body_size;
+use super::body_size::body_size;
 use super::fields::{difference, Segmenter};
 use super::profile;
 use super::{ExtractConfig, UserCount, AUTO_CELL_BL};
