@@ -3,7 +3,7 @@
 //! cells over the first frame and the obstacle cells of a mask image.
 
 use super::camera::Similarity;
-use super::decode::{cv, forward, Video};
+use super::decode::{cv, forward, Kept, Video};
 use super::profile;
 use super::ExtractConfig;
 use crate::data::obstacle_polygons::ObstaclePolygons;
@@ -91,9 +91,31 @@ pub(super) struct Sample {
     pub frames: Vec<(usize, Vec<u8>, Vec<u8>)>,
 }
 
+/// Most bytes of full-resolution frames that pass A keeps for the background sample (so that
+/// pass B need not decode the video again); a longer or larger sample is decoded again.
+pub(super) const KEEP_BYTES: usize = 256 << 20;
+
+/// The frames (indices within a range of `frames`) sampled for the background's median (up to 31,
+/// evenly spread, first and last included), and all the sampled frames: those with frame `extra`
+/// (the frame of a user count) when given, in frame order.
+pub(super) fn sample_picks(frames: usize, extra: Option<usize>) -> (Vec<usize>, Vec<usize>) {
+    let samples = frames.min(31);
+    let median_of: Vec<usize> = (0..samples)
+        .map(|k| k * frames.saturating_sub(1) / (samples.saturating_sub(1)).max(1))
+        .collect();
+    let mut pick = median_of.clone();
+    pick.extend(extra);
+    pick.sort_unstable();
+    pick.dedup();
+    (median_of, pick)
+}
+
 /// The background at the processing resolution (BGR bytes): `cfg.background`, or the per-pixel
 /// median of up to 31 sampled stabilised frames of `first..first + frames`; and the sample
-/// (which also holds frame `extra` of the range when given: the frame of a user count).
+/// (which also holds frame `extra` of the range when given: the frame of a user count). `kept`:
+/// the full-resolution frames of [`sample_picks`] that pass A kept, in order; when they are not
+/// exactly those, the video is decoded again.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn background(
     vid: &mut Video,
     geom: &Geometry,
@@ -101,55 +123,61 @@ pub(super) fn background(
     camera: &[Similarity],
     (first, frames): (usize, usize),
     extra: Option<usize>,
+    kept: Kept,
     progress: &mut impl FnMut(&str, usize, usize),
 ) -> Result<(Vec<u8>, Sample)> {
     let path = geom.path;
     let fail = cv(path);
-    let samples = frames.min(31);
-    let mut pick: Vec<usize> = (0..samples)
-        .map(|k| k * (frames - 1) / (samples - 1).max(1))
-        .collect();
-    let median_of = pick.clone();
-    if let Some(e) = extra {
-        pick.push(e);
-    }
-    vid.rewind()?;
-    vid.skip(first)?;
+    let (median_of, pick) = sample_picks(frames, extra);
     let mut sample = Sample {
         frames: Vec::with_capacity(pick.len()),
     };
     let ones = geom.ones()?;
-    // A second thread decodes while this one warps the sampled frames.
-    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Mat>>(4);
-    std::thread::scope(|scope| -> Result<()> {
-        let producer = scope.spawn(move || {
-            for _ in 0..camera.len() {
-                if !forward(&tx, profile::time("B decode", || vid.next())) {
-                    return;
-                }
-            }
-        });
-        for (i, cam) in camera.iter().enumerate() {
-            let Ok(f) = rx.recv() else { break };
-            let f = f?;
-            if pick.contains(&i) {
-                let t = profile::start();
-                let (mut o, mut m) = (Mat::default(), Mat::default());
-                geom.warp(&f, cam, &mut o, imgproc::INTER_LINEAR)?;
-                geom.warp(&ones, cam, &mut m, imgproc::INTER_NEAREST)?;
-                sample.frames.push((
-                    i,
-                    o.data_bytes().map_err(&fail)?.to_vec(),
-                    m.data_bytes().map_err(&fail)?.to_vec(),
-                ));
-                profile::stop("B warp sample", t);
-            }
-            progress("background", i + 1, frames);
+    let warp = |i: usize, f: &Mat| -> Result<(usize, Vec<u8>, Vec<u8>)> {
+        let t = profile::start();
+        let (mut o, mut m) = (Mat::default(), Mat::default());
+        geom.warp(f, &camera[i], &mut o, imgproc::INTER_LINEAR)?;
+        geom.warp(&ones, &camera[i], &mut m, imgproc::INTER_NEAREST)?;
+        let out = (
+            i,
+            o.data_bytes().map_err(&fail)?.to_vec(),
+            m.data_bytes().map_err(&fail)?.to_vec(),
+        );
+        profile::stop("B warp sample", t);
+        Ok(out)
+    };
+    if kept.iter().map(|k| k.0).eq(pick.iter().copied()) {
+        for (n, (i, f)) in kept.iter().enumerate() {
+            sample.frames.push(warp(*i, f)?);
+            progress("background", n + 1, kept.len());
         }
-        drop(rx);
-        let _ = producer.join();
-        Ok(())
-    })?;
+    } else {
+        drop(kept);
+        vid.rewind()?;
+        vid.skip(first)?;
+        // A second thread decodes while this one warps the sampled frames.
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Mat>>(4);
+        std::thread::scope(|scope| -> Result<()> {
+            let producer = scope.spawn(move || {
+                for _ in 0..camera.len() {
+                    if !forward(&tx, profile::time("B decode", || vid.next())) {
+                        return;
+                    }
+                }
+            });
+            for i in 0..camera.len() {
+                let Ok(f) = rx.recv() else { break };
+                let f = f?;
+                if pick.contains(&i) {
+                    sample.frames.push(warp(i, &f)?);
+                }
+                progress("background", i + 1, frames);
+            }
+            drop(rx);
+            let _ = producer.join();
+            Ok(())
+        })?;
+    }
     if let Some(bg) = &cfg.background {
         let img = geom.image(bg, imgcodecs::IMREAD_COLOR)?;
         let mut out = Mat::default();
@@ -292,4 +320,92 @@ pub(super) fn obstacle_cells(
         }
     };
     Ok(obstacles)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use opencv::videoio;
+
+    #[test]
+    fn sample_picks_spread_over_the_range_with_the_count_frame() {
+        let (median_of, pick) = sample_picks(100, Some(50));
+        assert_eq!(median_of.len(), 31);
+        assert_eq!((median_of[0], median_of[30]), (0, 99));
+        assert!(median_of.windows(2).all(|w| w[0] < w[1]));
+        // Frame 50 is not among the 31 (k · 99 / 30), so the sample has 32 frames, in order.
+        assert!(!median_of.contains(&50));
+        assert_eq!(pick.len(), 32);
+        assert!(pick.windows(2).all(|w| w[0] < w[1]) && pick.contains(&50));
+        // A count frame that is sampled anyway is held once.
+        let (_, pick) = sample_picks(10, Some(3));
+        assert_eq!(pick, (0..10).collect::<Vec<_>>());
+        assert_eq!(sample_picks(2, None).1, vec![0, 1]);
+    }
+
+    /// The frames pass A keeps give the same background and sample as decoding the video again.
+    #[test]
+    fn kept_frames_give_the_decoded_background() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v.avi");
+        let (w, h, n) = (96, 64, 40);
+        let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').unwrap();
+        let mut out =
+            videoio::VideoWriter::new(path.to_str().unwrap(), fourcc, 10.0, Size::new(w, h), true)
+                .unwrap();
+        for f in 0..n {
+            let bytes: Vec<u8> = (0..w * h * 3)
+                .map(|p| ((p * 7 + f * 13) % 251) as u8)
+                .collect();
+            let m = Mat::from_slice(&bytes).unwrap();
+            out.write(&m.reshape(3, h).unwrap()).unwrap();
+        }
+        out.release().unwrap();
+        let mut vid = super::super::decode::open(&path).unwrap();
+        let geom = Geometry::new(&path, w as usize, h as usize, 48);
+        let camera: Vec<Similarity> = (0..n)
+            .map(|f| Similarity {
+                scale: 1.0 + f as f64 * 0.01,
+                angle: f as f64 * 0.01,
+                t: [f as f64, -0.5 * f as f64],
+            })
+            .collect();
+        let cfg = ExtractConfig::default();
+        let frames = n as usize;
+        let (_, pick) = sample_picks(frames, Some(5));
+        let mut kept = Vec::new();
+        for i in 0..frames {
+            let f = vid.next().unwrap().unwrap();
+            if pick.contains(&i) {
+                kept.push((i, f));
+            }
+        }
+        let mut none = |_: &str, _: usize, _: usize| {};
+        let (bg_kept, s_kept) = background(
+            &mut vid,
+            &geom,
+            &cfg,
+            &camera,
+            (0, frames),
+            Some(5),
+            kept,
+            &mut none,
+        )
+        .unwrap();
+        let (bg_read, s_read) = background(
+            &mut vid,
+            &geom,
+            &cfg,
+            &camera,
+            (0, frames),
+            Some(5),
+            Vec::new(),
+            &mut none,
+        )
+        .unwrap();
+        assert_eq!(bg_kept.len(), 48 * 32 * 3);
+        assert_eq!(bg_kept, bg_read);
+        assert_eq!(s_kept.frames, s_read.frames);
+        assert_eq!(s_kept.frames.len(), pick.len());
+    }
 }

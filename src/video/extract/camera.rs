@@ -5,7 +5,7 @@
 //! leave-one-out rejection of a tracker that slid off (re-initialised where the camera says it
 //! is); the path is smoothed over the extraction's window.
 
-use super::decode::{cv, downscaled, forward, Video};
+use super::decode::{cv, downscaled, forward, Kept, Video};
 use super::ExtractConfig;
 use crate::error::Result;
 use opencv::core::{Mat, Point, Rect, Scalar, Size};
@@ -164,18 +164,21 @@ struct Anchors<'a> {
 
 /// Pass A: the raw (unsmoothed) camera of every frame in `first..last` (frame → first frame;
 /// the identity without anchors). A second thread decodes and downsizes frames while this one
-/// tracks. `progress(done, total)` after every frame.
+/// tracks. `progress(done, total)` after every frame. The full-resolution frames `keep` names
+/// (indices within the range, ascending) are returned with the path.
 pub(super) fn camera_path(
     vid: &mut Video,
     path: &Path,
     cfg: &ExtractConfig,
     (first, last): (usize, usize),
+    keep: &[usize],
     progress: &mut impl FnMut(&str, usize, usize),
-) -> Result<Vec<Similarity>> {
+) -> Result<(Vec<Similarity>, Kept)> {
     let (w, h) = (vid.w, vid.h);
     let fail = cv(path);
     let track_scale = (cfg.max_side as f64 / w.max(h) as f64).min(1.0);
     let mut raw = Vec::new();
+    let mut kept = Vec::new();
     let mut frames = 0usize;
     let mut anchors: Option<Anchors> = None;
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<(Mat, Mat)>>(4);
@@ -223,6 +226,9 @@ pub(super) fn camera_path(
                     raw.push(a.camera(&pts, &scales, prev, &small)?);
                 }
             }
+            if keep.binary_search(&frames).is_ok() {
+                kept.push((frames, frame));
+            }
             frames += 1;
             progress("stabilise", frames, total_frames);
         }
@@ -230,7 +236,7 @@ pub(super) fn camera_path(
         let _ = producer.join();
         Ok(())
     })?;
-    Ok(raw)
+    Ok((raw, kept))
 }
 
 impl<'a> Anchors<'a> {

@@ -28,6 +28,29 @@ pub(super) fn downscaled(frame: &Mat, scale: f64, path: &Path) -> Result<Mat> {
     Ok(small)
 }
 
+/// glibc's allocator, set once per process for extraction: blocks up to 32 MiB come from the
+/// heap rather than from their own mappings, and up to 256 MiB of free heap is kept rather than
+/// returned to the kernel. OpenCV allocates and frees buffers of several MiB in every optical
+/// flow, warp and decode; with glibc's defaults (a threshold that adapts, trimming of the
+/// threads' heaps) each frame's buffers were mapped and faulted in afresh (BENCHMARKS.md
+/// "Extraction throughput"). Memory stays bounded: it is reused, not grown.
+pub(super) fn tune_allocator() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        static ONCE: std::sync::Once = std::sync::Once::new();
+        // SAFETY: mallopt only sets allocator parameters; it is called once, before the
+        // extraction's threads start.
+        ONCE.call_once(|| unsafe {
+            libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+            libc::mallopt(libc::M_TRIM_THRESHOLD, 256 << 20);
+        });
+    }
+}
+
+/// Full-resolution frames one pass keeps for a later one: (index within the range, frame), in
+/// frame order.
+pub(super) type Kept = Vec<(usize, Mat)>;
+
 /// An open video and its size, frame rate and (reported) frame count.
 pub(super) struct Video {
     pub cap: videoio::VideoCapture,

@@ -243,22 +243,38 @@ fn open_range(path: &Path, cfg: &ExtractConfig) -> Result<(decode::Video, usize,
     Ok((vid, first, last))
 }
 
-/// Pass A: the smoothed camera path of the range (registered, from anchors, or static), what it
-/// came from, and with anchors the cross-check against the registration.
-#[allow(clippy::type_complexity)]
+/// What pass A found: the smoothed camera path of the range, what it came from, with anchors the
+/// cross-check against the registration, and the full-resolution frames it kept for the
+/// background sample.
+struct CameraPass {
+    camera: Vec<Similarity>,
+    kind: &'static str,
+    cross_check: Option<serde_json::Value>,
+    kept: decode::Kept,
+}
+
+/// Pass A: the camera path of the range (registered, from anchors, or static). It keeps the
+/// frames the background will sample when the header's frame count is right about the range and
+/// they fit in [`background::KEEP_BYTES`].
 fn camera_pass(
     vid: &mut decode::Video,
     path: &Path,
     cfg: &ExtractConfig,
     (first, last): (usize, usize),
     progress: &mut impl FnMut(&str, usize, usize),
-) -> Result<(Vec<Similarity>, &'static str, Option<serde_json::Value>)> {
+) -> Result<CameraPass> {
     let (w, h) = (vid.w, vid.h);
     let registered = cfg.anchors.is_empty() && cfg.stabilise;
-    let raw = if registered {
-        register::camera_path(vid, path, cfg, (first, last), &mut *progress)?
+    let expected = last.min(vid.count).saturating_sub(first);
+    let extra = cfg.count.and_then(|c| c.frame.checked_sub(first));
+    let (_, mut keep) = background::sample_picks(expected, extra);
+    if keep.len() * w * h * 3 > background::KEEP_BYTES {
+        keep.clear();
+    }
+    let (raw, kept) = if registered {
+        register::camera_path(vid, path, cfg, (first, last), &keep, &mut *progress)?
     } else {
-        camera::camera_path(vid, path, cfg, (first, last), &mut *progress)?
+        camera::camera_path(vid, path, cfg, (first, last), &keep, &mut *progress)?
     };
     if cfg.frames.is_none() && vid.count > 0 && raw.len() < vid.count {
         return Err(Error::file(
@@ -295,8 +311,8 @@ fn camera_pass(
     let cross_check = if !cfg.anchors.is_empty() && cfg.stabilise {
         vid.rewind()?;
         vid.skip(first)?;
-        match register::camera_path(vid, path, cfg, (first, last), &mut *progress) {
-            Ok(auto) => {
+        match register::camera_path(vid, path, cfg, (first, last), &[], &mut *progress) {
+            Ok((auto, _)) => {
                 let auto = camera::smooth_path(&auto, cfg.smooth);
                 let worst = camera
                     .iter()
@@ -329,7 +345,12 @@ fn camera_pass(
         }
         "static"
     };
-    Ok((camera, camera_kind, cross_check))
+    Ok(CameraPass {
+        camera,
+        kind: camera_kind,
+        cross_check,
+        kept,
+    })
 }
 
 /// Runs the extraction. `progress(stage, done, total)` after every processed frame of each pass.
@@ -348,13 +369,18 @@ pub fn extract(
             "is for a still image (a video's direction variance comes from its optical flow)",
         ));
     }
+    decode::tune_allocator();
     let (mut vid, first, last) = open_range(path, cfg)?;
     let (w, h) = (vid.w, vid.h);
     let t_start = std::time::Instant::now();
     let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
     let t = profile::start();
-    let (camera, camera_kind, cross_check) =
-        camera_pass(&mut vid, path, cfg, (first, last), &mut progress)?;
+    let CameraPass {
+        camera,
+        kind: camera_kind,
+        cross_check,
+        kept,
+    } = camera_pass(&mut vid, path, cfg, (first, last), &mut progress)?;
     profile::stop("A camera pass (total)", t);
     let frames = camera.len();
     if debug {
@@ -382,6 +408,7 @@ pub fn extract(
         &camera,
         (first, frames),
         count_at,
+        kept,
         &mut progress,
     )?;
     profile::stop("B background (total)", t);

@@ -19,7 +19,7 @@
 //! deterministic.
 
 use super::camera::Similarity;
-use super::decode::{cv, downscaled, forward, Video};
+use super::decode::{cv, downscaled, forward, Kept, Video};
 use super::profile;
 use super::ExtractConfig;
 use crate::error::{Error, Result};
@@ -406,14 +406,16 @@ fn ranges(frames: &[usize]) -> String {
 /// Pass A without anchors: the raw camera (frame → first frame, video pixels) of every frame in
 /// `first..last`, registered on the background's features (module docs). A second thread decodes
 /// and converts frames to grey at the processing resolution. Frames that cannot be registered
-/// are an error naming them.
+/// are an error naming them. The full-resolution frames `keep` names (indices within the range,
+/// ascending) are returned with the path.
 pub(super) fn camera_path(
     vid: &mut Video,
     path: &Path,
     cfg: &ExtractConfig,
     (first, last): (usize, usize),
+    keep: &[usize],
     progress: &mut impl FnMut(&str, usize, usize),
-) -> Result<Vec<Similarity>> {
+) -> Result<(Vec<Similarity>, Kept)> {
     let (w, h) = (vid.w, vid.h);
     let scale = (cfg.max_side as f64 / w.max(h) as f64).min(1.0);
     let total = vid.count.saturating_sub(first).min(last - first);
@@ -422,13 +424,14 @@ pub(super) fn camera_path(
     let mut key: Option<Key> = None;
     let mut last_good: Option<(Mat, Similarity)> = None;
     let mut stillness = Stillness::new(total);
+    let mut kept = Vec::new();
     let debug = std::env::var_os("HERDFIT_DEBUG").is_some();
-    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Mat>>(4);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<(Mat, Option<Mat>)>>(4);
     std::thread::scope(|scope| -> Result<()> {
         let producer = scope.spawn(move || {
             let mut k = 0usize;
             while first + k < last {
-                let item = (|| -> Result<Option<Mat>> {
+                let item = (|| -> Result<Option<(Mat, Option<Mat>)>> {
                     let Some(frame) = profile::time("A decode", || vid.next())? else {
                         return Ok(None);
                     };
@@ -439,7 +442,10 @@ pub(super) fn camera_path(
                         .map_err(cv(path))?;
                     let grey = downscaled(&full, scale, path)?;
                     profile::stop("A downscale + grey", t);
-                    Ok(Some(grey))
+                    Ok(Some((
+                        grey,
+                        keep.binary_search(&k).is_ok().then_some(frame),
+                    )))
                 })();
                 if !forward(&tx, item) {
                     return;
@@ -448,8 +454,11 @@ pub(super) fn camera_path(
             }
         });
         while let Ok(item) = profile::time("A wait for frame", || rx.recv()) {
-            let grey = item?;
+            let (grey, full) = item?;
             let i = raw.len();
+            if let Some(f) = full {
+                kept.push((i, f));
+            }
             profile::time("A stillness sample", || stillness.add(i, &grey, path))?;
             match &mut key {
                 None => {
@@ -508,7 +517,7 @@ pub(super) fn camera_path(
     let textureless = key.as_ref().is_some_and(|k| k.start < MIN_INLIERS) && raw.len() > 1;
     if (textureless || !failed.is_empty()) && stillness.is_still() {
         // Nothing to register on, but the frames do not change: a static camera.
-        return Ok(vec![Similarity::IDENTITY; raw.len()]);
+        return Ok((vec![Similarity::IDENTITY; raw.len()], kept));
     }
     if let Some(k) = &key {
         if k.start < MIN_INLIERS && raw.len() > 1 {
@@ -534,13 +543,14 @@ pub(super) fn camera_path(
         ));
     }
     // Processing pixels → video pixels: the same rotation and zoom, the translation / scale.
-    Ok(raw
+    let raw = raw
         .into_iter()
         .map(|s| Similarity {
             t: [s.t[0] / scale, s.t[1] / scale],
             ..s
         })
-        .collect())
+        .collect();
+    Ok((raw, kept))
 }
 
 #[cfg(test)]
