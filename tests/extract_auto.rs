@@ -156,8 +156,9 @@ fn bare_extract_of_synthetic_videos_recovers_counts_and_motion() {
             assert_eq!(kind, "registered");
             let err = corner_error(&clip, &out, 640.0, 384.0);
             eprintln!("moving: largest corner error of the camera path {err:.2} px");
-            // Measured 2.6 px: the herd pulls the fit in the first frames (see `register`).
-            assert!(err <= 3.0, "camera path off by {err} px at a corner");
+            // Measured 2.23 px (LK window 15; 2.83 px with 21): the herd pulls the fit in the
+            // first frames (see `register`).
+            assert!(err <= 2.6, "camera path off by {err} px at a corner");
         } else {
             assert_eq!(kind, "static");
         }

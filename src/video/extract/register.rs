@@ -39,8 +39,10 @@ const BUCKETS: (usize, usize) = (8, 6);
 pub(super) const MIN_INLIERS: usize = 12;
 /// RANSAC samples per frame.
 const SAMPLES: usize = 120;
-/// Lucas–Kanade window (processing pixels) and pyramid levels above the frame.
-const LK_WIN: i32 = 21;
+/// Lucas–Kanade window (processing pixels) and pyramid levels above the frame. 15 rather than
+/// OpenCV's customary 21: fewer of a feature's window pixels are animals, and LK costs half as
+/// much (RESULTS.md §2 has the table at 21 and 15).
+const LK_WIN: i32 = 15;
 const LK_LEVELS: i32 = 3;
 
 /// A key frame: its grey image's pyramid and features (processing pixels), its camera (key frame →
