@@ -232,6 +232,71 @@ fn read_avi(path: &Path) -> Vec<Mat> {
     }
 }
 
+/// `--count N@frame` sets the pixels per animal from the user's count on one frame of a
+/// `--frames` range (a frame the background's even sample does not hold: the extraction adds it),
+/// so that frame's extracted count is the user's; a count outside the range is one line.
+#[test]
+fn user_count_sets_pixels_per_animal() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (_, video) = synth(d, "count", "200", "20x12", "16", "250", false);
+    let out = d.join("ex");
+    // Frames 20..200: the count's frame 101 is index 81 of the range, not one of its 31 evenly
+    // spread samples (k · 179 / 30).
+    assert!((0..31).all(|k| k * 179 / 30 != 81));
+    ok(&[
+        "extract",
+        s(&video),
+        "--out",
+        s(&out),
+        "--frames",
+        "20..200",
+        "--count",
+        "200@101",
+    ]);
+    let ex = ClipFields::load(&out).unwrap();
+    let cal = calibration(&ex);
+    let from = cal["body_pixels_from"].as_str().unwrap();
+    assert!(from.contains("200 animals counted on frame 101"), "{from}");
+    let cell2 = ex.meta.cell_size * ex.meta.cell_size;
+    let count_at = |f: usize| -> f64 {
+        ex.density
+            .index_axis(ndarray::Axis(0), f)
+            .iter()
+            .map(|&v| v as f64 * cell2)
+            .sum()
+    };
+    assert_eq!(ex.meta.frames, 180);
+    let at = count_at(81);
+    assert!(
+        (at - 200.0).abs() <= 0.05 * 200.0,
+        "frame 101: {at} animals"
+    );
+    let mut all: Vec<f64> = (0..180).map(count_at).collect();
+    all.sort_by(f64::total_cmp);
+    let median = all[90];
+    eprintln!("--count 200@101: {at:.1} animals on frame 101, median {median:.1}");
+    assert!(
+        (median - 200.0).abs() <= 0.10 * 200.0,
+        "median {median} animals"
+    );
+    // The counted frame outside the range: one line naming the setting, nothing written.
+    let bad = d.join("bad");
+    let err = fails(&[
+        "extract",
+        s(&video),
+        "--out",
+        s(&bad),
+        "--frames",
+        "20..200",
+        "--count",
+        "200@5",
+    ]);
+    assert!(err.contains("count") && err.contains("outside"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!bad.exists());
+}
+
 #[test]
 fn bad_videos_fail_with_one_line_and_write_nothing() {
     let dir = tempfile::tempdir().unwrap();
