@@ -9,9 +9,9 @@
 //! not pull it. Each frame is registered against its key frame, not the previous frame, so errors
 //! do not accumulate frame by frame; a new key frame (the last registered frame, with its camera)
 //! starts only when a frame cannot be registered against the current one. In the first frames
-//! of a clip, before the animals have moved a pixel, the herd still biases the fit (measured:
-//! up to 2.6 px at a corner of a 640 × 384 frame over the first 12 frames, RESULTS.md §2). The
-//! path is smoothed over the extraction's window afterwards.
+//! of a clip, before the animals have moved a pixel, the herd still biases the fit (the
+//! camera-path error at the frame corners is measured in RESULTS.md §2). The path is smoothed
+//! over the extraction's window afterwards.
 //!
 //! Hand-written RANSAC rather than OpenCV's `estimateAffinePartial2D`: that needs the `calib3d`
 //! module (a feature of the `opencv` crate that is not built here), and the fit is 60 lines over
@@ -40,8 +40,8 @@ pub(super) const MIN_INLIERS: usize = 12;
 /// RANSAC samples per frame.
 const SAMPLES: usize = 120;
 /// Lucas–Kanade window (processing pixels) and pyramid levels above the frame. 15 rather than
-/// OpenCV's customary 21: fewer of a feature's window pixels are animals, and LK costs half as
-/// much (RESULTS.md §2 has the table at 21 and 15).
+/// OpenCV's customary 21: fewer of a feature's window pixels are animals, and LK costs less
+/// (RESULTS.md §2 has the table at 21 and 15, BENCHMARKS.md "Extraction throughput" the time).
 const LK_WIN: i32 = 15;
 const LK_LEVELS: i32 = 3;
 
