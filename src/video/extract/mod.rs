@@ -265,9 +265,10 @@ fn camera_pass(
 ) -> Result<CameraPass> {
     let (w, h) = (vid.w, vid.h);
     let registered = cfg.anchors.is_empty() && cfg.stabilise;
-    let expected = last.min(vid.count).saturating_sub(first);
+    // The frames of the range the header declares.
+    let declared = last.min(vid.count).saturating_sub(first);
     let extra = cfg.count.and_then(|c| c.frame.checked_sub(first));
-    let (_, mut keep) = background::sample_picks(expected, extra);
+    let (_, mut keep) = background::sample_picks(declared, extra);
     if keep.len() * w * h * 3 > background::KEEP_BYTES {
         keep.clear();
     }
@@ -289,7 +290,6 @@ fn camera_pass(
     let frames = raw.len();
     // A truncated file: fewer frames readable than its header declares (one frame of tolerance
     // for containers whose count is estimated from the duration).
-    let declared = last.min(vid.count).saturating_sub(first);
     if vid.count > 0 && frames + 1 < declared {
         return Err(Error::file(
             path,
