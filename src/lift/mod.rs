@@ -24,6 +24,7 @@ pub mod boids;
 mod demo;
 pub mod eval;
 pub mod frame;
+mod knots;
 pub mod lbfgs;
 pub mod observe;
 pub mod render;

@@ -43,6 +43,7 @@
 //! max(0, u − ln d_far)²)` outside [ln d_near, ln d_far] while minimising, then the depths are
 //! clamped into the bounds.
 
+use super::knots::{segments, Coarse, Knots};
 use super::observe::Observations;
 use super::LiftConfig;
 use crate::error::{Error, Result};
@@ -67,6 +68,14 @@ pub struct SequenceConfig {
     /// Knot spacings of the coarse-to-fine levels, in frames (0: one log-depth per segment; 1:
     /// every log-depth free); see [`whole_sequence`].
     pub levels: Vec<usize>,
+    /// With a value above 1, the coarse levels (knot spacing 0, or at least 4 × this) are
+    /// evaluated on every `coarse_stride`-th frame only: velocities over `coarse_stride` frames,
+    /// v_target × stride and w_accel / stride² (an acceleration over `stride` frames is stride²
+    /// times one over one frame), each term over its own count. Each of their evaluations is then
+    /// about `stride` times cheaper; the finer levels see every frame. Faster, but not the same
+    /// path to the minimum: the default, 1, evaluates every level on every frame (the trade-off
+    /// is measured in BENCHMARKS.md, "Lift").
+    pub coarse_stride: usize,
     pub w_accel: f64,
     pub w_speed: f64,
     pub w_align: f64,
@@ -89,6 +98,7 @@ impl Default for SequenceConfig {
             memory: 10,
             tolerance: 1e-7,
             levels: vec![0, 64, 16, 4, 1],
+            coarse_stride: 1,
             w_accel: 100.0,
             w_speed: 1.0,
             w_align: 0.3,
@@ -119,6 +129,12 @@ impl SequenceConfig {
             return Err(Error::invalid(format!(
                 "sequence.levels has {} entries: give 1 to 16 knot spacings (0 = one per segment, 1 = free)",
                 self.levels.len()
+            )));
+        }
+        if self.coarse_stride == 0 || self.coarse_stride > 64 {
+            return Err(Error::invalid(format!(
+                "sequence.coarse_stride = {} must be in 1..=64",
+                self.coarse_stride
             )));
         }
         if self.memory == 0 || self.memory > 100 {
@@ -247,6 +263,10 @@ pub struct EnergyTerms {
 pub struct SequenceLog {
     /// L-BFGS iterations of each level.
     pub iterations: Vec<usize>,
+    /// The frame stride each level was evaluated on (`sequence.coarse_stride` for the coarse
+    /// levels, else 1).
+    #[serde(default)]
+    pub strides: Vec<usize>,
     /// Energy evaluations (with gradient), line search included.
     pub evaluations: usize,
     pub start: EnergyTerms,
@@ -311,6 +331,11 @@ impl<'a> Energy<'a> {
         Ok(Energy { s, obs, cfg, how })
     }
 
+    /// Observations (log-depths) it takes.
+    fn len(&self) -> usize {
+        self.obs.len()
+    }
+
     /// The terms at log-depths `u` (one per observation) and, with `grad`, ∂E/∂u written into it.
     pub fn eval(&mut self, u: &[f64], grad: Option<&mut [f64]>) -> Result<EnergyTerms> {
         let n = self.obs.len();
@@ -358,120 +383,28 @@ pub fn energy_terms(obs: &Observations, depth: &[f64], cfg: &LiftConfig) -> Resu
     let u: Vec<f64> = depth.iter().map(|d| d.ln()).collect();
     Energy::new(obs, &s, cfg)?.eval(&u, None)
 }
+/// The problem on every `stride`-th frame with its index lists and settings (v_target × stride,
+/// w_accel / stride²; see [`SequenceConfig::coarse_stride`]).
+struct CoarseProblem {
+    coarse: Coarse,
+    s: Structure,
+    cfg: LiftConfig,
+}
+
+impl CoarseProblem {
+    fn new(obs: &Observations, segs: &[Vec<usize>], cfg: &LiftConfig, stride: usize) -> Self {
+        let coarse = Coarse::new(obs, segs, stride);
+        let s = Structure::new(&coarse.obs, cfg.sequence.neighbours);
+        let mut cfg = cfg.clone();
+        let k = stride as f64;
+        cfg.v_target *= k;
+        cfg.sequence.w_accel /= k * k;
+        CoarseProblem { coarse, s, cfg }
+    }
+}
+
 /// Weight of the bound penalty (per observation, on log-depth).
 const W_BOUNDS: f64 = 1e4;
-
-/// Segments (a bird's run of consecutive frames): each one's observations in frame order.
-pub fn segments(obs: &Observations) -> Vec<Vec<usize>> {
-    (0..obs.len())
-        .filter(|&i| obs.prev[i].is_none())
-        .map(|start| {
-            let mut run = vec![start];
-            while let Some(n) = obs.next[*run.last().expect("non-empty")] {
-                run.push(n);
-            }
-            run
-        })
-        .collect()
-}
-
-/// Log-depths as linear interpolation between knots along each segment: knots every `spacing`
-/// frames from the segment's start and at its end (`spacing` 0: one knot per segment, a constant).
-struct Knots {
-    /// The first knot of each segment, and their number last.
-    first: Vec<usize>,
-    k0: Vec<usize>,
-    k1: Vec<usize>,
-    w1: Vec<f64>,
-    /// The observation at each knot.
-    at: Vec<usize>,
-}
-
-impl Knots {
-    fn new(segs: &[Vec<usize>], n: usize, spacing: usize) -> Knots {
-        let (mut k0, mut k1, mut w1) = (vec![0; n], vec![0; n], vec![0.0; n]);
-        let mut at = Vec::new();
-        let mut firsts = Vec::with_capacity(segs.len() + 1);
-        for run in segs {
-            let first = at.len();
-            firsts.push(first);
-            let len = run.len();
-            let pos: Vec<usize> = if spacing == 0 {
-                vec![0]
-            } else {
-                let mut p: Vec<usize> = (0..len).step_by(spacing).collect();
-                if *p.last().expect("non-empty") != len - 1 {
-                    p.push(len - 1);
-                }
-                p
-            };
-            at.extend(pos.iter().map(|&p| run[p]));
-            let mut j = 0;
-            for (k, &o) in run.iter().enumerate() {
-                while j + 1 < pos.len() && pos[j + 1] <= k {
-                    j += 1;
-                }
-                if j + 1 < pos.len() {
-                    let (a, b) = (pos[j], pos[j + 1]);
-                    k0[o] = first + j;
-                    k1[o] = first + j + 1;
-                    w1[o] = (k - a) as f64 / (b - a) as f64;
-                } else {
-                    k0[o] = first + j;
-                    k1[o] = first + j;
-                }
-            }
-        }
-        firsts.push(at.len());
-        Knots {
-            first: firsts,
-            k0,
-            k1,
-            w1,
-            at,
-        }
-    }
-
-    /// Log-depths `u` of every observation from the knots' values `x` (element-wise, in parallel
-    /// chunks).
-    fn interpolate(&self, x: &[f64], u: &mut [f64]) {
-        use rayon::prelude::*;
-        u.par_chunks_mut(CHUNK).enumerate().for_each(|(c, us)| {
-            for (k, ui) in us.iter_mut().enumerate() {
-                let i = c * CHUNK + k;
-                *ui = (1.0 - self.w1[i]) * x[self.k0[i]] + self.w1[i] * x[self.k1[i]];
-            }
-        });
-    }
-
-    /// ∂E/∂x from ∂E/∂u (the transpose of [`Knots::interpolate`]), written into `g`: segment by
-    /// segment in parallel (a segment's knots take only its observations' terms, added in frame
-    /// order whatever the thread count).
-    fn pull_back(&self, segs: &[Vec<usize>], gu: &[f64], g: &mut [f64]) {
-        use rayon::prelude::*;
-        let mut parts = Vec::with_capacity(segs.len());
-        let mut rest = g;
-        for w in self.first.windows(2) {
-            let (mine, tail) = rest.split_at_mut(w[1] - w[0]);
-            parts.push((w[0], mine));
-            rest = tail;
-        }
-        parts
-            .into_par_iter()
-            .zip(segs.par_iter())
-            .for_each(|((first, gs), run)| {
-                gs.iter_mut().for_each(|v| *v = 0.0);
-                for &i in run {
-                    let gi = gu[i];
-                    gs[self.k0[i] - first] += (1.0 - self.w1[i]) * gi;
-                    gs[self.k1[i] - first] += self.w1[i] * gi;
-                }
-            });
-    }
-}
-
-/// Observations per chunk of the parallel element-wise passes.
-const CHUNK: usize = 16_384;
 
 /// Whole-sequence depths from `init` (the frame-by-frame depths), by L-BFGS on the energy of the
 /// module docs, its gradient by `sequence.gradient`.
@@ -481,7 +414,9 @@ const CHUNK: usize = 16_384;
 /// then free. Each level starts from the previous one's result. A start whose depths jump from
 /// frame to frame (as the frame-by-frame method's do) would otherwise hold the free stage in a
 /// poor local minimum, and the slow modes — a segment's distance, its drift towards the camera —
-/// are exactly the ones the acceleration term's stiffness makes slow for L-BFGS.
+/// are exactly the ones the acceleration term's stiffness makes slow for L-BFGS. With
+/// `sequence.coarse_stride` above 1 the coarse levels are evaluated on every stride-th frame
+/// ([`SequenceConfig::coarse_stride`]).
 pub fn whole_sequence(
     obs: &Observations,
     init: &[f64],
@@ -506,9 +441,22 @@ pub fn whole_sequence(
         .collect();
     let start = energy.eval(&init.iter().map(|d| d.ln()).collect::<Vec<_>>(), None)?;
     let segs = segments(obs);
+    let stride = sc.coarse_stride;
+    let on_coarse = |spacing: usize| stride > 1 && (spacing == 0 || spacing >= 4 * stride);
+    // The problem on every stride-th frame, built when a level is evaluated on it.
+    let coarse = sc
+        .levels
+        .iter()
+        .any(|&k| on_coarse(k))
+        .then(|| CoarseProblem::new(obs, &segs, cfg, stride));
+    let mut coarse_energy = match &coarse {
+        Some(c) => Some(Energy::new(&c.coarse.obs, &c.s, &c.cfg)?),
+        None => None,
+    };
     let mut per_level = Vec::with_capacity(sc.levels.len());
+    let mut strides = Vec::with_capacity(sc.levels.len());
     let mut evaluations = 0;
-    let (mut ut, mut gu) = (vec![0.0; n], vec![0.0; n]);
+    let (mut ut, mut gu) = (Vec::new(), Vec::new());
     for (level, &spacing) in sc.levels.iter().enumerate() {
         let last = level + 1 == sc.levels.len();
         let opt = super::lbfgs::Lbfgs {
@@ -534,13 +482,26 @@ pub fn whole_sequence(
                 .collect(),
             Some(k) => k.at.iter().map(|&i| u[i]).collect(),
         };
+        // The energy this level is evaluated on, with the knots and segments seen from its
+        // observations.
+        let coarse_here = match (&coarse, &knots) {
+            (Some(c), Some(k)) if on_coarse(spacing) => Some((c, c.coarse.knots(k))),
+            _ => None,
+        };
+        let (en, eval_knots, eval_segs) = match (&coarse_here, coarse_energy.as_mut()) {
+            (Some((c, k)), Some(e)) => (e, Some(k), &c.coarse.segs[..]),
+            _ => (&mut energy, knots.as_ref(), &segs[..]),
+        };
+        strides.push(if coarse_here.is_some() { stride } else { 1 });
+        ut.resize(en.len(), 0.0);
+        gu.resize(en.len(), 0.0);
         let objective = |x: &[f64], g: &mut [f64]| -> Result<f64> {
-            let value = match &knots {
-                None => energy.eval(x, Some(g))?.total,
+            let value = match eval_knots {
+                None => en.eval(x, Some(g))?.total,
                 Some(k) => {
                     k.interpolate(x, &mut ut);
-                    let e = energy.eval(&ut, Some(&mut gu))?;
-                    k.pull_back(&segs, &gu, g);
+                    let e = en.eval(&ut, Some(&mut gu))?;
+                    k.pull_back(eval_segs, &gu, g);
                     e.total
                 }
             };
@@ -572,8 +533,9 @@ pub fn whole_sequence(
         u = match &knots {
             None => x,
             Some(k) => {
-                k.interpolate(&x, &mut ut);
-                ut.clone()
+                let mut full = vec![0.0; n];
+                k.interpolate(&x, &mut full);
+                full
             }
         };
     }
@@ -586,6 +548,7 @@ pub fn whole_sequence(
         depth,
         SequenceLog {
             iterations: per_level,
+            strides,
             evaluations,
             start,
             end,
