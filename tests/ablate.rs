@@ -147,3 +147,138 @@ fn ablate_bad_input_is_one_line_and_writes_nothing() {
     assert!(e.contains("none"), "{e}");
     assert!(!out.exists(), "a failed ablation left {out:?}");
 }
+
+/// Zones west (x < 6) and east of the test clip's 24 × 18 world.
+fn two_zones(dir: &std::path::Path, split: f64) -> std::path::PathBuf {
+    let rect = |a: f64, b: f64| serde_json::json!([[a, 0.0], [b, 0.0], [b, 18.0], [a, 18.0]]);
+    let v = serde_json::json!({"schema": "herdfit.zones/1", "zones": [
+        {"name": "west", "polygon": rect(0.0, split)},
+        {"name": "east", "polygon": rect(split, 24.0)}]});
+    let p = dir.join(format!("zones-{split}.json"));
+    std::fs::write(&p, v.to_string()).unwrap();
+    p
+}
+
+fn json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn ablate_with_zones_fits_one_set_per_zone_in_every_variant_and_validates_each_zone() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = small_clip(dir.path());
+    let zones = two_zones(dir.path(), 6.0);
+    let out = dir.path().join("abl");
+    let md = ok(&[
+        "ablate",
+        s(&clip),
+        "--zones",
+        s(&zones),
+        "--out",
+        s(&out),
+        "--epochs",
+        "1",
+        "--window",
+        "3",
+        "--seeds",
+        "1",
+        "--settle",
+        "0",
+        "--switches",
+        "occlusion,density",
+    ]);
+    let r = json(&out.join("ablation.json"));
+    assert_eq!(r["schema"], "herdfit.zone-ablation/1");
+    assert_eq!(r["fit_frames"], serde_json::json!([0, 8]));
+    assert_eq!(r["heldout_frames"], serde_json::json!([8, 16]));
+    let v = r["variants"].as_array().unwrap();
+    let names: Vec<&str> = v.iter().map(|x| x["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["full", "no-occlusion", "no-density"]);
+    for (k, x) in v.iter().enumerate() {
+        let sets = x["sets"].as_array().unwrap();
+        let zones: Vec<&str> = sets.iter().map(|z| z["zone"].as_str().unwrap()).collect();
+        assert_eq!(zones, ["west", "east"]);
+        for z in sets {
+            assert_eq!(z["occlusion"].as_bool().unwrap(), k != 1, "{}", names[k]);
+        }
+        // Each zone learnt its own set.
+        assert_ne!(sets[0]["params"], sets[1]["params"]);
+        let rows = x["validation"]["zones"].as_array().unwrap();
+        assert_eq!(rows.len(), 2);
+        for z in rows {
+            let d = z["density_error"]["mean"].as_f64().unwrap();
+            assert!(d.is_finite() && d > 0.0, "{z}");
+        }
+    }
+    // The table: the whole grid's two errors and four per zone, every variant's value.
+    for row in [
+        "density error (whole grid)",
+        "west: polarization error",
+        "east: aspect ratio error",
+    ] {
+        assert!(md.contains(&format!("| {row} |")), "{row} missing: {md}");
+    }
+    let polar = v[1]["validation"]["zones"][1]["polarization_error"]["mean"]
+        .as_f64()
+        .unwrap();
+    assert!(md.contains(&format!("{polar:.4}")), "{md}");
+    assert!(
+        md.contains("- **occlusion** helps (full model lower) on "),
+        "{md}"
+    );
+    assert!(out.join("errors.png").is_file());
+    // Each variant's bundle is what `validate --params` reads, and validating the full model's
+    // bundle on the same held-out half reproduces the ablation's figures exactly.
+    for n in &names {
+        let b = json(&out.join(format!("params-{n}.json")));
+        assert_eq!(b["schema"], "herdfit.param-sets/1");
+        assert_eq!(b["sets"].as_array().unwrap().len(), 2);
+    }
+    let val = dir.path().join("val");
+    ok(&[
+        "validate",
+        s(&clip),
+        "--params",
+        s(&out.join("params-full.json")),
+        "--seeds",
+        "1",
+        "--settle",
+        "0",
+        "--no-video",
+        "--out",
+        s(&val),
+    ]);
+    let again = &json(&val.join("report.json"))["sets"][0];
+    let full = &v[0]["validation"];
+    for key in ["density_error", "velocity_error"] {
+        assert_eq!(again[key]["mean"], full[key]["mean"], "{key}");
+    }
+    assert_eq!(again["zones"], full["zones"]);
+}
+
+#[test]
+fn ablate_with_bad_zones_is_one_line_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = small_clip(dir.path());
+    let out = dir.path().join("abl");
+    // The test clip's herd lies in the west: a zone from x = 12 holds none of it.
+    let empty = two_zones(dir.path(), 12.0);
+    let e = fails(&[
+        "ablate",
+        s(&clip),
+        "--zones",
+        s(&empty),
+        "--out",
+        s(&out),
+        "--epochs",
+        "1",
+    ]);
+    assert!(
+        e.contains("zone 'east' holds no agents in frames 0..8: nothing to fit there"),
+        "{e}"
+    );
+    let missing = dir.path().join("nope.json");
+    let e = fails(&["ablate", s(&clip), "--zones", s(&missing), "--out", s(&out)]);
+    assert!(e.contains("nope.json"), "{e}");
+    assert!(!out.exists(), "a failed ablation left {out:?}");
+}

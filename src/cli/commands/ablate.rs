@@ -4,7 +4,7 @@ use crate::cli::args::{choice, with_flags, LOSSES};
 use crate::cli::commands::fit::StepFlags;
 use crate::cli::Bars;
 use crate::error::Result;
-use crate::herd::ablate::{run, AblateConfig, AblateJob, Switch, SWITCHES};
+use crate::herd::ablate::{run, zoned, AblateConfig, AblateJob, Switch, SWITCHES};
 use crate::herd::fit::{FitConfig, LossKind, Settle, GUIDANCE_SCALE};
 use crate::herd::validate::ValidateConfig;
 use clap::Args;
@@ -17,6 +17,10 @@ pub struct AblateArgs {
     /// Output report folder (ablation.json, ablation.md, plots, params-VARIANT.json).
     #[arg(long, value_name = "REPORT/")]
     pub out: PathBuf,
+    /// One parameter set per zone in every variant (herdfit.zones/1, as `fit --zones`); each is
+    /// validated zone by zone and written as a bundle.
+    #[arg(long, value_name = "ZONES.json")]
+    pub zones: Option<PathBuf>,
     /// Starting parameters of every variant; a generic start (every value 0.5) when omitted.
     #[arg(long, value_name = "P.json")]
     pub start: Option<PathBuf>,
@@ -71,6 +75,7 @@ pub fn exec(a: AblateArgs) -> Result<()> {
         clip: a.clip,
         start: a.start,
         out: a.out,
+        zones: a.zones,
         config: AblateConfig {
             fit: a.steps.apply(FitConfig {
                 seed: a.seed,
@@ -92,7 +97,11 @@ pub fn exec(a: AblateArgs) -> Result<()> {
             switches,
         },
     };
-    let (_, md) = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
+    let md = match job.zones {
+        Some(_) => zoned::run(&job, &mut Bars::default()).map(|r| r.1),
+        None => run(&job, &mut Bars::default()).map(|r| r.1),
+    }
+    .map_err(|e| with_flags(e, &[]))?;
     print!("{md}");
     println!("wrote {}", job.out.display());
     Ok(())

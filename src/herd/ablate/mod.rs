@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 mod report;
+pub mod zoned;
 
 pub use report::{markdown, AblationReport, VariantReport, ABLATION_SCHEMA};
 
@@ -148,6 +149,8 @@ pub struct AblateJob {
     /// The report folder: `ablation.json`, `ablation.md`, the plots and each variant's fitted
     /// parameter set (`params-<variant>.json`).
     pub out: PathBuf,
+    /// Zones (`herdfit.zones/1`): one parameter set per zone in every variant ([`zoned::run`]).
+    pub zones: Option<PathBuf>,
     pub config: AblateConfig,
 }
 
@@ -157,6 +160,7 @@ impl Default for AblateJob {
             clip: PathBuf::from("clip"),
             start: None,
             out: PathBuf::from("ablation"),
+            zones: None,
             config: AblateConfig::default(),
         }
     }
@@ -230,14 +234,12 @@ pub fn ablate(
 /// folder atomically; returns the report and its Markdown.
 pub fn run(job: &AblateJob, progress: &mut dyn Progress) -> Result<(AblationReport, String)> {
     job.config.check()?;
-    let clip = ClipFields::load(&job.clip)?;
-    if clip.frames() == 1 {
-        return Err(Error::file(
-            &job.clip,
-            "is a still (one frame): the ablations fit and validate on halves of a clip; fit a \
-             still with `herdfit fit` (with and without E_var: --var-weight 0)",
+    if job.zones.is_some() {
+        return Err(Error::Internal(
+            "a zone ablation runs through ablate::zoned::run".into(),
         ));
     }
+    let clip = load_clip(&job.clip)?;
     let start = match &job.start {
         Some(p) => Params::load(p)?,
         None => Params::neutral(),
@@ -252,6 +254,19 @@ pub fn run(job: &AblateJob, progress: &mut dyn Progress) -> Result<(AblationRepo
     dir.write("ablation.md", md.as_bytes())?;
     dir.commit()?;
     Ok((report, md))
+}
+
+/// The clip of an ablation: a video clip (a still has no held-out half).
+fn load_clip(path: &std::path::Path) -> Result<ClipFields> {
+    let clip = ClipFields::load(path)?;
+    if clip.frames() == 1 {
+        return Err(Error::file(
+            path,
+            "is a still (one frame): the ablations fit and validate on halves of a clip; fit a \
+             still with `herdfit fit` (with and without E_var: --var-weight 0)",
+        ));
+    }
+    Ok(clip)
 }
 
 /// Whether the loss kind has a density term the ablation of density matching removes: β of

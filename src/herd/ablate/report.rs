@@ -277,7 +277,7 @@ pub(super) fn write(r: &AblationReport, variants: &[Variant], dir: &AtomicDir) -
 }
 
 /// A line chart of named lines (the first black when `first_black`).
-fn chart(
+pub(super) fn chart(
     path: &std::path::Path,
     title: &str,
     y: &str,
