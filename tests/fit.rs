@@ -320,22 +320,43 @@ fn a_field_matching_fit_reduces_its_loss() {
 
 #[test]
 fn killed_and_resumed_fit_ends_with_the_same_bytes() {
-    resume_case(&["--starts", "1"], "checkpoint.json");
+    resume_case(&|_| vec!["--starts".into(), "1".into()], "checkpoint.json");
 }
 
 /// With the global phase: killed while the second candidate refines (its first checkpoint
 /// written, the first candidate's complete), then resumed.
 #[test]
 fn killed_and_resumed_global_fit_ends_with_the_same_bytes() {
-    resume_case(&["--starts", "3"], "start-1/checkpoint.json");
+    resume_case(
+        &|_| vec!["--starts".into(), "3".into()],
+        "start-1/checkpoint.json",
+    );
 }
 
-/// A fit with `extra` flags, run whole and run killed once `marker` (inside the checkpoint
-/// folder) exists and resumed: the outputs are the same bytes.
-fn resume_case(extra: &[&str], marker: &str) {
+/// A zone fit (one set per zone, each with its own optimiser state in the checkpoint): killed
+/// after its first checkpoint and resumed, the bundle and the log are the same bytes.
+#[test]
+fn killed_and_resumed_zone_fit_ends_with_the_same_bytes() {
+    let zones = |d: &Path| -> Vec<String> {
+        let rect = |a: f64, b: f64| serde_json::json!([[a, 0.0], [b, 0.0], [b, 18.0], [a, 18.0]]);
+        let v = serde_json::json!({"schema": "herdfit.zones/1", "zones": [
+            {"name": "west", "polygon": rect(0.0, 15.0)},
+            {"name": "east", "polygon": rect(15.0, 30.0)}]});
+        let p = d.join("zones.json");
+        std::fs::write(&p, v.to_string()).unwrap();
+        vec!["--zones".into(), s(&p).into()]
+    };
+    resume_case(&zones, "checkpoint.json");
+}
+
+/// A fit with the flags `extra(folder)` gives (it may write files into the test's folder), run
+/// whole and run killed once `marker` (inside the checkpoint folder) exists and resumed: the
+/// outputs are the same bytes.
+fn resume_case(extra: &dyn Fn(&Path) -> Vec<String>, marker: &str) {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let clip = make_clip(d, "clip", "200", "40");
+    let extra = extra(d);
     let args = |out: &Path, ck: &Path| -> Vec<String> {
         [
             "fit",
@@ -350,8 +371,8 @@ fn resume_case(extra: &[&str], marker: &str) {
             s(ck),
         ]
         .iter()
-        .chain(extra)
         .map(|x| x.to_string())
+        .chain(extra.iter().cloned())
         .collect()
     };
     let (a, cka) = (d.join("a.json"), d.join("ck-a"));

@@ -366,6 +366,7 @@ fn recording_json() {
 
 #[test]
 fn checkpoint_json() {
+    use herdfit::herd::fit::checkpoint::{ZoneStarts, ZoneState};
     use herdfit::herd::fit::{Checkpoint, FitConfig, OptState};
     use herdfit::herd::params::N_PARAMS;
     let k = Checkpoint {
@@ -379,6 +380,15 @@ fn checkpoint_json() {
             ..FitConfig::default()
         },
         start: [0.25; N_PARAMS],
+        // A zone fit's checkpoint, so that the zones' checks are fuzzed too.
+        zone_starts: ZoneStarts {
+            names: vec!["west".into(), "east".into()],
+            starts: vec![[0.75; N_PARAMS]],
+        },
+        zones: vec![ZoneState {
+            theta: [0.4; N_PARAMS],
+            opt: OptState::new(N_PARAMS),
+        }],
     };
     fuzz(target(
         "checkpoint",

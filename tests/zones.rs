@@ -254,4 +254,37 @@ fn bad_zones_are_one_line_errors_and_write_nothing() {
         s(&out),
     ]);
     assert!(e.contains("--zones: a zone fit takes one clip"), "{e}");
+    // A checkpoint of a fit of one set (or of other zones) is not resumed as a zone fit.
+    let (ck, plain) = (dir.path().join("ck"), dir.path().join("plain.json"));
+    let fit = |extra: &[&str]| -> Vec<String> {
+        [
+            "fit",
+            s(&clip),
+            "--epochs",
+            "1",
+            "--window",
+            "3",
+            "--checkpoint",
+            s(&ck),
+        ]
+        .iter()
+        .chain(extra)
+        .map(|x| x.to_string())
+        .collect()
+    };
+    let args = fit(&["--out", s(&plain)]);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let halves = zones_file(
+        dir.path(),
+        "halves.json",
+        serde_json::json!([{"name": "a", "polygon": rect(0.0, 6.0)},
+                           {"name": "b", "polygon": rect(6.0, 24.0)}]),
+    );
+    let args = fit(&["--out", s(&out), "--zones", s(&halves), "--resume"]);
+    let e = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        e.contains("checkpoint.json: was written by a fit with other settings, another start or other zones"),
+        "{e}"
+    );
+    assert!(!out.exists(), "a refused resume wrote {out:?}");
 }

@@ -21,6 +21,36 @@ pub struct Checkpoint {
     /// The settings and start the run was made with (a resume must match).
     pub config: FitConfig,
     pub start: [f64; N_PARAMS],
+    /// A zone fit's zones (absent for a fit of one set; a resume must match).
+    #[serde(default, skip_serializing_if = "ZoneStarts::is_empty")]
+    pub zone_starts: ZoneStarts,
+    /// A zone fit's learnt state of every zone after the first (the first's is `theta`, `opt`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub zones: Vec<ZoneState>,
+}
+
+/// A zone fit's zones as its checkpoint records them: every zone's name, and the start of every
+/// zone after the first (the first zone's is the checkpoint's `start`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ZoneStarts {
+    pub names: Vec<String>,
+    pub starts: Vec<[f64; N_PARAMS]>,
+}
+
+impl ZoneStarts {
+    /// No zones (a fit of one parameter set).
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty() && self.starts.is_empty()
+    }
+}
+
+/// One zone's learnt parameter set and optimiser state.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ZoneState {
+    pub theta: [f64; N_PARAMS],
+    pub opt: OptState,
 }
 
 pub const CHECKPOINT_SCHEMA: &str = "herdfit.checkpoint/1";
@@ -47,10 +77,33 @@ impl Checkpoint {
             return Err(Error::file(path, "theta or start holds a non-finite value"));
         }
         let sized = |v: &[f64]| v.is_empty() || v.len() == N_PARAMS;
-        if !(sized(&k.opt.m) && sized(&k.opt.v) && finite(&k.opt.m) && finite(&k.opt.v)) {
+        let sound = |o: &OptState| sized(&o.m) && sized(&o.v) && finite(&o.m) && finite(&o.v);
+        if !sound(&k.opt) {
             return Err(Error::file(
                 path,
                 format!("opt: m and v must hold {N_PARAMS} finite values"),
+            ));
+        }
+        let z = &k.zone_starts;
+        let zones_sized = z.is_empty()
+            || (z.names.len() == z.starts.len() + 1 && k.zones.len() == z.starts.len());
+        if !zones_sized {
+            return Err(Error::file(
+                path,
+                format!(
+                    "zones: {} names, {} starts and {} states do not describe one zone fit",
+                    z.names.len(),
+                    z.starts.len(),
+                    k.zones.len()
+                ),
+            ));
+        }
+        let zones_sound = k.zones.iter().all(|s| finite(&s.theta) && sound(&s.opt))
+            && z.starts.iter().all(|s| finite(s));
+        if !zones_sound {
+            return Err(Error::file(
+                path,
+                "zones: a zone's theta, start or optimiser state holds a non-finite value",
             ));
         }
         k.config.check().map_err(|e| e.in_file(path))?;
@@ -68,6 +121,17 @@ impl CheckpointDir {
     /// The checkpoint file inside the folder.
     pub fn file(&self) -> PathBuf {
         self.dir.join("checkpoint.json")
+    }
+
+    /// The epochs the checkpoint a resume starts from holds (for a progress bar: none when not
+    /// resuming or when there is no readable checkpoint, which the resume itself reports).
+    pub fn epochs_done(&self) -> Option<usize> {
+        let text = std::fs::read_to_string(self.file())
+            .ok()
+            .filter(|_| self.resume)?;
+        serde_json::from_str::<Checkpoint>(&text)
+            .ok()
+            .map(|k| k.epochs_done)
     }
 }
 
@@ -107,20 +171,22 @@ impl Learnt {
     }
 }
 
-/// The state to start from: θ = the start, or the checkpoint's state when resuming (refused
-/// when the checkpoint was written with other settings or another start).
+/// The state to start from: θ = the start (and each further zone's set its start), or the
+/// checkpoint's state when resuming (refused when the checkpoint was written with other
+/// settings, another start or other zones).
 pub(super) fn resume(
     ckpt: Option<&CheckpointDir>,
     cfg: &FitConfig,
     start: [f64; N_PARAMS],
+    zones: &ZoneStarts,
 ) -> Result<(Learnt, usize)> {
     match ckpt {
         Some(c) if c.resume && c.file().exists() => {
             let k = Checkpoint::load(&c.file())?;
-            if k.config != *cfg || k.start != start {
+            if k.config != *cfg || k.start != start || k.zone_starts != *zones {
                 return Err(Error::file(
                     c.file(),
-                    "was written by a fit with other settings or another start; resume with the same flags",
+                    "was written by a fit with other settings, another start or other zones; resume with the same flags",
                 ));
             }
             let learnt = Learnt {
@@ -128,7 +194,7 @@ pub(super) fn resume(
                 opt: k.opt,
                 log: k.log,
                 probes: Vec::new(),
-                zones: Vec::new(),
+                zones: k.zones.into_iter().map(|z| (z.theta, z.opt)).collect(),
             };
             Ok((learnt, k.epochs_done))
         }
@@ -138,7 +204,11 @@ pub(super) fn resume(
                 opt: OptState::new(N_PARAMS),
                 log: Vec::new(),
                 probes: Vec::new(),
-                zones: Vec::new(),
+                zones: zones
+                    .starts
+                    .iter()
+                    .map(|s| (*s, OptState::new(N_PARAMS)))
+                    .collect(),
             },
             0,
         )),
@@ -152,6 +222,7 @@ pub(super) fn save_checkpoint(
     learnt: &Learnt,
     cfg: &FitConfig,
     start: [f64; N_PARAMS],
+    zones: &ZoneStarts,
 ) -> Result<()> {
     let k = Checkpoint {
         schema: CHECKPOINT_SCHEMA.into(),
@@ -161,6 +232,15 @@ pub(super) fn save_checkpoint(
         log: learnt.log.clone(),
         config: cfg.clone(),
         start,
+        zone_starts: zones.clone(),
+        zones: learnt
+            .zones
+            .iter()
+            .map(|(theta, opt)| ZoneState {
+                theta: *theta,
+                opt: opt.clone(),
+            })
+            .collect(),
     };
     let text = serde_json::to_string(&k)
         .map_err(|e| Error::Internal(format!("serialising checkpoint: {e}")))?;

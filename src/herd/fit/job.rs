@@ -2,7 +2,7 @@
 //! from files, the fit, its evaluation (losses and field errors of the start and the fitted set),
 //! the provenance recorded in the parameter file, the training log and the loss curve.
 
-use super::checkpoint::{Checkpoint, CheckpointDir};
+use super::checkpoint::CheckpointDir;
 use super::config::FitConfig;
 use super::global::{fit_global, split_frames, GlobalReport};
 use super::identify::{identify, Uncertainty, UncertaintyConfig};
@@ -123,9 +123,6 @@ impl FitJob {
             if !self.config.global.is_off() {
                 return refuse("global.starts", "a zone fit has no global phase: set 1");
             }
-            if self.checkpoint.is_some() {
-                return refuse("checkpoint", "a zone fit writes no checkpoints");
-            }
         }
         if crate::data::atomic::is_stdout(&self.out) && (self.log.is_none() || self.plot.is_none())
         {
@@ -197,35 +194,12 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
     }
-    if job.resume {
-        // With the global phase the first candidate's folder holds the first checkpoint.
-        let first = match cfg.global.is_off() {
-            true => std::path::PathBuf::new(),
-            false => "start-0".into(),
-        };
-        let file = job
-            .checkpoint
-            .as_ref()
-            .map(|d| d.join(&first).join("checkpoint.json"));
-        match file {
-            None => return Err(Error::config("resume", "needs a checkpoint folder")),
-            Some(f) if !f.is_file() => {
-                return Err(Error::file(&f, "no checkpoint to resume from"));
-            }
-            Some(_) => {}
-        }
-    }
-    let ckpt = match &job.checkpoint {
-        Some(d) => {
-            std::fs::create_dir_all(d)
-                .map_err(|e| Error::file(d, format!("cannot create folder: {e}")))?;
-            Some(CheckpointDir {
-                dir: d.clone(),
-                resume: job.resume,
-            })
-        }
-        None => None,
+    // With the global phase the first candidate's folder holds the first checkpoint.
+    let first = match cfg.global.is_off() {
+        true => std::path::PathBuf::new(),
+        false => "start-0".into(),
     };
+    let ckpt = checkpoint_dir(job, &first)?;
     // With the global phase every candidate is refined on the frames before the held-out ones.
     let (refine, starts) = if cfg.global.is_off() {
         (frames.clone(), 1)
@@ -234,12 +208,8 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     };
     let windows_per_epoch = (refine.end - refine.start - 1).div_ceil(cfg.window) * clips.len();
     progress.start("fit", (windows_per_epoch * cfg.epochs * starts) as u64);
-    if let Some(c) = ckpt.as_ref().filter(|c| c.resume) {
-        if let Ok(text) = std::fs::read_to_string(c.file()) {
-            if let Ok(k) = serde_json::from_str::<Checkpoint>(&text) {
-                progress.inc((k.epochs_done * windows_per_epoch) as u64);
-            }
-        }
+    if let Some(done) = ckpt.as_ref().and_then(CheckpointDir::epochs_done) {
+        progress.inc((done * windows_per_epoch) as u64);
     }
     let (res, global) = fit_global(&clips, &init, &cfg, ckpt.as_ref(), |epoch, frame, e, ms| {
         progress.message(&format!(
@@ -553,5 +523,37 @@ impl std::fmt::Display for FitSummary {
             self.log.display(),
             self.plot.display()
         )
+    }
+}
+
+/// The job's checkpoint folder (created), or none; with `--resume`, refused unless the
+/// checkpoint to resume from (in `first` inside the folder) exists.
+pub(super) fn checkpoint_dir(
+    job: &FitJob,
+    first: &std::path::Path,
+) -> Result<Option<CheckpointDir>> {
+    if job.resume {
+        let file = job
+            .checkpoint
+            .as_ref()
+            .map(|d| d.join(first).join("checkpoint.json"));
+        match file {
+            None => return Err(Error::config("resume", "needs a checkpoint folder")),
+            Some(f) if !f.is_file() => {
+                return Err(Error::file(&f, "no checkpoint to resume from"));
+            }
+            Some(_) => {}
+        }
+    }
+    match &job.checkpoint {
+        Some(d) => {
+            std::fs::create_dir_all(d)
+                .map_err(|e| Error::file(d, format!("cannot create folder: {e}")))?;
+            Ok(Some(CheckpointDir {
+                dir: d.clone(),
+                resume: job.resume,
+            }))
+        }
+        None => Ok(None),
     }
 }

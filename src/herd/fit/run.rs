@@ -1,7 +1,7 @@
 //! The fit loop (paper §6.1): epochs × clips × windows of planned, then evaluated, steps; the
 //! gradient of each window's loss, the optimiser step, population control between windows.
 
-use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt};
+use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt, ZoneStarts};
 use super::config::{FitConfig, LossKind};
 use super::herds::{check_finite_step, grad_of, Herds};
 use super::log::LogRow;
@@ -94,12 +94,14 @@ pub struct ZoneFitResult {
 /// A zone fit (paper §7.2.4): one parameter set per zone of `zones`, learnt jointly — every
 /// step each agent uses the set of the zone its cell lies in ([`ForceTensors::zoned`]), so one
 /// window's gradient reaches every zone's set through the agents that used it, and each set
-/// takes its own optimiser step. `starts[k]` is zone k's start. No checkpoints.
+/// takes its own optimiser step. `starts[k]` is zone k's start. With `ckpt`, every zone's set and
+/// optimiser state is checkpointed after every epoch, and a resume continues exactly.
 pub fn fit_zones(
     clip: &ClipFields,
     starts: &[Params],
     cfg: &FitConfig,
     zones: &Zones,
+    ckpt: Option<&CheckpointDir>,
     mut progress: impl FnMut(usize, usize, f64, f64),
 ) -> Result<ZoneFitResult> {
     if starts.len() != zones.len() || starts.is_empty() {
@@ -113,14 +115,18 @@ pub fn fit_zones(
     let clips = [clip];
     let mut run = FitRun::new(&clips, &starts[0], cfg, true)?;
     run.zones = Some(zones);
-    let (mut learnt, _) = resume(None, cfg, starts[0].to_vec())?;
-    learnt.zones = starts[1..]
-        .iter()
-        .map(|p| (p.to_vec(), OptState::new(N_PARAMS)))
-        .collect();
-    for epoch in 0..cfg.epochs {
+    let zs = ZoneStarts {
+        names: zones.specs.iter().map(|z| z.name.clone()).collect(),
+        starts: starts[1..].iter().map(Params::to_vec).collect(),
+    };
+    let start = starts[0].to_vec();
+    let (mut learnt, first_epoch) = resume(ckpt, cfg, start, &zs)?;
+    for epoch in first_epoch..cfg.epochs {
         let mut rng = epoch_rng(cfg.seed, epoch);
         run.epoch_on_clip(epoch, 0, &mut learnt, &mut rng, &mut progress)?;
+        if let Some(c) = ckpt {
+            save_checkpoint(c, epoch + 1, &learnt, cfg, start, &zs)?;
+        }
     }
     let thetas = std::iter::once(learnt.theta).chain(learnt.zones.iter().map(|(t, _)| *t));
     let sets = thetas
@@ -224,14 +230,14 @@ fn fit_inner(
 ) -> Result<FitResult> {
     let run = FitRun::new(clips, init, cfg, learn)?;
     let start = init.to_vec();
-    let (mut learnt, first_epoch) = resume(ckpt, cfg, start)?;
+    let (mut learnt, first_epoch) = resume(ckpt, cfg, start, &ZoneStarts::default())?;
     for epoch in first_epoch..cfg.epochs {
         let mut rng = epoch_rng(cfg.seed, epoch);
         for ci in 0..clips.len() {
             run.epoch_on_clip(epoch, ci, &mut learnt, &mut rng, &mut progress)?;
         }
         if let Some(c) = ckpt {
-            save_checkpoint(c, epoch + 1, &learnt, cfg, start)?;
+            save_checkpoint(c, epoch + 1, &learnt, cfg, start, &ZoneStarts::default())?;
         }
     }
     let mut out = run.params.with_vec(&learnt.theta);

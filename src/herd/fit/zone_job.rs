@@ -59,15 +59,26 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
     }
+    let ckpt = super::job::checkpoint_dir(job, std::path::Path::new(""))?;
     let windows = (frames.end - frames.start - 1).div_ceil(cfg.window);
     progress.start("fit", (windows * cfg.epochs) as u64);
+    if let Some(done) = ckpt.as_ref().and_then(|c| c.epochs_done()) {
+        progress.inc((done * windows) as u64);
+    }
     let starts = vec![start.clone(); zones.len()];
-    let res = fit_zones(&clip, &starts, &cfg, &zones, |epoch, frame, e, ms| {
-        progress.message(&format!(
-            "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
-        ));
-        progress.inc(1);
-    })
+    let res = fit_zones(
+        &clip,
+        &starts,
+        &cfg,
+        &zones,
+        ckpt.as_ref(),
+        |epoch, frame, e, ms| {
+            progress.message(&format!(
+                "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
+            ));
+            progress.inc(1);
+        },
+    )
     .map_err(|e| e.in_file(&job.clips[0]))?;
     progress.finish();
     let grid = clip.grid();
