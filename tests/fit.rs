@@ -333,8 +333,9 @@ fn killed_and_resumed_global_fit_ends_with_the_same_bytes() {
     );
 }
 
-/// A zone fit (one set per zone, each with its own optimiser state in the checkpoint): killed
-/// after its first checkpoint and resumed, the bundle and the log are the same bytes.
+/// A zone fit (one set per zone, each with its own optimiser state in the checkpoint), alone and
+/// with the global phase: killed after its first checkpoint and resumed, the bundle and the log
+/// are the same bytes.
 #[test]
 fn killed_and_resumed_zone_fit_ends_with_the_same_bytes() {
     let zones = |d: &Path| -> Vec<String> {
@@ -347,6 +348,13 @@ fn killed_and_resumed_zone_fit_ends_with_the_same_bytes() {
         vec!["--zones".into(), s(&p).into()]
     };
     resume_case(&zones, "checkpoint.json");
+    // With the global phase: killed while the second candidate refines.
+    let global = |d: &Path| -> Vec<String> {
+        let mut v = zones(d);
+        v.extend(["--starts".to_string(), "3".to_string()]);
+        v
+    };
+    resume_case(&global, "start-1/checkpoint.json");
 }
 
 /// A fit with the flags `extra(folder)` gives (it may write files into the test's folder), run

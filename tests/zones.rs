@@ -184,6 +184,79 @@ fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
 }
 
 #[test]
+fn a_zone_fit_with_a_global_phase_keeps_the_plain_zone_fit_as_candidate_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = small_clip(dir.path());
+    let zones = zones_file(
+        dir.path(),
+        "zones.json",
+        serde_json::json!([{"name": "west", "polygon": rect(0.0, 12.0)},
+                           {"name": "east", "polygon": rect(12.0, 24.0)}]),
+    );
+    let fit = |out: &std::path::Path, extra: &[&str]| -> String {
+        let mut v = vec![
+            "fit",
+            s(&clip),
+            "--zones",
+            s(&zones),
+            "--out",
+            s(out),
+            "--epochs",
+            "2",
+            "--window",
+            "2",
+            "--eval-seeds",
+            "1",
+            "--loss",
+            "fields",
+        ];
+        v.extend_from_slice(extra);
+        ok(&v)
+    };
+    let bundle = |p: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let flat = |b: &serde_json::Value| -> Vec<f64> {
+        let sets = b["sets"].as_array().unwrap();
+        sets.iter()
+            .flat_map(|x| {
+                let p: Params = serde_json::from_value(x["params"].clone()).unwrap();
+                p.to_vec().to_vec()
+            })
+            .collect()
+    };
+    let (g, plain) = (dir.path().join("g.json"), dir.path().join("plain.json"));
+    let printed = fit(&g, &["--starts", "3"]);
+    assert!(
+        printed.contains("global phase: 3 starts refined on frames 0..9"),
+        "{printed}"
+    );
+    let b = bundle(&g);
+    let report = &b["provenance"]["global"];
+    let cands = report["candidates"].as_array().unwrap();
+    assert_eq!(cands.len(), 3);
+    let vec = |x: &serde_json::Value| -> Vec<f64> {
+        x.as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    // Every candidate starts every zone somewhere (12 values per zone); candidate 0 at the given start.
+    assert!(cands.iter().all(|c| vec(&c["start"]).len() == 24));
+    assert_eq!(vec(&cands[0]["start"]), vec![0.5; 24]);
+    assert_ne!(vec(&cands[1]["start"]), vec(&cands[2]["start"]));
+    // Candidate 0 is the plain zone fit on the refinement frames.
+    fit(&plain, &["--frames", "0..9"]);
+    assert_eq!(vec(&cands[0]["end"]), flat(&bundle(&plain)));
+    // The bundle holds the chosen candidate's sets, the lowest held-out score.
+    let chosen = report["chosen"].as_u64().unwrap() as usize;
+    assert_eq!(flat(&b), vec(&cands[chosen]["end"]));
+    let scores: Vec<f64> = cands.iter().map(|c| c["score"].as_f64().unwrap()).collect();
+    assert!(scores.iter().all(|&x| x >= scores[chosen]), "{scores:?}");
+}
+
+#[test]
 fn bad_zones_are_one_line_errors_and_write_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let clip = small_clip(dir.path());

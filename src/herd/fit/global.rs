@@ -12,13 +12,17 @@
 //! random numbers; the lowest score wins. Candidate 0 is the plain fit on `a..c`, so the chosen
 //! set never scores worse on the held-out frames than the plain fit does.
 //!
+//! A zone fit's global phase ([`fit_zones_global`]) is the same over every zone's set at once:
+//! candidate 0 is the given starts, the others Latin-hypercube points in 12 dimensions per zone.
+//!
 //! Checkpoints: candidate k checkpoints into `DIR/start-k/` after every epoch; a resumed run
 //! continues each candidate where it stopped, and the held-out scores are recomputed (they are
 //! deterministic), so a killed and resumed fit ends with the same bytes.
 
 use super::checkpoint::CheckpointDir;
 use super::config::{FitConfig, GlobalPhase, LossKind};
-use super::run::{fit_clips, loss_of, FitResult};
+use super::run::{fit_clips, fit_zones, loss_of, zone_loss_of, FitResult, ZoneFitResult};
+use super::zones::Zones;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::params::{Params, N_PARAMS};
@@ -66,13 +70,13 @@ pub fn split_frames(
 }
 
 /// The global phase's candidate starts: `init`, then `starts − 1` Latin-hypercube points in
-/// [0.05, 0.95]¹² drawn from the fit's seed.
-pub fn candidate_starts(init: &[f64; N_PARAMS], g: &GlobalPhase, seed: u64) -> Vec<Vec<f64>> {
+/// [0.05, 0.95]^n drawn from the fit's seed (n = `init.len()`: 12, or 12 per zone for a zone fit).
+pub fn candidate_starts(init: &[f64], g: &GlobalPhase, seed: u64) -> Vec<Vec<f64>> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6C0B_A15E_ED00_0015);
     let mut v = vec![init.to_vec()];
     v.extend(latin_hypercube(
         g.starts.saturating_sub(1),
-        N_PARAMS,
+        init.len(),
         0.05,
         0.95,
         &mut rng,
@@ -101,29 +105,10 @@ pub fn fit_global(
     if cfg.global.is_off() {
         return Ok((fit_clips(clips, init, cfg, ckpt, progress)?, None));
     }
-    let (refine_frames, holdout_frames) = split_frames(&cfg.frames, &cfg.global)?;
-    let inner = FitConfig {
-        frames: refine_frames.clone(),
-        global: GlobalPhase {
-            starts: 1,
-            ..cfg.global
-        },
-        ..cfg.clone()
-    };
-    let held = FitConfig {
-        frames: holdout_frames.clone(),
-        ..inner.clone()
-    };
-    let mut starts = candidate_starts(&init.to_vec(), &cfg.global, cfg.seed);
-    // Frozen parameters keep the given start's value in every candidate.
-    let frozen = cfg.frozen_indices()?;
-    for s in starts.iter_mut() {
-        for &p in &frozen {
-            s[p] = init.to_vec()[p];
-        }
-    }
+    let phase = Phase::new(cfg, &init.to_vec())?;
+    let (inner, held, starts) = (&phase.inner, &phase.held, &phase.starts);
     let (chosen, candidates, mut results) = multistart(
-        &starts,
+        starts,
         |k, s| -> Result<(Vec<f64>, FitResult)> {
             let sub = match ckpt {
                 Some(c) => Some(candidate_dir(c, k)?),
@@ -132,7 +117,7 @@ pub fn fit_global(
             let r = fit_clips(
                 clips,
                 &init.with_vec(&to_array(s)),
-                &inner,
+                inner,
                 sub.as_ref(),
                 &mut progress,
             )?;
@@ -140,27 +125,120 @@ pub fn fit_global(
         },
         |_, end| {
             let set = init.with_vec(&to_array(end));
-            Ok(objective(&held, loss_of(clips, &set, &held)?))
+            Ok(objective(held, loss_of(clips, &set, held)?))
         },
     )?;
     let mut res = results.swap_remove(chosen);
     // The user's start, not the candidate's: the summary and provenance compare with it.
     res.start = init.to_vec();
-    let objective = match cfg.loss {
-        LossKind::Paper => "mean E_mean + λ_var E_var over the held-out frames (one epoch without updates, the fit's seed)",
-        _ => "mean field-matching loss + λ_var E_var over the held-out frames (one epoch without updates, the fit's seed)",
+    Ok((res, Some(phase.report(candidates, chosen))))
+}
+
+/// A zone fit with its global phase: [`fit_zones`] alone when `cfg.global` is off, otherwise the
+/// multi-start of the module documentation over every zone's set at once — candidate 0 is the
+/// given starts, the others Latin-hypercube points in 12 dimensions per zone — each refined by
+/// [`fit_zones`] and ranked by [`zone_loss_of`] on the held-out frames. Checkpoints as for one set.
+pub fn fit_zones_global(
+    clip: &ClipFields,
+    starts: &[Params],
+    cfg: &FitConfig,
+    zones: &Zones,
+    ckpt: Option<&CheckpointDir>,
+    mut progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<(ZoneFitResult, Option<GlobalReport>)> {
+    if cfg.global.is_off() {
+        return Ok((fit_zones(clip, starts, cfg, zones, ckpt, progress)?, None));
+    }
+    let flat = |sets: &[Params]| -> Vec<f64> { sets.iter().flat_map(Params::to_vec).collect() };
+    let sets_of = |v: &[f64]| -> Vec<Params> {
+        let parts = v.chunks(N_PARAMS).zip(starts);
+        parts.map(|(x, p)| p.with_vec(&to_array(x))).collect()
     };
+    let phase = Phase::new(cfg, &flat(starts))?;
+    let (inner, held) = (&phase.inner, &phase.held);
+    let (chosen, candidates, mut results) = multistart(
+        &phase.starts,
+        |k, s| -> Result<(Vec<f64>, ZoneFitResult)> {
+            let sub = match ckpt {
+                Some(c) => Some(candidate_dir(c, k)?),
+                None => None,
+            };
+            let r = fit_zones(clip, &sets_of(s), inner, zones, sub.as_ref(), &mut progress)?;
+            Ok((flat(&r.sets), r))
+        },
+        |_, end| {
+            Ok(objective(
+                held,
+                zone_loss_of(clip, &sets_of(end), held, zones)?,
+            ))
+        },
+    )?;
     Ok((
-        res,
-        Some(GlobalReport {
-            starts: starts.len(),
+        results.swap_remove(chosen),
+        Some(phase.report(candidates, chosen)),
+    ))
+}
+
+/// The settings of a global phase: the refinement and held-out frames and fits, and the
+/// candidate starts (frozen parameters at the given start's value in every candidate).
+struct Phase {
+    refine_frames: Range<usize>,
+    holdout_frames: Range<usize>,
+    inner: FitConfig,
+    held: FitConfig,
+    starts: Vec<Vec<f64>>,
+    objective: &'static str,
+}
+
+impl Phase {
+    /// The phase of `cfg` from the given start `init` (12 values per parameter set).
+    fn new(cfg: &FitConfig, init: &[f64]) -> Result<Phase> {
+        let (refine_frames, holdout_frames) = split_frames(&cfg.frames, &cfg.global)?;
+        let inner = FitConfig {
+            frames: refine_frames.clone(),
+            global: GlobalPhase {
+                starts: 1,
+                ..cfg.global
+            },
+            ..cfg.clone()
+        };
+        let held = FitConfig {
+            frames: holdout_frames.clone(),
+            ..inner.clone()
+        };
+        let mut starts = candidate_starts(init, &cfg.global, cfg.seed);
+        let frozen = cfg.frozen_indices()?;
+        for s in starts.iter_mut() {
+            for set in 0..init.len() / N_PARAMS {
+                for &p in &frozen {
+                    s[set * N_PARAMS + p] = init[set * N_PARAMS + p];
+                }
+            }
+        }
+        let objective = match cfg.loss {
+            LossKind::Paper => "mean E_mean + λ_var E_var over the held-out frames (one epoch without updates, the fit's seed)",
+            _ => "mean field-matching loss + λ_var E_var over the held-out frames (one epoch without updates, the fit's seed)",
+        };
+        Ok(Phase {
             refine_frames,
             holdout_frames,
-            objective: objective.into(),
+            inner,
+            held,
+            starts,
+            objective,
+        })
+    }
+
+    fn report(self, candidates: Vec<Candidate>, chosen: usize) -> GlobalReport {
+        GlobalReport {
+            starts: self.starts.len(),
+            refine_frames: self.refine_frames,
+            holdout_frames: self.holdout_frames,
+            objective: self.objective.into(),
             candidates,
             chosen,
-        }),
-    ))
+        }
+    }
 }
 
 fn to_array(v: &[f64]) -> [f64; N_PARAMS] {
@@ -199,7 +277,7 @@ impl std::fmt::Display for GlobalReport {
                 .zip(&c.end)
                 .map(|(a, b)| (a - b).abs())
                 .sum::<f64>()
-                / N_PARAMS as f64;
+                / c.start.len().max(1) as f64;
             writeln!(
                 f,
                 "  start {k}{}: held-out objective {:.5}, mean |Δθ| in refinement {:.3}{}",

@@ -120,9 +120,6 @@ impl FitJob {
             if self.clips.len() != 1 {
                 return refuse("zones", "a zone fit takes one clip");
             }
-            if !self.config.global.is_off() {
-                return refuse("global.starts", "a zone fit has no global phase: set 1");
-            }
         }
         if crate::data::atomic::is_stdout(&self.out) && (self.log.is_none() || self.plot.is_none())
         {

@@ -2,6 +2,8 @@
 //! gradient of each window's loss, the optimiser step, population control between windows.
 
 use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt, ZoneStarts};
+
+mod zone;
 use super::config::{FitConfig, LossKind};
 use super::herds::{check_finite_step, grad_of, Herds};
 use super::log::LogRow;
@@ -26,6 +28,7 @@ use crate::optim::OptState;
 use burn::tensor::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+pub use zone::{fit_zones, zone_loss_of, ZoneFitResult};
 
 /// One optimiser step on `theta` with gradient `g` and step size `lr` ([`crate::optim::step`]
 /// with `cfg.optimizer` and `cfg.zero_grad_step`), then clamped to the parameters' ranges.
@@ -83,66 +86,6 @@ pub fn fit_clips(
     fit_inner(clips, init, cfg, ckpt, true, progress)
 }
 
-/// The result of a zone fit: one parameter set per zone (in the zones' order) and the log (its
-/// `theta` is zone 0's).
-#[derive(Clone, Debug)]
-pub struct ZoneFitResult {
-    pub sets: Vec<Params>,
-    pub log: Vec<LogRow>,
-}
-
-/// A zone fit (paper §7.2.4): one parameter set per zone of `zones`, learnt jointly — every
-/// step each agent uses the set of the zone its cell lies in ([`ForceTensors::zoned`]), so one
-/// window's gradient reaches every zone's set through the agents that used it, and each set
-/// takes its own optimiser step. `starts[k]` is zone k's start. With `ckpt`, every zone's set and
-/// optimiser state is checkpointed after every epoch, and a resume continues exactly.
-pub fn fit_zones(
-    clip: &ClipFields,
-    starts: &[Params],
-    cfg: &FitConfig,
-    zones: &Zones,
-    ckpt: Option<&CheckpointDir>,
-    mut progress: impl FnMut(usize, usize, f64, f64),
-) -> Result<ZoneFitResult> {
-    if starts.len() != zones.len() || starts.is_empty() {
-        return Err(Error::Internal(format!(
-            "{} starts for {} zones",
-            starts.len(),
-            zones.len()
-        )));
-    }
-    zones.check_agents(clip, cfg.frames.clone())?;
-    let clips = [clip];
-    let mut run = FitRun::new(&clips, &starts[0], cfg, true)?;
-    run.zones = Some(zones);
-    let zs = ZoneStarts {
-        names: zones.specs.iter().map(|z| z.name.clone()).collect(),
-        starts: starts[1..].iter().map(Params::to_vec).collect(),
-    };
-    let start = starts[0].to_vec();
-    let (mut learnt, first_epoch) = resume(ckpt, cfg, start, &zs)?;
-    for epoch in first_epoch..cfg.epochs {
-        let mut rng = epoch_rng(cfg.seed, epoch);
-        run.epoch_on_clip(epoch, 0, &mut learnt, &mut rng, &mut progress)?;
-        if let Some(c) = ckpt {
-            save_checkpoint(c, epoch + 1, &learnt, cfg, start, &zs)?;
-        }
-    }
-    let thetas = std::iter::once(learnt.theta).chain(learnt.zones.iter().map(|(t, _)| *t));
-    let sets = thetas
-        .zip(starts)
-        .map(|(t, s)| {
-            let mut p = s.with_vec(&t);
-            p.speed = run.params.speed.clone();
-            p
-        })
-        .collect();
-    Ok(ZoneFitResult {
-        sets,
-        log: learnt.log,
-    })
-}
-
 /// The loss of a parameter set on a clip without learning: one epoch of the fit's schedule
 /// (epoch-0 herd and noise) with no updates; returns the mean E_mean, E_var and field-matching
 /// loss over its windows. Comparing two parameter sets this way uses the same herd, noise and
@@ -153,12 +96,17 @@ pub fn loss_of(clips: &[&ClipFields], params: &Params, cfg: &FitConfig) -> Resul
         ..cfg.clone()
     };
     let r = fit_inner(clips, params, &one, None, false, |_, _, _, _| {})?;
-    let n = r.log.len().max(1) as f64;
-    Ok((
-        r.log.iter().map(|x| x.e_mean).sum::<f64>() / n,
-        r.log.iter().map(|x| x.e_var).sum::<f64>() / n,
-        r.log.iter().map(|x| x.e_fields).sum::<f64>() / n,
-    ))
+    Ok(mean_losses(&r.log))
+}
+
+/// The mean E_mean, E_var and field-matching loss over a log's windows.
+fn mean_losses(log: &[LogRow]) -> (f64, f64, f64) {
+    let n = log.len().max(1) as f64;
+    (
+        log.iter().map(|x| x.e_mean).sum::<f64>() / n,
+        log.iter().map(|x| x.e_var).sum::<f64>() / n,
+        log.iter().map(|x| x.e_fields).sum::<f64>() / n,
+    )
 }
 
 /// Each window's (back-propagated loss, gradient as the fit uses it) over one epoch of the fit's

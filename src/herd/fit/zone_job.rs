@@ -2,9 +2,9 @@
 //! jointly ([`super::run::fit_zones`]), evaluated against the start on the fitted frames, and
 //! written as a parameter-set bundle (`herdfit.param-sets/1`) with the log and the loss curve.
 
+use super::global::fit_zones_global;
 use super::job::{loss_plot, FitJob};
 use super::log::write_log;
-use super::run::fit_zones;
 use super::zones::Zones;
 use crate::backend::cpu_device;
 use crate::data::atomic::check_writable;
@@ -32,6 +32,8 @@ pub struct ZoneFitSummary {
     pub out: PathBuf,
     pub log: PathBuf,
     pub plot: PathBuf,
+    /// The global phase's candidates and choice, when it ran.
+    pub global: Option<super::global::GlobalReport>,
 }
 
 /// Runs a zone fit job (`job.zones` set): loads the clip, the zones (checked against the clip's
@@ -59,14 +61,23 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
     }
-    let ckpt = super::job::checkpoint_dir(job, std::path::Path::new(""))?;
-    let windows = (frames.end - frames.start - 1).div_ceil(cfg.window);
-    progress.start("fit", (windows * cfg.epochs) as u64);
+    // With the global phase the first candidate's folder holds the first checkpoint, and every
+    // candidate is refined on the frames before the held-out ones.
+    let (first, refine, candidates) = match cfg.global.is_off() {
+        true => (PathBuf::new(), frames.clone(), 1),
+        false => {
+            let refine = super::global::split_frames(&frames, &cfg.global)?.0;
+            (PathBuf::from("start-0"), refine, cfg.global.starts)
+        }
+    };
+    let ckpt = super::job::checkpoint_dir(job, &first)?;
+    let windows = (refine.end - refine.start - 1).div_ceil(cfg.window);
+    progress.start("fit", (windows * cfg.epochs * candidates) as u64);
     if let Some(done) = ckpt.as_ref().and_then(|c| c.epochs_done()) {
         progress.inc((done * windows) as u64);
     }
     let starts = vec![start.clone(); zones.len()];
-    let res = fit_zones(
+    let (res, global) = fit_zones_global(
         &clip,
         &starts,
         &cfg,
@@ -99,7 +110,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         errors_of(&clip, &fitted, &frames, job)?,
     ];
     let names: Vec<String> = zones.specs.iter().map(|z| z.name.clone()).collect();
-    let prov = serde_json::json!({
+    let mut prov = serde_json::json!({
         "source": "fit --zones",
         "clip": job.clips[0].display().to_string(),
         "zones": zpath.display().to_string(),
@@ -113,6 +124,11 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
             "fitted": {"density_error": errors[1].0, "velocity_error": errors[1].1},
         },
     });
+    if let Some(g) = &global {
+        prov["global"] = serde_json::to_value(g).map_err(|e| {
+            crate::error::Error::Internal(format!("serialising the global phase: {e}"))
+        })?;
+    }
     write_log(&log_path, &res.log)?;
     // The curve is zone 0's θ; a plot that cannot be drawn does not stop the fit.
     let _ = loss_plot(&plot_path, &res.log, cfg.epochs);
@@ -127,6 +143,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         out: job.out.clone(),
         log: log_path,
         plot: plot_path,
+        global,
     })
 }
 
@@ -174,6 +191,9 @@ impl std::fmt::Display for ZoneFitSummary {
             self.frames.start,
             self.frames.end
         )?;
+        if let Some(g) = &self.global {
+            write!(f, "{g}")?;
+        }
         write!(f, "{:<20} {:>8}", "parameter", "start")?;
         for n in &self.names {
             write!(f, " {n:>10}")?;
