@@ -16,20 +16,7 @@ fn ablate_runs_every_switch_and_reports_table_4() {
     let dir = tempfile::tempdir().unwrap();
     let clip = small_clip(dir.path());
     let out = dir.path().join("abl");
-    let md = ok(&[
-        "ablate",
-        s(&clip),
-        "--out",
-        s(&out),
-        "--epochs",
-        "1",
-        "--window",
-        "3",
-        "--seeds",
-        "1",
-        "--settle",
-        "0",
-    ]);
+    let md = quick_ablate(&clip, &out, &[]);
     for f in [
         "ablation.json",
         "ablation.md",
@@ -148,6 +135,27 @@ fn ablate_bad_input_is_one_line_and_writes_nothing() {
     assert!(!out.exists(), "a failed ablation left {out:?}");
 }
 
+/// `herdfit ablate CLIP --out OUT` with one 3-step epoch, one validation seed, no settling and
+/// the `extra` flags: what it prints.
+fn quick_ablate(clip: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> String {
+    let mut v = vec![
+        "ablate",
+        s(clip),
+        "--out",
+        s(out),
+        "--epochs",
+        "1",
+        "--window",
+        "3",
+        "--seeds",
+        "1",
+        "--settle",
+        "0",
+    ];
+    v.extend_from_slice(extra);
+    ok(&v)
+}
+
 /// Zones west (x < 6) and east of the test clip's 24 × 18 world.
 fn two_zones(dir: &std::path::Path, split: f64) -> std::path::PathBuf {
     let rect = |a: f64, b: f64| serde_json::json!([[a, 0.0], [b, 0.0], [b, 18.0], [a, 18.0]]);
@@ -169,24 +177,11 @@ fn ablate_with_zones_fits_one_set_per_zone_in_every_variant_and_validates_each_z
     let clip = small_clip(dir.path());
     let zones = two_zones(dir.path(), 6.0);
     let out = dir.path().join("abl");
-    let md = ok(&[
-        "ablate",
-        s(&clip),
-        "--zones",
-        s(&zones),
-        "--out",
-        s(&out),
-        "--epochs",
-        "1",
-        "--window",
-        "3",
-        "--seeds",
-        "1",
-        "--settle",
-        "0",
-        "--switches",
-        "occlusion,density",
-    ]);
+    let md = quick_ablate(
+        &clip,
+        &out,
+        &["--zones", s(&zones), "--switches", "occlusion,density"],
+    );
     let r = json(&out.join("ablation.json"));
     assert_eq!(r["schema"], "herdfit.zone-ablation/1");
     assert_eq!(r["fit_frames"], serde_json::json!([0, 8]));

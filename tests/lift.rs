@@ -27,16 +27,6 @@ fn shared_data() -> PathBuf {
     PathBuf::from("/work/shared/data")
 }
 
-/// The small synthetic flock of these tests (a 40° view: birds leave and enter it).
-fn small_flock() -> BoidsConfig {
-    BoidsConfig {
-        birds: 12,
-        frames: 150,
-        hfov: 40.0,
-        ..BoidsConfig::default()
-    }
-}
-
 fn synth_to(dir: &Path) -> PathBuf {
     let out = dir.join("syn");
     ok(&[
@@ -154,7 +144,7 @@ fn scores(r: &EvalReport) -> [(f64, f64); 4] {
 
 #[test]
 fn whole_sequence_beats_the_baselines_on_a_synthetic_flock_with_entries_and_exits() {
-    let b = small_flock();
+    let b = BoidsConfig::demo();
     let syn = synth_flock(&b, &mut NoProgress).unwrap();
     assert!(
         syn.tracks.rows.len() < syn.truth.rows.len(),

@@ -15,12 +15,7 @@ use herdfit::progress::NoProgress;
 /// A 12-bird flock over 150 frames seen through a 40° view (birds leave and enter it), and the
 /// lift settings of the demo with tensors in f64.
 fn problem() -> (Observations, LiftConfig) {
-    let b = BoidsConfig {
-        birds: 12,
-        frames: 150,
-        hfov: 40.0,
-        ..BoidsConfig::default()
-    };
+    let b = BoidsConfig::demo();
     let syn = synth_flock(&b, &mut NoProgress).unwrap();
     let obs = Observations::new(&syn.tracks, &syn.camera).unwrap();
     assert!(obs.len() < 12 * 150, "some points leave the view");

@@ -106,16 +106,21 @@ fn rect(x0: f64, x1: f64) -> serde_json::Value {
     serde_json::json!([[x0, 0.0], [x1, 0.0], [x1, 18.0], [x0, 18.0]])
 }
 
-#[test]
-fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
-    let dir = tempfile::tempdir().unwrap();
-    let clip = small_clip(dir.path());
+/// The test's clip and zones "west" and "east", its two halves.
+fn clip_and_halves(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
     let zones = zones_file(
-        dir.path(),
+        dir,
         "zones.json",
         serde_json::json!([{"name": "west", "polygon": rect(0.0, 12.0)},
                            {"name": "east", "polygon": rect(12.0, 24.0)}]),
     );
+    (small_clip(dir), zones)
+}
+
+#[test]
+fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clip, zones) = clip_and_halves(dir.path());
     let out = dir.path().join("sets.json");
     let printed = ok(&[
         "fit",
@@ -186,13 +191,7 @@ fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
 #[test]
 fn a_zone_fit_with_a_global_phase_keeps_the_plain_zone_fit_as_candidate_0() {
     let dir = tempfile::tempdir().unwrap();
-    let clip = small_clip(dir.path());
-    let zones = zones_file(
-        dir.path(),
-        "zones.json",
-        serde_json::json!([{"name": "west", "polygon": rect(0.0, 12.0)},
-                           {"name": "east", "polygon": rect(12.0, 24.0)}]),
-    );
+    let (clip, zones) = clip_and_halves(dir.path());
     let fit = |out: &std::path::Path, extra: &[&str]| -> String {
         let mut v = vec![
             "fit",

@@ -80,6 +80,17 @@ impl Default for BoidsConfig {
 }
 
 impl BoidsConfig {
+    /// The flock of `herdfit demo`, RESULTS.md §5 and the tests: 12 birds over 150 frames seen
+    /// through a 40° view, so that birds leave and enter it.
+    pub fn demo() -> Self {
+        BoidsConfig {
+            birds: 12,
+            frames: 150,
+            hfov: 40.0,
+            ..BoidsConfig::default()
+        }
+    }
+
     /// Checks ranges; errors name the key.
     pub fn check(&self) -> Result<()> {
         if self.birds < 2 || self.birds > 100_000 {

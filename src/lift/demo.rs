@@ -80,12 +80,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
         .map_err(|e| Error::file(&dir, format!("cannot create folder: {e}")))?;
     // Small enough for the demo's time budget (RESULTS.md §5 has the timing); the 40° view makes
     // birds leave and enter it.
-    let boids = BoidsConfig {
-        birds: 12,
-        frames: 150,
-        hfov: 40.0,
-        ..BoidsConfig::default()
-    };
+    let boids = BoidsConfig::demo();
     let syn = synth_flock(&boids, progress)?;
     syn.truth.save(&dir.join("truth3d.csv"))?;
     syn.tracks.save(&dir.join("tracks2d.csv"))?;

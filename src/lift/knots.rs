@@ -208,12 +208,7 @@ mod tests {
 
     /// A 12-bird flock whose birds leave and enter a 40° view: its observations and true depths.
     fn flock() -> (Observations, Vec<f64>, super::super::LiftConfig) {
-        let b = BoidsConfig {
-            birds: 12,
-            frames: 150,
-            hfov: 40.0,
-            ..BoidsConfig::default()
-        };
+        let b = BoidsConfig::demo();
         let syn = synth_flock(&b, &mut NoProgress).unwrap();
         let (tracks, depth) = project_tracks(&syn.truth, &syn.camera, true).unwrap();
         let obs = Observations::new(&tracks, &syn.camera).unwrap();

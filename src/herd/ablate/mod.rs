@@ -185,30 +185,11 @@ pub fn ablate(
     cfg: &AblateConfig,
     progress: &mut dyn Progress,
 ) -> Result<(Vec<Variant>, crate::herd::validate::Report)> {
-    cfg.check()?;
-    let nf = clip.frames();
-    let held = cfg.validate.held_out_start(nf);
-    let fit_cfg = FitConfig {
-        frames: 0..held,
-        ..cfg.fit.clone()
-    };
-    fit_cfg.check_clip(clip)?;
-    let windows = (held - 1).div_ceil(fit_cfg.window) * fit_cfg.epochs;
-    let runs: Vec<Option<Switch>> = std::iter::once(None)
-        .chain(cfg.switches.iter().copied().map(Some))
-        .collect();
-    progress.start(
-        "ablate",
-        (runs.len() * (windows + cfg.validate.seeds)) as u64,
-    );
+    let (fit_cfg, runs) = plan(clip, cfg, "ablate", progress)?;
     let mut out = Vec::with_capacity(runs.len());
     let mut first_report = None;
     for switch in runs {
-        let (mut s, mut c, mut k) = (start.clone(), fit_cfg.clone(), clip.clone());
-        if let Some(sw) = switch {
-            sw.apply(&mut s, &mut c, &mut k);
-        }
-        let name = switch.map_or_else(|| "full".to_string(), Switch::variant);
+        let (name, s, c, k) = variant(switch, start, &fit_cfg, clip);
         progress.message(&name);
         let t0 = std::time::Instant::now();
         let res = fit_clips(&[&k], &s, &c, None, |_, _, _, _| progress.inc(1))?;
@@ -228,6 +209,46 @@ pub fn ablate(
     progress.finish();
     let report = first_report.ok_or_else(|| Error::Internal("no variant ran".into()))?;
     Ok((out, report))
+}
+
+/// The fit settings of every variant (the frames before the held-out part, checked against
+/// `clip`) and the runs (the full model, then each switch off); starts `progress` with one unit
+/// per fit window and validation seed of every run.
+fn plan(
+    clip: &ClipFields,
+    cfg: &AblateConfig,
+    label: &str,
+    progress: &mut dyn Progress,
+) -> Result<(FitConfig, Vec<Option<Switch>>)> {
+    cfg.check()?;
+    let held = cfg.validate.held_out_start(clip.frames());
+    let fit_cfg = FitConfig {
+        frames: 0..held,
+        ..cfg.fit.clone()
+    };
+    fit_cfg.check_clip(clip)?;
+    let windows = (held - 1).div_ceil(fit_cfg.window) * fit_cfg.epochs;
+    let runs: Vec<Option<Switch>> = std::iter::once(None)
+        .chain(cfg.switches.iter().copied().map(Some))
+        .collect();
+    progress.start(label, (runs.len() * (windows + cfg.validate.seeds)) as u64);
+    Ok((fit_cfg, runs))
+}
+
+/// A run's name (`full` or `no-<switch>`) and its start, fit settings and clip with the switch
+/// off.
+fn variant(
+    switch: Option<Switch>,
+    start: &Params,
+    fit_cfg: &FitConfig,
+    clip: &ClipFields,
+) -> (String, Params, FitConfig, ClipFields) {
+    let (mut s, mut c, mut k) = (start.clone(), fit_cfg.clone(), clip.clone());
+    if let Some(sw) = switch {
+        sw.apply(&mut s, &mut c, &mut k);
+    }
+    let name = switch.map_or_else(|| "full".to_string(), Switch::variant);
+    (name, s, c, k)
 }
 
 /// Runs an ablation job: loads the clip and the start, runs [`ablate`] and writes the report

@@ -5,13 +5,12 @@
 //! whole grid's density and velocity errors and, in every zone, its density, polarization,
 //! angular momentum and aspect-ratio errors.
 
-use super::{AblateConfig, AblateJob, Switch};
+use super::{AblateConfig, AblateJob};
 use crate::data::atomic::AtomicDir;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::fit::run::fit_zones;
 use crate::herd::fit::zones::Zones;
-use crate::herd::fit::FitConfig;
 use crate::herd::params::Params;
 use crate::herd::validate::zones::{validate_zones, ZoneSetReport};
 use crate::herd::zoned::ZoneSets;
@@ -113,27 +112,11 @@ pub fn ablate_zones(
     cfg.check()?;
     let nf = clip.frames();
     let held = cfg.validate.held_out_start(nf);
-    let fit_cfg = FitConfig {
-        frames: 0..held,
-        ..cfg.fit.clone()
-    };
-    fit_cfg.check_clip(clip)?;
     zones.check_agents(clip, 0..held)?;
-    let windows = (held - 1).div_ceil(fit_cfg.window) * fit_cfg.epochs;
-    let runs: Vec<Option<Switch>> = std::iter::once(None)
-        .chain(cfg.switches.iter().copied().map(Some))
-        .collect();
-    progress.start(
-        "ablate --zones",
-        (runs.len() * (windows + cfg.validate.seeds)) as u64,
-    );
+    let (fit_cfg, runs) = super::plan(clip, cfg, "ablate --zones", progress)?;
     let mut out = Vec::with_capacity(runs.len());
     for switch in runs {
-        let (mut s, mut c, mut k) = (start.clone(), fit_cfg.clone(), clip.clone());
-        if let Some(sw) = switch {
-            sw.apply(&mut s, &mut c, &mut k);
-        }
-        let name = switch.map_or_else(|| "full".to_string(), Switch::variant);
+        let (name, s, c, k) = super::variant(switch, start, &fit_cfg, clip);
         progress.message(&name);
         let t0 = std::time::Instant::now();
         let starts = vec![s; zones.len()];
