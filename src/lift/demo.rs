@@ -42,7 +42,7 @@ impl fmt::Display for DemoSummary {
                 "true_mean_depth" => "(a) true mean depth of each frame",
                 "constant_median" => "(b) constant, middle of the bounds",
                 "frame_by_frame" => "(c) frame by frame (thesis)",
-                _ => "(d) whole sequence (autodiff)",
+                _ => "(d) whole sequence (L-BFGS)",
             };
             writeln!(
                 f,

@@ -18,7 +18,7 @@ pub struct ZoneFitResult {
 }
 
 /// A zone fit (paper §7.2.4): one parameter set per zone of `zones`, learnt jointly — every
-/// step each agent uses the set of the zone its cell lies in ([`ForceTensors::zoned`]), so one
+/// step each agent uses the set of the zone its cell lies in ([`crate::herd::sim::ForceTensors::zoned`]), so one
 /// window's gradient reaches every zone's set through the agents that used it, and each set
 /// takes its own optimiser step. `starts[k]` is zone k's start. With `ckpt`, every zone's set and
 /// optimiser state is checkpointed after every epoch, and a resume continues exactly.
@@ -69,7 +69,7 @@ pub fn fit_zones(
     })
 }
 
-/// The loss of per-zone sets (`sets[k]` for zone k) on a clip without learning, as [`loss_of`]
+/// The loss of per-zone sets (`sets[k]` for zone k) on a clip without learning, as [`super::loss_of`]
 /// for one set: one epoch of [`fit_zones`]'s schedule with no updates.
 pub fn zone_loss_of(
     clip: &ClipFields,
