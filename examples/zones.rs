@@ -7,10 +7,11 @@
 //! second half with the same seeds (common random numbers): the whole grid's coarse density
 //! error and each zone's density, polarization, angular momentum and aspect-ratio errors.
 //!
-//! `cargo run --release --example zones -- [EPOCHS] [OUT] [SPEEDS]` (default 6, `out/zones/`, no
-//! fixed speeds). `SPEEDS` = `A,B` gives the zones fixed speeds A and B BL/s (paper §7.2.4, the
-//! seals' water and land): the clip is generated with them, the zone fit is told them, and a
-//! second zone fit without them is validated beside it.
+//! `cargo run --release --example zones -- [EPOCHS] [OUT] [SPEEDS] [SEEDS]` (default 6,
+//! `out/zones/`, no fixed speeds, 4 validation seeds). `SPEEDS` = `A,B` gives the zones fixed
+//! speeds A and B BL/s (paper §7.2.4, the seals' water and land): the clip is generated with them,
+//! the zone fit is told them, and a second zone fit without them is validated beside it; `-` for
+//! none.
 
 use herdfit::herd::fit::job::{run, FitJob};
 use herdfit::herd::fit::zone_job::run_zones;
@@ -34,11 +35,12 @@ fn main() -> herdfit::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let epochs: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let out = Path::new(args.get(2).map_or("out/zones", String::as_str)).to_path_buf();
-    let speeds: Option<[f64; 2]> = args.get(3).map(|s| {
+    let speeds: Option<[f64; 2]> = args.get(3).filter(|s| s.as_str() != "-").map(|s| {
         let v: Vec<f64> = s.split(',').filter_map(|x| x.parse().ok()).collect();
-        assert_eq!(v.len(), 2, "SPEEDS is A,B (BL/s)");
+        assert_eq!(v.len(), 2, "SPEEDS is A,B (BL/s), or - for none");
         [v[0], v[1]]
     });
+    let seeds: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(4);
     std::fs::create_dir_all(&out).map_err(|e| herdfit::Error::file(&out, e.to_string()))?;
     // 16 × 8 cells of 3 BL; the zones meet at x = 21 BL (between cell columns 6 and 7).
     let zones = vec![
@@ -202,7 +204,7 @@ fn main() -> herdfit::Result<()> {
         sets.insert(1, ("zone fit, speeds not given".to_string(), of(b, &out)?));
     }
     let vcfg = ValidateConfig {
-        seeds: 4,
+        seeds,
         ..ValidateConfig::default()
     };
     let reports = validate_zones(&clip, &sets, &vcfg, || {})?;
