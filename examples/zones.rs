@@ -226,7 +226,83 @@ fn main() -> herdfit::Result<()> {
         dist(&zone_fit),
         dist(&repeat(&single))
     );
+    // In behaviour, with common random numbers: each choice's clip from the same initial herd and
+    // seed as the truth's, and its fields' distance from the truth's. The forces are compared:
+    // every choice plays with the truth's speed model (as `scripts/identifiability.py --sets`).
+    let forces_of = |b: &ParamSets| -> ParamSets {
+        let mut b = b.clone();
+        for (s, t) in b.sets.iter_mut().zip(&bundle.sets) {
+            s.params.speed = t.params.speed.clone();
+            s.speed = t.speed;
+        }
+        b
+    };
+    let choices = [
+        ("zone fit", forces_of(&zone_fit)),
+        ("single fit", forces_of(&repeat(&single))),
+        ("truth ±0.06", moved.clone()),
+    ];
+    println!(
+        "| set | field distance from the truth's clip, seeds 5..{} (mean ± std) |",
+        5 + seeds
+    );
+    println!("|---|---:|");
+    for (name, b) in &choices {
+        let d: Vec<f64> = (0..seeds as u64)
+            .map(|k| field_distance(&out, &bundle, b, 5 + k))
+            .collect::<herdfit::Result<_>>()?;
+        let m = d.iter().sum::<f64>() / d.len() as f64;
+        let sd = (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+        println!("| {name} | {m:.4} ± {sd:.4} |");
+    }
     Ok(())
+}
+
+/// Σ(ρ' − ρ)²/Σρ² + Σ‖m' − m‖²/Σ‖m‖² (m = ρ v, over every cell and frame) between the clips of
+/// `sets` and of `truth` synthesised with the same seed (the same initial herd and noise).
+fn field_distance(
+    out: &Path,
+    truth: &ParamSets,
+    sets: &ParamSets,
+    seed: u64,
+) -> herdfit::Result<f64> {
+    let clip_of = |b: &ParamSets, name: &str| -> herdfit::Result<herdfit::data::ClipFields> {
+        let (bp, dir) = (
+            out.join(format!("crn-{name}.json")),
+            out.join(format!("crn-{name}")),
+        );
+        write(&bp, b)?;
+        write_clip(
+            &SynthJob {
+                params: Some(out.join("base.json")),
+                agents: 300,
+                frame_count: 160,
+                grid_size: (16, 8),
+                cell_size: 3.0,
+                seed,
+                out: dir.clone(),
+                zone_sets: Some(bp),
+                ..SynthJob::default()
+            },
+            &mut NoProgress,
+        )?;
+        herdfit::data::ClipFields::load(&dir)
+    };
+    let (a, b) = (clip_of(truth, "truth")?, clip_of(sets, "set")?);
+    let (mut dr, mut nr, mut dm, mut nm) = (0.0, 0.0, 0.0, 0.0);
+    for ((f, iy, ix), &r) in a.density.indexed_iter() {
+        let r2 = b.density[[f, iy, ix]] as f64;
+        let r = r as f64;
+        dr += (r2 - r).powi(2);
+        nr += r * r;
+        for c in 0..2 {
+            let m = r * a.velocity[[f, iy, ix, c]] as f64;
+            let m2 = r2 * b.velocity[[f, iy, ix, c]] as f64;
+            dm += (m2 - m).powi(2);
+            nm += m * m;
+        }
+    }
+    Ok(dr / nr.max(1e-12) + dm / nm.max(1e-12))
 }
 
 fn table(reports: &[ZoneSetReport]) {
