@@ -7,8 +7,9 @@
 //! second half with the same seeds (common random numbers): the whole grid's coarse density
 //! error and each zone's density, polarization, angular momentum and aspect-ratio errors.
 //!
-//! `cargo run --release --example zones -- [EPOCHS] [OUT] [SPEEDS] [SEEDS]` (default 6,
-//! `out/zones/`, no fixed speeds, 4 validation seeds). `SPEEDS` = `A,B` gives the zones fixed
+//! `cargo run --release --example zones -- [EPOCHS] [OUT] [SPEEDS] [SEEDS] [STARTS]` (default 6,
+//! `out/zones/`, no fixed speeds, 4 validation seeds, no global phase; `STARTS` = K runs both
+//! fits with the global phase of K starts). `SPEEDS` = `A,B` gives the zones fixed
 //! speeds A and B BL/s (paper §7.2.4, the seals' water and land): the clip is generated with them,
 //! the zone fit is told them, and a second zone fit without them is validated beside it; `-` for
 //! none.
@@ -41,6 +42,7 @@ fn main() -> herdfit::Result<()> {
         [v[0], v[1]]
     });
     let seeds: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(4);
+    let starts: usize = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(1);
     std::fs::create_dir_all(&out).map_err(|e| herdfit::Error::file(&out, e.to_string()))?;
     // 16 × 8 cells of 3 BL; the zones meet at x = 21 BL (between cell columns 6 and 7).
     let zones = vec![
@@ -125,6 +127,10 @@ fn main() -> herdfit::Result<()> {
         epochs,
         window: 4,
         loss: LossKind::Fields,
+        global: herdfit::herd::fit::GlobalPhase {
+            starts,
+            ..Default::default()
+        },
         ..FitConfig::default()
     };
     let t0 = std::time::Instant::now();
