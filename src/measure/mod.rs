@@ -2,6 +2,7 @@
 //! (polarization eq. 12, angular momentum eq. 13, aspect ratio), rasterising agents into clip
 //! fields and the speed–density table (§6.2), and field comparisons (density and velocity errors).
 
+pub mod dir_variance;
 pub mod emergent;
 pub mod fields;
 pub mod info;

@@ -344,12 +344,18 @@ pub(super) struct Fields {
 }
 
 impl Sums {
-    /// The sums of a still (one frame, no flow): herd pixels per cell, and the direction
-    /// variance `dir_variance` (rad²) in every cell that holds herd pixels.
-    pub fn still(count: Vec<f64>, dir_variance: f64) -> Sums {
+    /// The sums of a still (one frame, no flow): herd pixels per cell, and in every cell that
+    /// holds herd pixels the direction variance (rad²) its animals have when their directions
+    /// spread by `dir_variance` (`per_animal` herd pixels to an animal;
+    /// [`crate::measure::dir_variance::SampleVariance`]).
+    pub fn still(count: Vec<f64>, dir_variance: f64, per_animal: f64) -> Sums {
+        let expected = crate::measure::dir_variance::SampleVariance::new(dir_variance);
         let var = count
             .iter()
-            .map(|&n| if n > 0.0 { dir_variance } else { 0.0 })
+            .map(|&n| match n > 0.0 {
+                true => expected.at(n / per_animal.max(f64::MIN_POSITIVE)),
+                false => 0.0,
+            })
             .collect();
         Sums {
             fsum: vec![vec![[0.0; 2]; count.len()]],

@@ -140,7 +140,7 @@ pub(super) fn extract_still(path: &Path, cfg: &ExtractConfig, preview: bool) -> 
     }
     let body_len = calib.body_length_px;
     let body_px_proc = calib.body_pixels * geom.scale * geom.scale;
-    let sums = Sums::still(count, dir_variance);
+    let sums = Sums::still(count, dir_variance, body_px_proc);
     let previews = match preview {
         false => Vec::new(),
         true => vec![(
