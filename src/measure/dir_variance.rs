@@ -35,7 +35,7 @@ impl SampleVariance {
         let uniform = PI * PI / 3.0;
         let v = v.clamp(0.0, uniform);
         let sigma = (v < uniform * (1.0 - 1e-9)).then(|| sigma_of(v));
-        let mut rng = ChaCha8Rng::seed_from_u64(0x5eed_d1_7a);
+        let mut rng = ChaCha8Rng::seed_from_u64(0x5eed_d17a);
         let mut table = vec![0.0; N_TABLE + 1];
         if v > 0.0 {
             let mut th = Vec::with_capacity(N_TABLE);
@@ -65,7 +65,7 @@ impl SampleVariance {
     /// The expected cell direction variance of `n` animals (fractional counts interpolate; fewer
     /// than 2 give 0 at 1 and below, as one animal is its own mean).
     pub fn at(&self, n: f64) -> f64 {
-        if !(n > 1.0) {
+        if n.is_nan() || n <= 1.0 {
             return 0.0;
         }
         let top = N_TABLE as f64;
