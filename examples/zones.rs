@@ -108,21 +108,7 @@ fn main() -> herdfit::Result<()> {
     write(&plain_path, &plain)?;
     base.save(&out.join("base.json"))?;
     let clip_dir = out.join("clip");
-    write_clip(
-        &SynthJob {
-            params: Some(out.join("base.json")),
-            agents: 300,
-            frame_count: 160,
-            grid_size: (16, 8),
-            cell_size: 3.0,
-            seed: 5,
-            out: clip_dir.clone(),
-            zone_sets: Some(truth_path.clone()),
-            ..SynthJob::default()
-        },
-        &mut NoProgress,
-    )?;
-    let clip = herdfit::data::ClipFields::load(&clip_dir)?;
+    let clip = scene_clip(&out, &truth_path, 5, &clip_dir)?;
     let config = FitConfig {
         epochs,
         window: 4,
@@ -264,6 +250,31 @@ fn main() -> herdfit::Result<()> {
     Ok(())
 }
 
+/// The scene's clip (300 agents, 160 frames, 16 × 8 cells of 3 BL, `out/base.json`'s constants)
+/// with the zone sets of the bundle `sets`, synthesised with `seed` into `dir`.
+fn scene_clip(
+    out: &Path,
+    sets: &Path,
+    seed: u64,
+    dir: &Path,
+) -> herdfit::Result<herdfit::data::ClipFields> {
+    write_clip(
+        &SynthJob {
+            params: Some(out.join("base.json")),
+            agents: 300,
+            frame_count: 160,
+            grid_size: (16, 8),
+            cell_size: 3.0,
+            seed,
+            out: dir.to_path_buf(),
+            zone_sets: Some(sets.to_path_buf()),
+            ..SynthJob::default()
+        },
+        &mut NoProgress,
+    )?;
+    herdfit::data::ClipFields::load(dir)
+}
+
 /// Σ(ρ' − ρ)²/Σρ² + Σ‖m' − m‖²/Σ‖m‖² (m = ρ v, over every cell and frame) between the clips of
 /// `sets` and of `truth` synthesised with the same seed (the same initial herd and noise).
 fn field_distance(
@@ -278,21 +289,7 @@ fn field_distance(
             out.join(format!("crn-{name}")),
         );
         write(&bp, b)?;
-        write_clip(
-            &SynthJob {
-                params: Some(out.join("base.json")),
-                agents: 300,
-                frame_count: 160,
-                grid_size: (16, 8),
-                cell_size: 3.0,
-                seed,
-                out: dir.clone(),
-                zone_sets: Some(bp),
-                ..SynthJob::default()
-            },
-            &mut NoProgress,
-        )?;
-        herdfit::data::ClipFields::load(&dir)
+        scene_clip(out, &bp, seed, &dir)
     };
     let (a, b) = (clip_of(truth, "truth")?, clip_of(sets, "set")?);
     let (mut dr, mut nr, mut dm, mut nm) = (0.0, 0.0, 0.0, 0.0);
