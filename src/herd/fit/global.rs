@@ -110,10 +110,7 @@ pub fn fit_global(
     let (chosen, candidates, mut results) = multistart(
         starts,
         |k, s| -> Result<(Vec<f64>, FitResult)> {
-            let sub = match ckpt {
-                Some(c) => Some(candidate_dir(c, k)?),
-                None => None,
-            };
+            let sub = candidate_dir(ckpt, k)?;
             let r = fit_clips(
                 clips,
                 &init.with_vec(&to_array(s)),
@@ -159,10 +156,7 @@ pub fn fit_zones_global(
     let (chosen, candidates, mut results) = multistart(
         &phase.starts,
         |k, s| -> Result<(Vec<f64>, ZoneFitResult)> {
-            let sub = match ckpt {
-                Some(c) => Some(candidate_dir(c, k)?),
-                None => None,
-            };
+            let sub = candidate_dir(ckpt, k)?;
             let r = fit_zones(clip, &sets_of(s), inner, zones, sub.as_ref(), &mut progress)?;
             Ok((flat(&r.sets), r))
         },
@@ -247,15 +241,18 @@ fn to_array(v: &[f64]) -> [f64; N_PARAMS] {
     a
 }
 
-/// Candidate k's checkpoint folder, `DIR/start-k/` (created).
-fn candidate_dir(c: &CheckpointDir, k: usize) -> Result<CheckpointDir> {
+/// Candidate k's checkpoint folder, `DIR/start-k/` (created), when the fit checkpoints.
+fn candidate_dir(c: Option<&CheckpointDir>, k: usize) -> Result<Option<CheckpointDir>> {
+    let Some(c) = c else {
+        return Ok(None);
+    };
     let dir = c.dir.join(format!("start-{k}"));
     std::fs::create_dir_all(&dir)
         .map_err(|e| Error::file(&dir, format!("cannot create folder: {e}")))?;
-    Ok(CheckpointDir {
+    Ok(Some(CheckpointDir {
         dir,
         resume: c.resume,
-    })
+    }))
 }
 
 impl std::fmt::Display for GlobalReport {

@@ -191,23 +191,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
     }
-    // With the global phase the first candidate's folder holds the first checkpoint.
-    let first = match cfg.global.is_off() {
-        true => std::path::PathBuf::new(),
-        false => "start-0".into(),
-    };
-    let ckpt = checkpoint_dir(job, &first)?;
-    // With the global phase every candidate is refined on the frames before the held-out ones.
-    let (refine, starts) = if cfg.global.is_off() {
-        (frames.clone(), 1)
-    } else {
-        (split_frames(&frames, &cfg.global)?.0, cfg.global.starts)
-    };
-    let windows_per_epoch = (refine.end - refine.start - 1).div_ceil(cfg.window) * clips.len();
-    progress.start("fit", (windows_per_epoch * cfg.epochs * starts) as u64);
-    if let Some(done) = ckpt.as_ref().and_then(CheckpointDir::epochs_done) {
-        progress.inc((done * windows_per_epoch) as u64);
-    }
+    let (ckpt, windows_per_epoch) = start_fit(job, &cfg, clips.len(), progress)?;
     let (res, global) = fit_global(&clips, &init, &cfg, ckpt.as_ref(), |epoch, frame, e, ms| {
         progress.message(&format!(
             "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
@@ -523,12 +507,35 @@ impl std::fmt::Display for FitSummary {
     }
 }
 
+/// The job's checkpoint folder ([`checkpoint_dir`]) and the fit's progress bar started on `clips`
+/// clips: one unit per window of every candidate's refinement, those a resumed checkpoint holds
+/// counted done; returns the folder and the windows per epoch of a refinement. With the global
+/// phase the first candidate's folder holds the first checkpoint, and every candidate is refined
+/// on the frames before the held-out ones.
+pub(super) fn start_fit(
+    job: &FitJob,
+    cfg: &FitConfig,
+    clips: usize,
+    progress: &mut dyn Progress,
+) -> Result<(Option<CheckpointDir>, usize)> {
+    let global = !cfg.global.is_off();
+    let first = if global { "start-0" } else { "" };
+    let ckpt = checkpoint_dir(job, std::path::Path::new(first))?;
+    let (refine, candidates) = match global {
+        false => (cfg.frames.clone(), 1),
+        true => (split_frames(&cfg.frames, &cfg.global)?.0, cfg.global.starts),
+    };
+    let windows = (refine.end - refine.start - 1).div_ceil(cfg.window) * clips;
+    progress.start("fit", (windows * cfg.epochs * candidates) as u64);
+    if let Some(done) = ckpt.as_ref().and_then(CheckpointDir::epochs_done) {
+        progress.inc((done * windows) as u64);
+    }
+    Ok((ckpt, windows))
+}
+
 /// The job's checkpoint folder (created), or none; with `--resume`, refused unless the
 /// checkpoint to resume from (in `first` inside the folder) exists.
-pub(super) fn checkpoint_dir(
-    job: &FitJob,
-    first: &std::path::Path,
-) -> Result<Option<CheckpointDir>> {
+fn checkpoint_dir(job: &FitJob, first: &std::path::Path) -> Result<Option<CheckpointDir>> {
     if job.resume {
         let file = job
             .checkpoint

@@ -61,21 +61,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
     }
-    // With the global phase the first candidate's folder holds the first checkpoint, and every
-    // candidate is refined on the frames before the held-out ones.
-    let (first, refine, candidates) = match cfg.global.is_off() {
-        true => (PathBuf::new(), frames.clone(), 1),
-        false => {
-            let refine = super::global::split_frames(&frames, &cfg.global)?.0;
-            (PathBuf::from("start-0"), refine, cfg.global.starts)
-        }
-    };
-    let ckpt = super::job::checkpoint_dir(job, &first)?;
-    let windows = (refine.end - refine.start - 1).div_ceil(cfg.window);
-    progress.start("fit", (windows * cfg.epochs * candidates) as u64);
-    if let Some(done) = ckpt.as_ref().and_then(|c| c.epochs_done()) {
-        progress.inc((done * windows) as u64);
-    }
+    let (ckpt, _) = super::job::start_fit(job, &cfg, 1, progress)?;
     let starts = vec![start.clone(); zones.len()];
     let (res, global) = fit_zones_global(
         &clip,

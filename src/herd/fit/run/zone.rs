@@ -28,6 +28,36 @@ pub fn fit_zones(
     cfg: &FitConfig,
     zones: &Zones,
     ckpt: Option<&CheckpointDir>,
+    progress: impl FnMut(usize, usize, f64, f64),
+) -> Result<ZoneFitResult> {
+    zone_fit_inner(clip, starts, cfg, zones, ckpt, true, progress)
+}
+
+/// The loss of per-zone sets (`sets[k]` for zone k) on a clip without learning, as
+/// [`super::loss_of`] for one set: one epoch of [`fit_zones`]'s schedule with no updates.
+pub fn zone_loss_of(
+    clip: &ClipFields,
+    sets: &[Params],
+    cfg: &FitConfig,
+    zones: &Zones,
+) -> Result<(f64, f64, f64)> {
+    let one = FitConfig {
+        epochs: 1,
+        ..cfg.clone()
+    };
+    let r = zone_fit_inner(clip, sets, &one, zones, None, false, |_, _, _, _| {})?;
+    Ok(mean_losses(&r.log))
+}
+
+/// [`fit_zones`], or with `learn` false its schedule without updates (whose frames need not hold
+/// every zone's agents: nothing is learnt there).
+fn zone_fit_inner(
+    clip: &ClipFields,
+    starts: &[Params],
+    cfg: &FitConfig,
+    zones: &Zones,
+    ckpt: Option<&CheckpointDir>,
+    learn: bool,
     mut progress: impl FnMut(usize, usize, f64, f64),
 ) -> Result<ZoneFitResult> {
     if starts.len() != zones.len() || starts.is_empty() {
@@ -37,9 +67,11 @@ pub fn fit_zones(
             zones.len()
         )));
     }
-    zones.check_agents(clip, cfg.frames.clone())?;
+    if learn {
+        zones.check_agents(clip, cfg.frames.clone())?;
+    }
     let clips = [clip];
-    let mut run = FitRun::new(&clips, &starts[0], cfg, true)?;
+    let mut run = FitRun::new(&clips, &starts[0], cfg, learn)?;
     run.zones = Some(zones);
     let zs = ZoneStarts {
         names: zones.specs.iter().map(|z| z.name.clone()).collect(),
@@ -67,29 +99,4 @@ pub fn fit_zones(
         sets,
         log: learnt.log,
     })
-}
-
-/// The loss of per-zone sets (`sets[k]` for zone k) on a clip without learning, as [`super::loss_of`]
-/// for one set: one epoch of [`fit_zones`]'s schedule with no updates.
-pub fn zone_loss_of(
-    clip: &ClipFields,
-    sets: &[Params],
-    cfg: &FitConfig,
-    zones: &Zones,
-) -> Result<(f64, f64, f64)> {
-    let one = FitConfig {
-        epochs: 1,
-        ..cfg.clone()
-    };
-    let clips = [clip];
-    let mut run = FitRun::new(&clips, &sets[0], &one, false)?;
-    run.zones = Some(zones);
-    let zs = ZoneStarts {
-        names: Vec::new(),
-        starts: sets[1..].iter().map(Params::to_vec).collect(),
-    };
-    let (mut learnt, _) = resume(None, &one, sets[0].to_vec(), &zs)?;
-    let mut rng = epoch_rng(one.seed, 0);
-    run.epoch_on_clip(0, 0, &mut learnt, &mut rng, &mut |_, _, _, _| {})?;
-    Ok(mean_losses(&learnt.log))
 }
