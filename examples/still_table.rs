@@ -59,6 +59,12 @@ fn main() -> herdfit::Result<()> {
         let arms = [
             ("fit with E_var", 1.0, true, &clip),
             ("fit without E_var", 0.0, false, &clip),
+            (
+                "fit without E_var, alignment by the split",
+                0.0,
+                true,
+                &clip,
+            ),
             ("extracted image: fit with E_var", 1.0, true, &extracted),
         ];
         for (name, var_weight, split, clip) in arms {

@@ -110,6 +110,7 @@ fn line_clip(density: [f32; 5], vel: [f32; 2]) -> ClipFields {
                 std: 0.1,
                 density_table: vec![],
             },
+            dir_spread: None,
             provenance: serde_json::Value::Null,
         },
         density: d,

@@ -90,6 +90,8 @@ fn extract_turns_a_still_image_into_a_one_frame_clip() {
     );
     assert!(c.velocity.iter().all(|&v| v == 0.0));
     assert_eq!(c.meta.speed.mean, 0.0);
+    // The given spread is kept for E_var's per-cell targets.
+    assert_eq!(c.meta.dir_spread, Some(3.29));
     // Each occupied cell holds the direction variance its animals have when their directions
     // are random (the given spread, 3.29 rad²): below the spread, more for more animals.
     let expected = herdfit::measure::dir_variance::SampleVariance::new(3.29);
@@ -117,7 +119,7 @@ fn extract_turns_a_still_image_into_a_one_frame_clip() {
 fn a_still_fit_keeps_the_density_without_aligning_the_herd() {
     let dir = tempfile::tempdir().unwrap();
     let (clip, _) = still(dir.path(), 1.0);
-    let st = fit_still(&clip, &dir.path().join("p.json"));
+    let st = fit_still(&clip, &dir.path().join("p.json"), true);
     // The herd as drawn from the image reproduces it exactly (cell counts).
     assert!(
         st["drawn"]["density_error"].as_f64().unwrap() < 1e-6,
@@ -142,14 +144,32 @@ fn a_still_fit_from_the_extracted_image_keeps_the_density_too() {
         "--dir-variance",
         "3.29",
     ]);
-    fit_still(&clip, &dir.path().join("p.json"));
+    fit_still(&clip, &dir.path().join("p.json"), true);
+}
+
+/// At 0.2 agents/BL² (about two animals a cell) the simulated herd fills cells differently from
+/// the image. E_var targets, per cell, the direction variance of the simulated animals in it for
+/// the still's known spread (`dir_spread`, π²/3 for the uniform headings synth drew); with the
+/// image's per-cell values instead, a cell of three simulated animals where the image had one
+/// (target 0) pushed the herd to align: alignment weight 1.0 and a smoothed density error 12 %
+/// below the start only (RESULTS §8). The herd at this density spreads out (crowding ≈ 0.8) and
+/// its raw cell counts decorrelate from the image's as it moves, so only the fit's own smoothed
+/// density measure and the polarization are checked here.
+#[test]
+fn a_still_fit_at_low_density_keeps_the_density_without_aligning_the_herd() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clip, _) = still(dir.path(), 0.2);
+    let c = ClipFields::load(&clip).unwrap();
+    let uniform = std::f64::consts::PI.powi(2) / 3.0;
+    assert_eq!(c.meta.dir_spread, Some(uniform));
+    fit_still(&clip, &dir.path().join("p.json"), false);
 }
 
 /// Fits the still `clip` into `out` (16 epochs) and checks the must-show: the fitted herd matches
 /// the image's density better than the generic start by ≥ 30 % (the fit's own smoothed measure
-/// and the raw cell counts), keeps the density around an average animal within 10 % of the
-/// image's, and stays disordered. Returns the fit's still evaluation.
-fn fit_still(clip: &Path, out: &Path) -> serde_json::Value {
+/// and, when `dense`, the raw cell counts), keeps the density around an average animal within
+/// 10 % of the image's (when `dense`), and stays disordered. Returns the fit's still evaluation.
+fn fit_still(clip: &Path, out: &Path, dense: bool) -> serde_json::Value {
     let line = ok(&[
         "fit",
         s(clip),
@@ -168,11 +188,13 @@ fn fit_still(clip: &Path, out: &Path) -> serde_json::Value {
         m("fitted", "smooth_density_error") < 0.7 * m("start", "smooth_density_error"),
         "{st}"
     );
-    assert!(
-        m("fitted", "density_error") < 0.7 * m("start", "density_error"),
-        "{st}"
-    );
-    assert!((m("fitted", "crowding") - 1.0).abs() < 0.1, "{st}");
+    if dense {
+        assert!(
+            m("fitted", "density_error") < 0.7 * m("start", "density_error"),
+            "{st}"
+        );
+        assert!((m("fitted", "crowding") - 1.0).abs() < 0.1, "{st}");
+    }
     assert!(m("fitted", "polarization") < 0.2, "{st}");
     st
 }

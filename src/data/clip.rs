@@ -98,6 +98,13 @@ pub struct ClipMeta {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub body_pixel_coverage: Option<f64>,
     pub speed: ClipSpeed,
+    /// The spread of the animals' directions (rad² about their mean; π²/3 when uniform) when it
+    /// was given rather than measured: a still image's `extract --dir-variance`, or one frame of
+    /// `synth --random-headings`. E_var (eq. 8) then targets, in each cell, the expected
+    /// direction variance of the *simulated* animals in it for that spread
+    /// ([`crate::measure::dir_variance::SampleVariance`]), not the value for the image's count.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dir_spread: Option<f64>,
     /// Where the clip came from (command, source files, settings).
     #[serde(default)]
     pub provenance: serde_json::Value,

@@ -364,6 +364,7 @@ pub fn import_reference(prefix: &Path) -> Result<ClipFields> {
                 std,
                 density_table,
             },
+            dir_spread: None,
             provenance: serde_json::json!({
                 "source": "import-reference",
                 "prefix": prefix.display().to_string(),

@@ -193,7 +193,11 @@ pub fn synthesise_zoned(
         "precision": cfg.precision,
         "truth": "truth.json",
     });
-    let clip = rasterise(&frames, *g, cfg.fps, cfg.obstacles.clone(), provenance)?;
+    let mut clip = rasterise(&frames, *g, cfg.fps, cfg.obstacles.clone(), provenance)?;
+    if cfg.random_headings && cfg.frame_count == 1 {
+        // A still of headings drawn uniformly: their spread is known, π²/3 (ClipMeta::dir_spread).
+        clip.meta.dir_spread = Some(std::f64::consts::PI.powi(2) / 3.0);
+    }
     Ok(Synth {
         clip,
         frames,

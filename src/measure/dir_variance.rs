@@ -13,6 +13,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
+use std::sync::{Arc, Mutex};
 
 /// Largest count tabulated; above it the expected value follows the 1/n law to the spread.
 const N_TABLE: usize = 32;
@@ -60,6 +61,20 @@ impl SampleVariance {
             }
         }
         SampleVariance { spread: v, table }
+    }
+
+    /// The table for spread `v`, built once per spread and shared (a fit asks for it at every
+    /// step).
+    pub fn shared(v: f64) -> Arc<SampleVariance> {
+        static TABLES: Mutex<Vec<(u64, Arc<SampleVariance>)>> = Mutex::new(Vec::new());
+        let mut tables = TABLES.lock().unwrap_or_else(|e| e.into_inner());
+        let key = v.to_bits();
+        if let Some((_, t)) = tables.iter().find(|(k, _)| *k == key) {
+            return t.clone();
+        }
+        let t = Arc::new(SampleVariance::new(v));
+        tables.push((key, t.clone()));
+        t
     }
 
     /// The expected cell direction variance of `n` animals (fractional counts interpolate; fewer

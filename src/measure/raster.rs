@@ -145,6 +145,7 @@ pub fn rasterise(
                 std,
                 density_table: speed_density_table(&samples),
             },
+            dir_spread: None,
             provenance,
         },
         density,

@@ -504,6 +504,7 @@ fn clip_meta(
         body_length_px: Some(calib.body_length_px),
         body_pixel_coverage: Some(calib.body_pixels),
         speed,
+        dir_spread: None,
         provenance,
     }
 }

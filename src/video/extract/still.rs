@@ -157,7 +157,8 @@ pub(super) fn extract_still(path: &Path, cfg: &ExtractConfig, preview: bool) -> 
         density_table: Vec::new(),
     };
     let source = serde_json::json!({"still": path.display().to_string()});
-    let meta = super::clip_meta((&grid, &geom), cfg, &calib, (25.0, 1), speed, source);
+    let mut meta = super::clip_meta((&grid, &geom), cfg, &calib, (25.0, 1), speed, source);
+    meta.dir_spread = Some(dir_variance);
     super::finish(
         meta,
         fields,
