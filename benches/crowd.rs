@@ -16,12 +16,17 @@ use herdfit::progress::NoProgress;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-fn model() -> CrowdModel {
-    let src = corridor(&SynthConfig {
+/// The synthetic corridor crowd the model learns from (120 s).
+fn source() -> herdfit::data::tracks::Tracks {
+    corridor(&SynthConfig {
         duration: 120.0,
         ..SynthConfig::default()
     })
-    .unwrap();
+    .unwrap()
+}
+
+fn model() -> CrowdModel {
+    let src = source();
     let cfg = LearnConfig {
         max_samples: 6000,
         ..LearnConfig::default()
@@ -67,6 +72,41 @@ fn agents(m: &CrowdModel, n: usize) -> Vec<Agent> {
         .collect()
 }
 
+/// `n` agents in states like the training ones: the corridor walkers present at frames 50, 87,
+/// 124, … of the source crowd (each with its last two positions and its exit as its goal),
+/// each frame's group moved 50 m further along y so that the groups do not meet.
+fn corridor_agents(m: &CrowdModel, n: usize) -> Vec<Agent> {
+    let scene = herdfit::crowd::features::Scene::from_tracks(&source(), 0.0).unwrap();
+    let mut out = Vec::new();
+    for (copy, f) in (50..scene.at_frame.len()).step_by(37).enumerate() {
+        let dy = copy as f64 * 50.0;
+        for &si in &scene.at_frame[f] {
+            let s = &scene.segments[si];
+            let j = f - s.start;
+            if j < 1 || j + 1 >= s.pos.len() {
+                continue;
+            }
+            let at = |p: [f64; 2]| [p[0], p[1] + dy];
+            let (a, b) = (at(s.pos[j - 1]), at(s.pos[j]));
+            let h =
+                herdfit::crowd::features::unit([b[0] - a[0], b[1] - a[1]]).unwrap_or([1.0, 0.0]);
+            let goal = at(*s.pos.last().unwrap());
+            out.push(Agent::new(
+                out.len() as u64,
+                vec![a, b],
+                h,
+                Some(goal),
+                0,
+                m.dt,
+            ));
+            if out.len() == n {
+                return out;
+            }
+        }
+    }
+    panic!("the corridor has fewer than {n} walkers at the sampled frames");
+}
+
 /// Steps the agents take before the measured step (so the states are mid-simulation ones).
 const WARM_UP_STEPS: usize = 10;
 
@@ -84,16 +124,22 @@ fn bench_step(c: &mut Criterion) {
         .build()
         .unwrap();
     let mut g = c.benchmark_group("crowd_step");
-    for n in [100usize, 400] {
-        let mut a = agents(&m, n);
+    // The corridor's sampled frames hold fewer than 400 walkers: 100 of them.
+    for (crowd, n) in [("agents", 100usize), ("agents", 400), ("corridor", 100)] {
+        let mut a = if crowd == "agents" {
+            agents(&m, n)
+        } else {
+            corridor_agents(&m, n)
+        };
         for _ in 0..WARM_UP_STEPS {
             step(&m, &mut a);
         }
         g.throughput(Throughput::Elements(n as u64));
-        g.bench_with_input(BenchmarkId::new("agents", n), &n, |b, _| {
+        g.bench_with_input(BenchmarkId::new(crowd, n), &n, |b, _| {
             b.iter_batched_ref(|| a.clone(), |a| step(&m, a), BatchSize::SmallInput)
         });
-        g.bench_with_input(BenchmarkId::new("agents_1_thread", n), &n, |b, _| {
+        let one_thread = format!("{crowd}_1_thread");
+        g.bench_with_input(BenchmarkId::new(one_thread, n), &n, |b, _| {
             b.iter_batched_ref(
                 || a.clone(),
                 |a| one.install(|| step(&m, a)),
