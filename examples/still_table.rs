@@ -3,16 +3,23 @@
 //! variance matching (E_var, eq. 8) and without it (λ_var = 0, every parameter from the density
 //! term), and measured after settling (RESULTS.md §8); then the same frame as a rendered image
 //! through `extract --dir-variance 3.29` and fitted with E_var (measured against the extracted
-//! clip).
+//! clip). "Without E_var, alignment by the split" is the paper's ablation: λ_var = 0 with the
+//! split kept, so alignment (learnt from E_var only) stays at the start's. A second table fits
+//! the 1.0 and 0.5 stills from random starts (the paper's Figure 15 "random parameters") with
+//! and without E_var (split kept), the contrast of Figure 14.
 //!
 //! `cargo run --release --example still_table [-- OUT_DIR]` (default `out/still_table/`)
 
 use herdfit::herd::fit::job::{run, FitJob};
+use herdfit::herd::fit::still::StillMeasures;
 use herdfit::herd::fit::FitConfig;
+use herdfit::herd::params::{Params, N_PARAMS};
 use herdfit::herd::synth::{write_clip, SynthJob};
 use herdfit::progress::NoProgress;
 use herdfit::video::extract;
-use std::path::PathBuf;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::path::{Path, PathBuf};
 
 fn main() -> herdfit::Result<()> {
     let out = PathBuf::from(
@@ -68,24 +75,8 @@ fn main() -> herdfit::Result<()> {
             ("extracted image: fit with E_var", 1.0, true, &extracted),
         ];
         for (name, var_weight, split, clip) in arms {
-            let job = FitJob {
-                clips: vec![clip.clone()],
-                config: FitConfig {
-                    epochs: 16,
-                    var_weight,
-                    split_gradients: split,
-                    ..FitConfig::default()
-                },
-                out: out.join(format!("fit-{density}-{}.json", rows.len())),
-                uncertainty: herdfit::herd::fit::identify::UncertaintyConfig {
-                    enabled: false,
-                    ..Default::default()
-                },
-                ..FitJob::default()
-            };
-            let s = run(&job, &mut NoProgress)?;
-            let (_, [drawn, start, fitted]) =
-                s.still.expect("a one-frame clip is fitted as a still");
+            let fit = out.join(format!("fit-{density}-{}.json", rows.len()));
+            let [drawn, start, fitted] = fit_still(clip, var_weight, split, None, fit)?;
             if rows.is_empty() || name.starts_with("extracted") {
                 let pre = if rows.is_empty() {
                     ""
@@ -101,6 +92,97 @@ fn main() -> herdfit::Result<()> {
             println!(
                 "| {density} | {name} | {:.3} | {:.3} | {:.3} | {:.3} |",
                 m.density_error, m.smooth_density_error, m.crowding, m.polarization
+            );
+        }
+    }
+    random_starts(&out)
+}
+
+/// Fits the still `clip` (16 epochs, from `start` or the generic start) into `fit`; returns the
+/// measures of the herd as drawn, of the start and of the fitted set.
+fn fit_still(
+    clip: &Path,
+    var_weight: f64,
+    split: bool,
+    start: Option<PathBuf>,
+    fit: PathBuf,
+) -> herdfit::Result<[StillMeasures; 3]> {
+    let job = FitJob {
+        clips: vec![clip.to_path_buf()],
+        start,
+        config: FitConfig {
+            epochs: 16,
+            var_weight,
+            split_gradients: split,
+            ..FitConfig::default()
+        },
+        out: fit,
+        uncertainty: herdfit::herd::fit::identify::UncertaintyConfig {
+            enabled: false,
+            ..Default::default()
+        },
+        ..FitJob::default()
+    };
+    let s = run(&job, &mut NoProgress)?;
+    Ok(s.still.expect("a one-frame clip is fitted as a still").1)
+}
+
+/// Figure 14's contrast from random starts: each of `STARTS` parameter sets drawn uniformly in
+/// the normalised box (seeded) is fitted to the 0.5 and 1.0 stills with E_var and without it
+/// (λ_var = 0, the split kept: alignment stays at the random start's); the table gives the mean
+/// and range over the starts.
+fn random_starts(out: &Path) -> herdfit::Result<()> {
+    const STARTS: usize = 4;
+    let mut rng = ChaCha8Rng::seed_from_u64(14);
+    let starts: Vec<PathBuf> = (0..STARTS)
+        .map(|k| {
+            let mut v = [0.0; N_PARAMS];
+            v.iter_mut().for_each(|x| *x = rng.gen_range(0.0..1.0));
+            Params::clamp_vec(&mut v);
+            let p = out.join(format!("random-start-{k}.json"));
+            Params::neutral().with_vec(&v).save(&p).map(|_| p)
+        })
+        .collect::<herdfit::Result<_>>()?;
+    println!();
+    println!("From {STARTS} random starts (mean, min–max over the starts):");
+    println!();
+    println!("| density (agents/BL²) | set | smoothed density error | crowding | polarization |");
+    println!("|---|---|---|---|---|");
+    for density in [0.5, 1.0] {
+        let clip = out.join(format!("still-{density}"));
+        let mut sets: [Vec<StillMeasures>; 3] = Default::default();
+        for (k, start) in starts.iter().enumerate() {
+            for (arm, var_weight) in [(1, 1.0), (2, 0.0)] {
+                let fit = out.join(format!("random-fit-{density}-{k}-{arm}.json"));
+                let [_, before, after] =
+                    fit_still(&clip, var_weight, true, Some(start.clone()), fit)?;
+                if arm == 1 {
+                    sets[0].push(before);
+                }
+                sets[arm].push(after);
+            }
+        }
+        let names = [
+            "random start (unfitted)",
+            "fit with E_var",
+            "fit without E_var (split)",
+        ];
+        for (name, ms) in names.iter().zip(&sets) {
+            let cell = |f: fn(&StillMeasures) -> f64| {
+                let v: Vec<f64> = ms.iter().map(f).collect();
+                let mean = v.iter().sum::<f64>() / v.len() as f64;
+                let (lo, hi) = v
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                        (a.min(x), b.max(x))
+                    });
+                format!("{mean:.3} ({lo:.3}–{hi:.3})")
+            };
+            println!(
+                "| {density} | {name} | {} | {} | {} |",
+                cell(|m| m.smooth_density_error),
+                cell(|m| m.crowding),
+                cell(|m| m.polarization)
             );
         }
     }
