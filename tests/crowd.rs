@@ -147,6 +147,7 @@ fn eq3_lwr_is_ols_at_infinite_bandwidth_and_exact_on_linear_data() {
 #[test]
 fn kd_tree_knn_equals_brute_force() {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut got_far = Vec::new();
     for dims in [3, 8, 10, 12] {
         let pts: Vec<f64> = (0..5000 * dims)
             .map(|i| rng.gen_range(-1.0..1.0) * (1.0 + (i % dims) as f64))
@@ -171,6 +172,22 @@ fn kd_tree_knn_equals_brute_force() {
                     assert!((g.0 - w.0).abs() <= 1e-9 * w.0.max(1.0));
                 }
             }
+        }
+    }
+    // Points whose f32 roundings are coarser than their spacing (coordinates near 10⁴, spread
+    // 10⁻³; f32 steps there are ≈ 10⁻³): the tree's f32 leaf filter must still pass every
+    // candidate, and the exact f64 distances decide, as brute force's do.
+    let far: Vec<f64> = (0..3000 * 10)
+        .map(|i| 1.0e4 * (1.0 + (i % 10) as f64) + rng.gen_range(-1e-3..1e-3))
+        .collect();
+    let tree = StateTree::build(&far, 10).unwrap();
+    for i in 0..20 {
+        let q: Vec<f64> = (0..10)
+            .map(|k| 1.0e4 * (1.0 + k as f64) + rng.gen_range(-2e-3..2e-3) * (1 + i % 3) as f64)
+            .collect();
+        for k in [1, 7, 100] {
+            tree.nearest(&q, k, &mut got_far);
+            assert_eq!(got_far, brute_force(&far, 10, &q, k), "far points, k {k}");
         }
     }
     // Ties: a lattice with many equal distances; rows of equal distance come in row order.
@@ -202,8 +219,8 @@ fn tree_memory_is_linear_in_the_samples() {
     let (a, b) = (bytes(5000, &mut rng), bytes(20000, &mut rng));
     let per = a as f64 / 5000.0;
     assert!(
-        per < 100.0,
-        "{per} bytes per 10-D sample (80 for the point)"
+        per < 140.0,
+        "{per} bytes per 10-D sample (80 for the point, 40 for its f32 copy)"
     );
     let ratio = b as f64 / a as f64;
     assert!(

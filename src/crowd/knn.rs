@@ -9,6 +9,12 @@
 //! in a binary heap held in the caller's buffer and allocates nothing. The dimension is a const
 //! generic; [`StateTree`] picks one of 1–12 at run time (the paper's PCA keeps 8–12). Ties in
 //! distance are ordered by row, so the result equals [`brute_force`]'s exactly.
+//!
+//! A leaf's points are scanned first in f32, column by column in SIMD lanes (AVX2 where the CPU
+//! has it, through `pulp`'s run-time dispatch): half the bytes of the f64 points, which a query
+//! far from the samples streams almost entirely. Only the points whose f32 distance is within
+//! the bound widened by the roundings' proven allowance get their exact f64 distance, so the
+//! neighbours and distances are the f64 search's, bit for bit.
 
 use crate::error::{Error, Result};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
@@ -19,8 +25,14 @@ use std::num::NonZeroUsize;
 /// Largest PCA dimension a tree supports.
 pub const MAX_DIMS: usize = 12;
 
-/// Most points in a leaf.
-const LEAF: usize = 12;
+/// Most points in a leaf; leaves start at multiples of it, so that each leaf is one block of
+/// [`Tree::cols`].
+const LEAF: usize = 16;
+const _: () = assert!(LEAF <= 32, "a leaf's candidates are bits of a u32");
+
+/// Relative rounding allowance of a leaf's f32 distances (sums of ≤ 12 squares in f32, each
+/// coordinate rounded once to f32: far below 1e-5 relative).
+const F32_SLACK: f64 = 1e-5;
 
 /// A node: inner (`dim` < D, children `a`, `b` holding coordinates ≤ / ≥ `split`) or leaf
 /// (`dim` = u32::MAX, points `a..b`).
@@ -36,6 +48,15 @@ struct Node {
 pub struct Tree<const D: usize> {
     /// Points in tree order.
     pts: Vec<[f64; D]>,
+    /// The same points as f32, leaf by leaf column by column: coordinate `d` of position `p` at
+    /// `(p / LEAF) * LEAF * D + d * LEAF + p % LEAF` (the last leaf padded with zeros). A leaf's
+    /// distances are first computed from them in SIMD lanes; only the points that may lie
+    /// within the bound get their exact f64 distance.
+    cols: Vec<f32>,
+    /// Largest point norm, for the f32 filter's allowance.
+    max_norm: f64,
+    /// The instruction set the f32 distances are compiled for (chosen at run time).
+    arch: pulp::Arch,
     /// Row of each point in the input.
     rows: Vec<u32>,
     nodes: Vec<Node>,
@@ -61,10 +82,23 @@ impl<const D: usize> Tree<D> {
         if !pts.is_empty() {
             Self::build(pts, &mut perm, 0, &mut nodes);
         }
+        let mut cols = vec![0.0f32; pts.len().div_ceil(LEAF) * LEAF * D];
+        for (pos, &i) in perm.iter().enumerate() {
+            for (d, &v) in pts[i as usize].iter().enumerate() {
+                cols[(pos / LEAF) * LEAF * D + d * LEAF + pos % LEAF] = v as f32;
+            }
+        }
+        let max_norm = pts
+            .iter()
+            .map(|p| p.iter().map(|v| v * v).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
         Tree {
             pts: perm.iter().map(|&i| pts[i as usize]).collect(),
             rows: perm,
             nodes,
+            cols,
+            max_norm,
+            arch: pulp::Arch::new(),
         }
     }
 
@@ -93,10 +127,10 @@ impl<const D: usize> Tree<D> {
                 dim = j;
             }
         }
-        if hi[dim] - lo[dim] <= 0.0 {
-            return me as u32; // all points coincide: one (large) leaf
-        }
-        let mid = perm.len() / 2;
+        // The left part a whole number of leaves (at least one, short of all the points), so
+        // that every leaf starts at a multiple of LEAF. Points that all coincide still split:
+        // the search then visits both sides.
+        let mid = (perm.len().div_ceil(LEAF) / 2).max(1) * LEAF;
         perm.select_nth_unstable_by(mid, |&x, &y| {
             pts[x as usize][dim]
                 .total_cmp(&pts[y as usize][dim])
@@ -130,13 +164,21 @@ impl<const D: usize> Tree<D> {
         }
         let k = k.min(self.pts.len());
         let mut off = [0.0; D];
+        let qn = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let q32 = q.map(|v| v as f32);
         let mut best = Best {
             k,
             bound: f64::INFINITY,
             buf: out,
             rows: &self.rows,
         };
-        self.search(0, q, &mut off, 0.0, &mut best);
+        let query = Query {
+            q,
+            q32: &q32,
+            // |‖x̃ − q̃‖ − ‖x − q‖| ≤ 2⁻²⁴ (‖x‖ + ‖q‖) for the f32 roundings x̃, q̃.
+            delta: 1.2e-7 * (self.max_norm + qn),
+        };
+        self.search(0, &query, &mut off, 0.0, &mut best);
         best.cut();
         let rows = &self.rows;
         out.sort_unstable_by(|a, b| cmp(rows, a, b));
@@ -152,38 +194,47 @@ impl<const D: usize> Tree<D> {
         &self.rows
     }
 
-    fn search(&self, node: u32, q: &[f64; D], off: &mut [f64; D], rd: f64, best: &mut Best) {
+    fn search(&self, node: u32, qq: &Query<D>, off: &mut [f64; D], rd: f64, best: &mut Best) {
+        let q = qq.q;
         let n = self.nodes[node as usize];
         if n.dim == u32::MAX {
             let (a, b) = (n.a as usize, n.b as usize);
-            // The leading (PCA: largest-variance) dimensions first; most points already lie
-            // beyond the bound on them and skip the rest (the sum's order is unchanged).
-            let head = D.min(4);
-            for (pos, p) in (a..b).zip(&self.pts[a..b]) {
+            let block = &self.cols[a * D..(a + LEAF) * D];
+            let d32 = self.arch.dispatch(|| block_distances::<D>(block, qq.q32));
+            // A point can be within the bound only if its f32 distance is within the bound
+            // widened by the roundings; those get the exact f64 distance (summed in order, as
+            // brute_force does), so the result is the f64 search's.
+            let reach = (best.bound.sqrt() + qq.delta).powi(2) * (1.0 + F32_SLACK);
+            let reach = if reach.is_finite() {
+                reach as f32
+            } else {
+                f32::INFINITY
+            };
+            let mut inside = d32.iter().enumerate().fold(0u32, |m, (j, &d)| {
+                m | (u32::from(d <= reach || !d.is_finite()) << j)
+            }) & (u32::MAX >> (32 - (b - a)));
+            while inside != 0 {
+                let j = inside.trailing_zeros() as usize;
+                inside &= inside - 1;
+                let p = &self.pts[a + j];
                 let mut d = 0.0;
-                for (a, b) in p[..head].iter().zip(&q[..head]) {
-                    d += (a - b) * (a - b);
+                for (x, y) in p.iter().zip(q) {
+                    d += (x - y) * (x - y);
                 }
-                if d > best.bound {
-                    continue;
-                }
-                for (a, b) in p[head..].iter().zip(&q[head..]) {
-                    d += (a - b) * (a - b);
-                }
-                best.offer(d, pos as u32);
+                best.offer(d, (a + j) as u32);
             }
             return;
         }
         let dim = n.dim as usize;
         let diff = q[dim] - n.split;
         let (near, far) = if diff < 0.0 { (n.a, n.b) } else { (n.b, n.a) };
-        self.search(near, q, off, rd, best);
+        self.search(near, qq, off, rd, best);
         let old = off[dim];
         let far_rd = rd - old * old + diff * diff;
         // A little slack keeps a point tied with the k-th at equal distance despite rounding.
         if far_rd <= best.bound * (1.0 + 1e-12) {
             off[dim] = diff;
-            self.search(far, q, off, far_rd, best);
+            self.search(far, qq, off, far_rd, best);
             off[dim] = old;
         }
     }
@@ -191,9 +242,30 @@ impl<const D: usize> Tree<D> {
     /// Memory held by the tree, in bytes (linear in the number of points).
     pub fn bytes(&self) -> usize {
         self.pts.len() * std::mem::size_of::<[f64; D]>()
+            + self.cols.len() * 4
             + self.rows.len() * 4
             + self.nodes.len() * std::mem::size_of::<Node>()
     }
+}
+
+/// A query in f64 and f32, with the f32 distances' allowance (in distance, not squared).
+struct Query<'a, const D: usize> {
+    q: &'a [f64; D],
+    q32: &'a [f32; D],
+    delta: f64,
+}
+
+/// Squared f32 distances of one leaf's points (column by column, [`LEAF`] lanes) to `q`.
+#[inline(always)]
+fn block_distances<const D: usize>(block: &[f32], q: &[f32; D]) -> [f32; LEAF] {
+    let mut acc = [0.0f32; LEAF];
+    for (col, &qd) in block.chunks_exact(LEAF).zip(q) {
+        for (a, &x) in acc.iter_mut().zip(col) {
+            let t = x - qd;
+            *a += t * t;
+        }
+    }
+    acc
 }
 
 /// The candidates of one query: every point offered no farther than `bound` is kept in `buf`;
