@@ -269,7 +269,7 @@ fn block_distances<const D: usize>(block: &[f32], q: &[f32; D]) -> [f32; LEAF] {
 }
 
 /// The candidates of one query: every point offered no farther than `bound` is kept in `buf`;
-/// when `buf` holds `3k`, a selection cuts it to the `k` best (by [`cmp`]) and `bound` becomes
+/// when `buf` holds `2k`, a selection cuts it to the `k` best (by [`cmp`]) and `bound` becomes
 /// the k-th distance. Cheaper than a heap when many candidates arrive (a query outside the
 /// samples' range), and exact: a point beyond the k-th distance cannot be among the k best.
 struct Best<'a> {
@@ -284,7 +284,7 @@ impl Best<'_> {
     fn offer(&mut self, d: f64, pos: u32) {
         if d <= self.bound {
             self.buf.push((d, pos));
-            if self.buf.len() >= 3 * self.k {
+            if self.buf.len() >= 2 * self.k {
                 self.cut();
             }
         }
