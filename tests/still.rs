@@ -266,4 +266,13 @@ fn a_still_among_video_clips_and_field_objectives_are_refused() {
     let e = fails(&["ablate", s(&clip), "--out", s(&rep)]);
     assert!(e.contains("still (one frame)"), "{e}");
     assert!(!rep.exists(), "nothing written");
+    // A spread of directions that is not one (negative) in clip.json: one line naming the key.
+    let meta = clip.join("clip.json");
+    let mut j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&meta).unwrap()).unwrap();
+    j["dir_spread"] = serde_json::json!(-1.0);
+    std::fs::write(&meta, j.to_string()).unwrap();
+    let e = fails(&["fit", s(&clip), "--out", s(&p)]);
+    assert!(e.contains("clip.json") && e.contains("dir_spread"), "{e}");
+    assert!(!p.exists(), "nothing written");
 }

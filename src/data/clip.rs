@@ -221,6 +221,13 @@ impl ClipFields {
                 )));
             }
         }
+        if let Some(v) = m.dir_spread {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::invalid(format!(
+                    "clip.json: dir_spread = {v} (rad², finite and ≥ 0)"
+                )));
+            }
+        }
         let (f, ny, nx) = (m.frames, m.ny, m.nx);
         let check = |name: &str, got: &[usize], want: &[usize]| -> Result<()> {
             if got != want {
