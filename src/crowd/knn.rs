@@ -2,13 +2,14 @@
 //! an exact brute-force search to check against, and `kiddo`'s immutable kd-tree as the peer the
 //! benchmark compares with.
 //!
-//! [`StateTree`] is a bucketed kd-tree that splits each node at the median of its widest
-//! dimension. The PCA states have most of their variance in the leading components, so splitting
-//! the widest dimension prunes far more than the round-robin splits of kiddo's trees (which, at
-//! ~9 levels over 10–12 dimensions, split each dimension about once); the query keeps the k best
-//! in a binary heap held in the caller's buffer and allocates nothing. The dimension is a const
-//! generic; [`StateTree`] picks one of 1–12 at run time (the paper's PCA keeps 8–12). Ties in
-//! distance are ordered by row, so the result equals [`brute_force`]'s exactly.
+//! [`StateTree`] is a bucketed kd-tree that splits each node on its widest dimension, at the
+//! multiple of 16 points nearest the median (so that every leaf is one 16-point block). The PCA
+//! states have most of their variance in the leading components, so splitting the widest
+//! dimension prunes far more than the round-robin splits of kiddo's trees (which, at ~9 levels
+//! over 10–12 dimensions, split each dimension about once); the query keeps its candidates in
+//! the caller's buffer, cut to the k best by selection, and allocates nothing. The dimension is
+//! a const generic; [`StateTree`] picks one of 1–12 at run time (the paper's PCA keeps 8–12).
+//! Ties in distance are ordered by row, so the result equals [`brute_force`]'s exactly.
 //!
 //! A leaf's points are scanned first in f32, column by column in SIMD lanes (AVX2 where the CPU
 //! has it, through `pulp`'s run-time dispatch): half the bytes of the f64 points, which a query

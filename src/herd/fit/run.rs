@@ -2,8 +2,6 @@
 //! gradient of each window's loss, the optimiser step, population control between windows.
 
 use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt, ZoneStarts};
-
-mod zone;
 use super::config::{FitConfig, LossKind};
 use super::herds::{check_finite_step, grad_of, Herds};
 use super::log::LogRow;
@@ -29,6 +27,8 @@ use burn::tensor::{Device, Tensor};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 pub use zone::{fit_zones, zone_loss_of, ZoneFitResult};
+
+mod zone;
 
 /// One optimiser step on `theta` with gradient `g` and step size `lr` ([`crate::optim::step`]
 /// with `cfg.optimizer` and `cfg.zero_grad_step`), then clamped to the parameters' ranges.
