@@ -18,11 +18,10 @@
 //! ∂E/∂u_i = d_i (∂E/∂q_i · r_i) + ∂E_cohesion/∂u_i. herdfit keeps the burn-autodiff form of the
 //! same energy as the reference it is tested against (`tests/lift_gradient.rs`).
 //!
-//! Parallel (rayon) and deterministic: the lists are cut into fixed blocks of 8192 targets
-//! ([`SeqPlan`]); element-wise passes run block by block, scatters run even blocks then odd ones
-//! (each block writes only its own range and the one before, so blocks of one parity never touch
-//! the same entry), and partial sums are added in block order — the same bytes for any thread
-//! count.
+//! Cache-tiled, parallel (rayon) and deterministic ([`SeqPlan`]): one sweep over tiles of a few
+//! frames does every pass of a tile while its data is in cache, chunks of tiles are swept in
+//! parallel, and each entry's gradient contributions are added in list order whatever the cuts —
+//! the same bytes for any thread count.
 
 use rayon::prelude::*;
 
@@ -85,10 +84,6 @@ struct Vel {
     gh: [f64; 3],
 }
 
-/// Elements per block of the parallel passes (fixed, so results do not depend on the thread
-/// count).
-const BLOCK: usize = 8192;
-
 impl Vel {
     /// The heading h = v / s.
     #[inline]
@@ -97,162 +92,191 @@ impl Vel {
     }
 }
 
-/// A scatter list cut into blocks of its target space. Each entry belongs to the block of its
-/// larger target (`forward` false: it writes only into `starts[b − 1]..starts[b + 1]`) or of its
-/// smaller one (`forward`: `starts[b]..starts[b + 2]`), so blocks of one parity write disjoint
-/// ranges and run in parallel (even blocks, then odd ones).
-#[derive(Clone, Debug, Default)]
-struct Blocks {
-    /// Block starts in the target space, and its length last.
-    starts: Vec<usize>,
-    /// Entries of each block.
-    ranges: Vec<std::ops::Range<usize>>,
-    forward: bool,
-}
+/// Observations per tile at least (tiles end at a clean cut: see [`SeqPlan`]).
+const TILE: usize = 512;
+/// Observations per chunk at least (chunks are runs of whole tiles, fixed by the problem, so
+/// results do not depend on the thread count).
+const CHUNK: usize = 8192;
 
-impl Blocks {
-    /// Blocks of `len` targets for entries touching targets (smaller, larger) = `touch(e)`: by
-    /// the larger target if the entries are in its block order and reach back at most one block,
-    /// else by the smaller one likewise, else one block (a sequential pass).
-    fn new<E>(
-        entries: &[E],
-        len: usize,
-        block: usize,
-        touch: impl Fn(&E) -> (usize, usize),
-    ) -> Blocks {
-        let nb = len.div_ceil(block).max(1);
-        let mut starts: Vec<usize> = (0..nb).map(|b| b * block).collect();
-        starts.push(len);
-        let try_by = |forward: bool| -> Option<Vec<std::ops::Range<usize>>> {
-            let mut ranges = vec![0..0; nb];
-            let mut last = 0;
-            for (k, e) in entries.iter().enumerate() {
-                let (lo, hi) = touch(e);
-                let owner = if forward { lo } else { hi } / block;
-                let (from, to) = if forward {
-                    (starts[owner], starts[(owner + 2).min(nb)])
-                } else {
-                    (starts[owner.saturating_sub(1)], starts[owner + 1])
-                };
-                if owner < last || owner >= nb || lo < from || hi >= to {
-                    return None;
-                }
-                if ranges[owner].is_empty() {
-                    ranges[owner] = k..k;
-                }
-                ranges[owner].end = k + 1;
-                last = owner;
-            }
-            Some(ranges)
-        };
-        if nb > 1 {
-            for forward in [false, true] {
-                if let Some(ranges) = try_by(forward) {
-                    return Blocks {
-                        starts,
-                        ranges,
-                        forward,
-                    };
-                }
-            }
-        }
-        Blocks {
-            starts: vec![0, len],
-            ranges: std::iter::once(0..entries.len()).collect(),
-            forward: false,
-        }
-    }
-
-    /// Runs `f(targets, offset, first, entries)` on every block — even blocks in parallel, then
-    /// odd ones — where `targets[k − offset]` is target k and `entries` starts at entry `first`;
-    /// returns the blocks' partial sums added in block order.
-    fn run<T: Send, E: Sync>(
-        &self,
-        targets: &mut [T],
-        entries: &[E],
-        f: impl Fn(&mut [T], usize, usize, &[E]) -> [f64; 2] + Sync,
-    ) -> [f64; 2] {
-        let nb = self.ranges.len();
-        let mut part = vec![[0.0; 2]; nb];
-        for parity in 0..2 {
-            let mut tasks = Vec::new();
-            let mut rest = &mut targets[..];
-            let mut consumed = 0;
-            for b in (parity..nb).step_by(2) {
-                let (lo, hi) = if self.forward {
-                    (self.starts[b], self.starts[(b + 2).min(nb)])
-                } else {
-                    (self.starts[b.saturating_sub(1)], self.starts[b + 1])
-                };
-                let tail = std::mem::take(&mut rest);
-                let (_, tail) = tail.split_at_mut(lo - consumed);
-                let (mine, tail) = tail.split_at_mut(hi - lo);
-                rest = tail;
-                consumed = hi;
-                tasks.push((b, lo, mine));
-            }
-            let one = |(b, lo, mine): (usize, usize, &mut [T])| {
-                let r = self.ranges[b].clone();
-                (b, f(mine, lo, r.start, &entries[r]))
-            };
-            // One task runs here: handing it to the pool would only add a wake-up.
-            let sums: Vec<(usize, [f64; 2])> = if tasks.len() == 1 {
-                tasks.into_iter().map(one).collect()
-            } else {
-                tasks.into_par_iter().map(one).collect()
-            };
-            for (b, s) in sums {
-                part[b] = s;
-            }
-        }
-        part.iter()
-            .fold([0.0; 2], |a, s| [a[0] + s[0], a[1] + s[1]])
-    }
-}
-
-/// The blocks of one problem's lists, built once ([`SeqPlan::new`]) and reused by every
-/// evaluation.
+/// How one problem's lists are cut for evaluation, built once ([`SeqPlan::new`]) and reused by
+/// every evaluation.
+///
+/// The observations are cut into **tiles**, consecutive ranges ending where no same-frame pair
+/// (of observations, or of velocities by their later observation) crosses — with frame-major
+/// observations, at frame boundaries. Every entry belongs to the tile of its later index
+/// (velocity: its observation at f; acceleration: its later velocity; pair: both). The plan
+/// requires that a velocity reaches back at most one tile for its earlier observation, and an
+/// acceleration at most one tile for its earlier velocity. Then one sweep over the tiles does
+/// every pass of a tile while its data is in cache: tile t's forward passes, the velocity
+/// backward of tile t − 1 (whose ∂E/∂v is complete once tile t's accelerations are in) and the
+/// pairs and ∂E/∂u of tile t − 2 — instead of one pass over the whole problem per term, which
+/// streams it from memory a dozen times (BENCHMARKS.md, "Lift").
+///
+/// Tiles are grouped into **chunks** of at least [`CHUNK`] observations and two tiles, swept in
+/// parallel. A chunk's first tile reaches into the previous chunk's last one: it recomputes the
+/// positions and velocities it reads there from the log-depths, and its gradient contributions
+/// there are handed over in order and added by their owner after the sweep. Each entry's
+/// contributions are thus added in list order, as one sequential pass would, and the energy's
+/// partial sums are summed in chunk order: the same bytes for any thread count, and for a single
+/// chunk the same bytes as a plain sequential pass over each list.
+///
+/// Lists that break the requirements (out of order, or reaching further) get one tile: a
+/// sequential evaluation, with the same result.
 #[derive(Clone, Debug, Default)]
 pub struct SeqPlan {
-    /// Elements per block.
-    block: usize,
     n: usize,
     nv: usize,
-    /// Velocities into ∂E/∂q (observation space).
-    vel: Blocks,
-    /// Accelerations into ∂E/∂v and alignment pairs into ∂E/∂h (velocity space).
-    acc: Blocks,
-    align: Blocks,
-    /// Same-frame pairs into ∂E/∂q and ∂E/∂u (observation space).
-    pairs: Blocks,
+    /// Tile starts (and the end, last) in observations, velocities, and the entries of the
+    /// acceleration, pair and alignment lists.
+    obs: Vec<usize>,
+    vel: Vec<usize>,
+    acc: Vec<usize>,
+    pairs: Vec<usize>,
+    align: Vec<usize>,
+    /// Chunk starts in tiles, and the tile count last.
+    chunks: Vec<usize>,
+}
+
+/// Tile starts of a list whose entry e is in tile `key(e)`, if the keys never decrease and every
+/// entry passes `ok`.
+fn starts_of<E>(
+    list: &[E],
+    tiles: usize,
+    key: impl Fn(&E) -> usize,
+    ok: impl Fn(&E, usize) -> bool,
+) -> Option<Vec<usize>> {
+    let mut starts = Vec::with_capacity(tiles + 1);
+    let mut last = 0;
+    for (i, e) in list.iter().enumerate() {
+        let t = key(e);
+        if t < last || !ok(e, t) {
+            return None;
+        }
+        while starts.len() <= t {
+            starts.push(i);
+        }
+        last = t;
+    }
+    while starts.len() <= tiles {
+        starts.push(list.len());
+    }
+    Some(starts)
 }
 
 impl SeqPlan {
-    /// The plan of `st`'s lists (sorted by their larger index, as herdfit builds them, they run in
-    /// parallel blocks; otherwise sequentially, with the same result).
+    /// The plan of `st` (lists as herdfit builds them: frame-major observations, each list sorted
+    /// by its entries' tiles).
     pub fn new(st: &SeqStructure) -> SeqPlan {
-        SeqPlan::with_block(st, BLOCK)
+        SeqPlan::with_sizes(st, TILE, CHUNK)
     }
 
-    /// The plan with `block` elements per block (tests cut small problems into many blocks).
-    pub fn with_block(st: &SeqStructure, block: usize) -> SeqPlan {
-        let block = block.max(1);
+    /// The plan with tiles of at least `tile` and chunks of at least `chunk` observations (tests
+    /// cut small problems into many of both).
+    pub fn with_sizes(st: &SeqStructure, tile: usize, chunk: usize) -> SeqPlan {
         let (n, nv) = (st.ray.len(), st.vel.len());
-        let ordered = |&(a, b): &(usize, usize)| (a.min(b), a.max(b));
-        SeqPlan {
-            block,
+        SeqPlan::tiled(st, tile.max(1), chunk.max(1)).unwrap_or_else(|| SeqPlan {
             n,
             nv,
-            vel: Blocks::new(st.vel, n, block, ordered),
-            acc: Blocks::new(st.acc, nv, block, ordered),
-            align: Blocks::new(st.align, nv, block, ordered),
-            pairs: Blocks::new(st.pairs, n, block, ordered),
-        }
+            obs: vec![0, n],
+            vel: vec![0, nv],
+            acc: vec![0, st.acc.len()],
+            pairs: vec![0, st.pairs.len()],
+            align: vec![0, st.align.len()],
+            chunks: vec![0, 1],
+        })
     }
 
-    /// Blocks of the four lists (1 where a list runs sequentially).
-    pub fn blocks(&self) -> [usize; 4] {
-        [&self.vel, &self.acc, &self.align, &self.pairs].map(|b| b.ranges.len())
+    fn tiled(st: &SeqStructure, tile: usize, chunk: usize) -> Option<SeqPlan> {
+        let (n, nv) = (st.ray.len(), st.vel.len());
+        // A cut at o (between o − 1 and o) is clean when no pair has lo < o ≤ hi.
+        let mut cover = vec![0i64; n + 2];
+        let mut span = |a: usize, b: usize| {
+            let (lo, hi) = (a.min(b), a.max(b).min(n));
+            if lo < hi {
+                cover[lo + 1] += 1;
+                cover[hi + 1] -= 1;
+            }
+        };
+        for &(i, j) in st.pairs {
+            span(i, j);
+        }
+        for &(a, b) in st.align {
+            span(st.vel.get(a)?.1, st.vel.get(b)?.1);
+        }
+        let mut obs = vec![0];
+        let mut open = 0i64;
+        for (o, c) in cover.iter().enumerate().take(n).skip(1) {
+            open += c;
+            if open == 0 && o - obs[obs.len() - 1] >= tile {
+                obs.push(o);
+            }
+        }
+        obs.push(n);
+        let tiles = obs.len() - 1;
+        let mut tile_of = vec![0; n];
+        for t in 0..tiles {
+            tile_of[obs[t]..obs[t + 1]].fill(t);
+        }
+        let of = |i: usize| tile_of.get(i).copied();
+        let near = |a: Option<usize>, t: usize| a.is_some_and(|a| a <= t && a + 1 >= t);
+        let vel = starts_of(
+            st.vel,
+            tiles,
+            |&(_, c)| of(c).unwrap_or(0),
+            |&(p, c), t| of(c).is_some() && near(of(p), t),
+        )?;
+        let mut vtile = vec![0; nv];
+        for t in 0..tiles {
+            vtile[vel[t]..vel[t + 1]].fill(t);
+        }
+        let vof = |k: usize| vtile.get(k).copied();
+        let acc = starts_of(
+            st.acc,
+            tiles,
+            |&(_, b)| vof(b).unwrap_or(0),
+            |&(a, b), t| vof(b).is_some() && near(vof(a), t),
+        )?;
+        let pairs = starts_of(
+            st.pairs,
+            tiles,
+            |&(i, _)| of(i).unwrap_or(0),
+            |&(i, j), t| of(i).is_some() && of(j) == Some(t),
+        )?;
+        let align = starts_of(
+            st.align,
+            tiles,
+            |&(a, _)| vof(a).unwrap_or(0),
+            |&(a, b), t| vof(a).is_some() && vof(b) == Some(t),
+        )?;
+        // Chunks of ≥ `chunk` observations and ≥ 2 tiles (a chunk's first tile must finish its
+        // velocity backward within the chunk's own sweep: its hand-over is read by the previous
+        // chunk).
+        let mut chunks = vec![0];
+        for t in 1..tiles {
+            let c0 = chunks[chunks.len() - 1];
+            if obs[t] - obs[c0] >= chunk && t - c0 >= 2 {
+                chunks.push(t);
+            }
+        }
+        if chunks.len() > 1 && tiles - chunks[chunks.len() - 1] < 2 {
+            chunks.pop();
+        }
+        chunks.push(tiles);
+        Some(SeqPlan {
+            n,
+            nv,
+            obs,
+            vel,
+            acc,
+            pairs,
+            align,
+            chunks,
+        })
+    }
+
+    /// Tiles and chunks of the plan.
+    pub fn cuts(&self) -> [usize; 2] {
+        [self.obs.len() - 1, self.chunks.len() - 1]
     }
 }
 
@@ -303,22 +327,233 @@ fn scaled(k: f64, a: [f64; 3]) -> [f64; 3] {
     [k * a[0], k * a[1], k * a[2]]
 }
 
-/// Sums of fixed-size chunks of a parallel map, added in chunk order.
-fn chunk_sums<T: Send>(
-    data: &mut [T],
-    block: usize,
-    f: impl Fn(usize, &mut [T]) -> [f64; 2] + Sync,
-) -> [f64; 2] {
-    if data.len() <= block {
-        return f(0, data);
+/// `[q, d]` of observation i at log-depths u (eq. 1.1 without the camera centre).
+#[inline]
+fn point(u: &[f64], ray: &[[f64; 3]], i: usize) -> [f64; 4] {
+    let (d, r) = (u[i].exp(), ray[i]);
+    [d * r[0], d * r[1], d * r[2], d]
+}
+
+/// What every chunk's sweep reads.
+struct Shared<'a> {
+    st: &'a SeqStructure<'a>,
+    plan: &'a SeqPlan,
+    u: &'a [f64],
+    grad: bool,
+    vt: f64,
+    ds: f64,
+    c_speed: f64,
+    c_level: f64,
+    c_acc: f64,
+    c_align: f64,
+    c_coh: f64,
+    c_sep: f64,
+}
+
+/// Gradient contributions handed to the previous chunk: (index, value), in list order.
+type Given = Vec<(usize, [f64; 3])>;
+
+/// Partial sums of one chunk: speed, level, accel, align, cohesion, separation (unweighted).
+type Sums = [f64; 6];
+
+/// One chunk's slices of the workspace and the gradient, and what it hands over.
+struct Chunk<'a> {
+    /// Its tiles.
+    t0: usize,
+    t1: usize,
+    /// Its first observation and velocity.
+    o0: usize,
+    v0: usize,
+    dq: &'a mut [[f64; 4]],
+    vel: &'a mut [Vel],
+    gq: &'a mut [[f64; 4]],
+    gu: &'a mut [f64],
+    sums: Sums,
+    /// Contributions to the previous chunk's ∂E/∂v and ∂E/∂q, in list order.
+    give_v: Given,
+    give_q: Given,
+}
+
+/// Splits `data` at `at` (offsets, the first 0 and the last `data.len()`).
+fn split_at<'a, T>(mut data: &'a mut [T], at: &[usize]) -> Vec<&'a mut [T]> {
+    let mut out = Vec::with_capacity(at.len().saturating_sub(1));
+    for w in at.windows(2) {
+        let (head, tail) = std::mem::take(&mut data).split_at_mut(w[1] - w[0]);
+        out.push(head);
+        data = tail;
     }
-    let sums: Vec<[f64; 2]> = data
-        .par_chunks_mut(block)
-        .enumerate()
-        .map(|(c, chunk)| f(c * block, chunk))
-        .collect();
-    sums.iter()
-        .fold([0.0; 2], |a, s| [a[0] + s[0], a[1] + s[1]])
+    out
+}
+
+impl Chunk<'_> {
+    /// Positions of tile t; ∂E/∂q zeroed.
+    fn points(&mut self, s: &Shared, t: usize) {
+        let p = s.plan;
+        for i in p.obs[t]..p.obs[t + 1] {
+            self.dq[i - self.o0] = point(s.u, s.st.ray, i);
+        }
+        if s.grad {
+            self.gq[p.obs[t] - self.o0..p.obs[t + 1] - self.o0].fill([0.0; 4]);
+        }
+    }
+
+    /// `[q, d]` of observation i (recomputed when it is the previous chunk's).
+    #[inline]
+    fn q(&self, s: &Shared, i: usize) -> [f64; 4] {
+        if i >= self.o0 {
+            self.dq[i - self.o0]
+        } else {
+            point(s.u, s.st.ray, i)
+        }
+    }
+
+    /// Velocities of tile t with their speed and level terms.
+    fn velocities(&mut self, s: &Shared, t: usize) {
+        let p = s.plan;
+        let vt = s.vt;
+        for k in p.vel[t]..p.vel[t + 1] {
+            let (a, c) = s.st.vel[k];
+            let v = sub4(self.q(s, c), self.q(s, a));
+            let sp = (norm2(v) + EPS * vt * vt).sqrt();
+            let inv_s = 1.0 / sp;
+            let r = sp / vt - 1.0;
+            let h = scaled(inv_s, v);
+            self.sums[0] += r * r;
+            self.sums[1] += h[2] * h[2];
+            // ∂(c r²)/∂v = 2c r / v_t · v / s = 2c r / v_t · h; ∂(c h_z²)/∂h = (0, 0, 2c h_z).
+            self.vel[k - self.v0] = Vel {
+                v,
+                inv_s,
+                gv: scaled(2.0 * s.c_speed * r / vt, h),
+                gh: [0.0, 0.0, 2.0 * s.c_level * h[2]],
+            };
+        }
+    }
+
+    /// Accelerations and alignment pairs of tile t.
+    fn accelerations(&mut self, s: &Shared, t: usize) {
+        let p = s.plan;
+        let v0 = self.v0;
+        for &(a, b) in &s.st.acc[p.acc[t]..p.acc[t + 1]] {
+            let va = if a >= v0 {
+                self.vel[a - v0].v
+            } else {
+                let (i, j) = s.st.vel[a];
+                sub4(self.q(s, j), self.q(s, i))
+            };
+            let dv = sub(self.vel[b - v0].v, va);
+            self.sums[2] += norm2(dv);
+            let g = scaled(2.0 * s.c_acc, dv);
+            axpy(&mut self.vel[b - v0].gv, 1.0, g);
+            if a >= v0 {
+                axpy(&mut self.vel[a - v0].gv, -1.0, g);
+            } else {
+                self.give_v.push((a, scaled(-1.0, g)));
+            }
+        }
+        for &(a, b) in &s.st.align[p.align[t]..p.align[t + 1]] {
+            let (a, b) = (a - v0, b - v0);
+            let dh = sub(self.vel[b].h(), self.vel[a].h());
+            self.sums[3] += norm2(dh);
+            let g = scaled(2.0 * s.c_align, dh);
+            axpy(&mut self.vel[b].gh, 1.0, g);
+            axpy(&mut self.vel[a].gh, -1.0, g);
+        }
+    }
+
+    /// ∂E/∂v += (I − h hᵀ)/s · ∂E/∂h for the velocities of tile t, then ∂E/∂q through
+    /// v = q_c − q_p.
+    fn velocity_backward(&mut self, s: &Shared, t: usize) {
+        let p = s.plan;
+        for k in p.vel[t]..p.vel[t + 1] {
+            let (a, c) = s.st.vel[k];
+            let x = &self.vel[k - self.v0];
+            let (h, gh) = (x.h(), x.gh);
+            let hg = h[0] * gh[0] + h[1] * gh[1] + h[2] * gh[2];
+            let mut gk = x.gv;
+            axpy(
+                &mut gk,
+                x.inv_s,
+                [gh[0] - hg * h[0], gh[1] - hg * h[1], gh[2] - hg * h[2]],
+            );
+            axpy4(&mut self.gq[c - self.o0], 1.0, gk);
+            if a >= self.o0 {
+                axpy4(&mut self.gq[a - self.o0], -1.0, gk);
+            } else {
+                self.give_q.push((a, scaled(-1.0, gk)));
+            }
+        }
+    }
+
+    /// Cohesion and separation of tile t's pairs and, with the gradient, ∂E/∂u of its
+    /// observations.
+    fn pairs(&mut self, s: &Shared, t: usize) {
+        let p = s.plan;
+        let (ds, o0) = (s.ds, self.o0);
+        let near = ds * ds;
+        for &(i, j) in &s.st.pairs[p.pairs[t]..p.pairs[t + 1]] {
+            let du = s.u[j] - s.u[i];
+            self.sums[4] += du * du;
+            let dq = sub4(self.dq[j - o0], self.dq[i - o0]);
+            if s.grad {
+                self.gq[j - o0][3] += 2.0 * s.c_coh * du;
+                self.gq[i - o0][3] -= 2.0 * s.c_coh * du;
+            }
+            // hinge > 0 ⇔ ‖dq‖² + ε d_sep² < d_sep²: the square root only inside d_sep.
+            let d2 = norm2(dq) + EPS * near;
+            if d2 < near {
+                let dist = d2.sqrt();
+                let hinge = 1.0 - dist / ds;
+                self.sums[5] += hinge * hinge;
+                if s.grad {
+                    // ∂(c hinge²)/∂q_j = −2c hinge / d_sep · dq / dist.
+                    let gj = scaled(-2.0 * s.c_sep * hinge / (ds * dist), dq);
+                    axpy4(&mut self.gq[j - o0], 1.0, gj);
+                    axpy4(&mut self.gq[i - o0], -1.0, gj);
+                }
+            }
+        }
+        if s.grad {
+            for i in p.obs[t]..p.obs[t + 1] {
+                let (gi, r, d) = (self.gq[i - o0], s.st.ray[i], self.dq[i - o0][3]);
+                self.gu[i - o0] = gi[3] + d * (gi[0] * r[0] + gi[1] * r[1] + gi[2] * r[2]);
+            }
+        }
+    }
+
+    /// The sweep up to what needs the next chunk's hand-over: the last tile's velocity backward
+    /// and the last two tiles' pairs.
+    fn sweep(&mut self, s: &Shared) {
+        for t in self.t0..self.t1 {
+            self.points(s, t);
+            self.velocities(s, t);
+            self.accelerations(s, t);
+            if t > self.t0 && s.grad {
+                self.velocity_backward(s, t - 1);
+            }
+            if t >= self.t0 + 2 {
+                self.pairs(s, t - 2);
+            }
+        }
+    }
+
+    /// The rest of the sweep, with the next chunk's hand-over.
+    fn finish(&mut self, s: &Shared, next: Option<&(Given, Given)>) {
+        let last = self.t1 - 1;
+        if s.grad {
+            for &(k, g) in next.map_or(&[][..], |n| &n.0[..]) {
+                axpy(&mut self.vel[k - self.v0].gv, 1.0, g);
+            }
+            self.velocity_backward(s, last);
+            for &(i, g) in next.map_or(&[][..], |n| &n.1[..]) {
+                axpy4(&mut self.gq[i - self.o0], 1.0, g);
+            }
+        }
+        if last > self.t0 {
+            self.pairs(s, last - 1);
+        }
+        self.pairs(s, last);
+    }
 }
 
 /// The energy's terms at log-depths `u` and, when `grad` is given, ∂E/∂u written into it (one
@@ -337,164 +572,86 @@ pub fn sequence_energy(
         plan.n == n && plan.nv == nv,
         "the plan of another structure"
     );
+    let want = grad.is_some();
     ws.dq.resize(n, [0.0; 4]);
     ws.vel.resize(nv, Vel::default());
-    let SeqWorkspace { dq, vel, gq } = ws;
-    let block = plan.block;
-    chunk_sums(dq, block, |at, chunk| {
-        for (k, x) in chunk.iter_mut().enumerate() {
-            let (d, r) = (u[at + k].exp(), st.ray[at + k]);
-            *x = [d * r[0], d * r[1], d * r[2], d];
+    ws.gq.resize(if want { n } else { 0 }, [0.0; 4]);
+    let mut no_grad = Vec::new();
+    let gu = match grad {
+        Some(g) => {
+            assert_eq!(g.len(), n, "one gradient entry per log-depth");
+            g
         }
-        [0.0; 2]
-    });
-    let q = &dq[..];
-    let mut t = SeqTerms::default();
+        None => &mut no_grad[..],
+    };
     let vt = w.v_target;
-    // Velocities, speeds, headings and the per-velocity terms (speed, level).
-    let (c_speed, c_level) = (w.speed * w.scale, w.level * w.scale);
-    let [speed, level] = chunk_sums(vel, block, |at, chunk| {
-        let mut sum = [0.0; 2];
-        for (k, x) in chunk.iter_mut().enumerate() {
-            let (p, c) = st.vel[at + k];
-            let v = sub4(q[c], q[p]);
-            let s = (norm2(v) + EPS * vt * vt).sqrt();
-            let inv_s = 1.0 / s;
-            let r = s / vt - 1.0;
-            let h = scaled(inv_s, v);
-            sum[0] += r * r;
-            sum[1] += h[2] * h[2];
-            // ∂(c r²)/∂v = 2c r / v_t · v / s = 2c r / v_t · h; ∂(c h_z²)/∂h = (0, 0, 2c h_z).
-            *x = Vel {
-                v,
-                inv_s,
-                gv: scaled(2.0 * c_speed * r / vt, h),
-                gh: [0.0, 0.0, 2.0 * c_level * h[2]],
-            };
-        }
-        sum
-    });
-    t.speed = c_speed * speed;
-    t.level = c_level * level;
-    // Accelerations.
-    let c_acc = w.accel * w.scale / (vt * vt);
-    t.accel = c_acc
-        * plan.acc.run(vel, st.acc, |x, off, _, list| {
-            let mut sum = 0.0;
-            for &(a, b) in list {
-                let dv = sub(x[b - off].v, x[a - off].v);
-                sum += norm2(dv);
-                let g = scaled(2.0 * c_acc, dv);
-                axpy(&mut x[b - off].gv, 1.0, g);
-                axpy(&mut x[a - off].gv, -1.0, g);
-            }
-            [sum, 0.0]
-        })[0];
-    // Alignment of neighbours' headings.
-    let c_align = w.align * w.scale;
-    t.align = c_align
-        * plan.align.run(vel, st.align, |x, off, _, list| {
-            let mut sum = 0.0;
-            for &(a, b) in list {
-                let dh = sub(x[b - off].h(), x[a - off].h());
-                sum += norm2(dh);
-                let g = scaled(2.0 * c_align, dh);
-                axpy(&mut x[b - off].gh, 1.0, g);
-                axpy(&mut x[a - off].gh, -1.0, g);
-            }
-            [sum, 0.0]
-        })[0];
-    let Some(gu) = grad else {
-        let [coh, sep] = pair_values(st, plan, w, u, q);
-        t.cohesion = w.cohesion * w.scale * coh;
-        t.separation = w.separation * w.scale * sep;
-        return t;
+    let s = Shared {
+        st,
+        plan,
+        u,
+        grad: want,
+        vt,
+        ds: w.d_sep,
+        c_speed: w.speed * w.scale,
+        c_level: w.level * w.scale,
+        c_acc: w.accel * w.scale / (vt * vt),
+        c_align: w.align * w.scale,
+        c_coh: w.cohesion * w.scale,
+        c_sep: w.separation * w.scale,
     };
-    assert_eq!(gu.len(), n, "one gradient entry per log-depth");
-    gq.clear();
-    gq.resize(n, [0.0; 4]);
-    // ∂E/∂v += (I − h hᵀ)/s · ∂E/∂h, then ∂E/∂q through v = q_c − q_p.
-    let vel = &vel[..];
-    plan.vel.run(gq, st.vel, |g, off, first, list| {
-        for (k, &(p, c)) in list.iter().enumerate() {
-            let x = &vel[first + k];
-            let (h, gh) = (x.h(), x.gh);
-            let hg = h[0] * gh[0] + h[1] * gh[1] + h[2] * gh[2];
-            let mut gk = x.gv;
-            axpy(
-                &mut gk,
-                x.inv_s,
-                [gh[0] - hg * h[0], gh[1] - hg * h[1], gh[2] - hg * h[2]],
-            );
-            axpy4(&mut g[c - off], 1.0, gk);
-            axpy4(&mut g[p - off], -1.0, gk);
-        }
-        [0.0; 2]
-    });
-    let (c_coh, c_sep, ds) = (w.cohesion * w.scale, w.separation * w.scale, w.d_sep);
-    let near = ds * ds;
-    let [coh, sep] = plan.pairs.run(gq, st.pairs, |g, off, _, list| {
-        let mut sum = [0.0; 2];
-        for &(i, j) in list {
-            let du = u[j] - u[i];
-            sum[0] += du * du;
-            g[j - off][3] += 2.0 * c_coh * du;
-            g[i - off][3] -= 2.0 * c_coh * du;
-            let dq = sub4(q[j], q[i]);
-            // hinge > 0 ⇔ ‖dq‖² + ε d_sep² < d_sep²: the square root only inside d_sep.
-            let d2 = norm2(dq) + EPS * near;
-            if d2 < near {
-                let dist = d2.sqrt();
-                let hinge = 1.0 - dist / ds;
-                sum[1] += hinge * hinge;
-                // ∂(c hinge²)/∂q_j = −2c hinge / d_sep · dq / dist.
-                let gj = scaled(-2.0 * c_sep * hinge / (ds * dist), dq);
-                axpy4(&mut g[j - off], 1.0, gj);
-                axpy4(&mut g[i - off], -1.0, gj);
-            }
-        }
-        sum
-    });
-    t.cohesion = c_coh * coh;
-    t.separation = c_sep * sep;
-    let gq = &gq[..];
-    chunk_sums(gu, block, |at, chunk| {
-        for (k, g) in chunk.iter_mut().enumerate() {
-            let (gi, r, d) = (gq[at + k], st.ray[at + k], q[at + k][3]);
-            *g = gi[3] + d * (gi[0] * r[0] + gi[1] * r[1] + gi[2] * r[2]);
-        }
-        [0.0; 2]
-    });
-    t
-}
-
-/// The sums of cohesion and separation (unweighted) over the pairs, without gradients.
-fn pair_values(
-    st: &SeqStructure,
-    plan: &SeqPlan,
-    w: &SeqWeights,
-    u: &[f64],
-    q: &[[f64; 4]],
-) -> [f64; 2] {
-    let ds = w.d_sep;
-    let near = ds * ds;
-    let sum_of = |r: &std::ops::Range<usize>| {
-        let mut sum = [0.0; 2];
-        for &(i, j) in &st.pairs[r.clone()] {
-            sum[0] += (u[j] - u[i]).powi(2);
-            let d2 = norm2(sub4(q[j], q[i])) + EPS * near;
-            if d2 < near {
-                sum[1] += (1.0 - d2.sqrt() / ds).powi(2);
-            }
-        }
-        sum
-    };
-    let ranges = &plan.pairs.ranges;
-    let sums: Vec<[f64; 2]> = if ranges.len() == 1 {
-        ranges.iter().map(sum_of).collect()
+    let at = |starts: &[usize]| -> Vec<usize> { plan.chunks.iter().map(|&t| starts[t]).collect() };
+    let (obs_at, vel_at) = (at(&plan.obs), at(&plan.vel));
+    let grad_at = if want {
+        obs_at.clone()
     } else {
-        ranges.par_iter().map(sum_of).collect()
+        vec![0; obs_at.len()]
     };
-    sums.iter()
-        .fold([0.0; 2], |a, s| [a[0] + s[0], a[1] + s[1]])
+    let mut chunks: Vec<Chunk> = split_at(&mut ws.dq, &obs_at)
+        .into_iter()
+        .zip(split_at(&mut ws.vel, &vel_at))
+        .zip(split_at(&mut ws.gq, &grad_at))
+        .zip(split_at(gu, &grad_at))
+        .enumerate()
+        .map(|(c, (((dq, vel), gq), gu))| Chunk {
+            t0: plan.chunks[c],
+            t1: plan.chunks[c + 1],
+            o0: obs_at[c],
+            v0: vel_at[c],
+            dq,
+            vel,
+            gq,
+            gu,
+            sums: [0.0; 6],
+            give_v: Vec::new(),
+            give_q: Vec::new(),
+        })
+        .collect();
+    if chunks.len() == 1 {
+        chunks[0].sweep(&s);
+        chunks[0].finish(&s, None);
+    } else {
+        chunks.par_iter_mut().for_each(|c| c.sweep(&s));
+        let gives: Vec<_> = chunks
+            .iter_mut()
+            .map(|c| (std::mem::take(&mut c.give_v), std::mem::take(&mut c.give_q)))
+            .collect();
+        chunks
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(k, c)| c.finish(&s, gives.get(k + 1)));
+    }
+    let sums = chunks.iter().fold([0.0; 6], |mut a, c| {
+        for (x, y) in a.iter_mut().zip(c.sums) {
+            *x += y;
+        }
+        a
+    });
+    SeqTerms {
+        speed: s.c_speed * sums[0],
+        level: s.c_level * sums[1],
+        accel: s.c_acc * sums[2],
+        align: s.c_align * sums[3],
+        cohesion: s.c_coh * sums[4],
+        separation: s.c_sep * sums[5],
+    }
 }

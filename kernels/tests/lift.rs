@@ -14,13 +14,18 @@ type Problem = (
 
 /// Three birds over five frames, the third leaving after frame 3; every term active.
 fn problem() -> Problem {
-    let mut rng = ChaCha8Rng::seed_from_u64(7);
-    // Observation order: frame-major; birds 0, 1 in frames 0..5, bird 2 in frames 0..3.
+    flock(5, 3, 7, |b, f| b == 2 && f > 3)
+}
+
+/// `birds` birds over `frames` frames, bird b absent where `gone(b, f)`; every same-frame pair a
+/// neighbour pair; frame-major observations, as herdfit builds them.
+fn flock(frames: usize, birds: usize, seed: u64, gone: impl Fn(usize, usize) -> bool) -> Problem {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut ray = Vec::new();
     let mut at = Vec::new();
-    for f in 0..5 {
-        for b in 0..3 {
-            if b == 2 && f > 3 {
+    for f in 0..frames {
+        for b in 0..birds {
+            if gone(b, f) {
                 continue;
             }
             ray.push([
@@ -73,7 +78,11 @@ type Lists = [Vec<(usize, usize)>; 4];
 
 /// vel, acc, pairs, align of `problem`.
 fn lists() -> (Vec<[f64; 3]>, Lists, Vec<f64>) {
-    let (ray, vel, pairs, u) = problem();
+    lists_of(problem())
+}
+
+/// vel, acc, pairs, align of a problem.
+fn lists_of((ray, vel, pairs, u): Problem) -> (Vec<[f64; 3]>, Lists, Vec<f64>) {
     let acc: Vec<(usize, usize)> = (0..vel.len())
         .flat_map(|b| (0..vel.len()).map(move |a| (a, b)))
         .filter(|&(a, b)| vel[b].0 == vel[a].1)
@@ -127,52 +136,84 @@ fn the_gradient_matches_central_finite_differences() {
     }
 }
 
+/// Energy and gradient of `st` at `u` with `plan` on a pool of `threads`.
+fn run(st: &SeqStructure, plan: &SeqPlan, u: &[f64], threads: usize) -> (SeqTerms, Vec<f64>) {
+    let w = weights(u.len());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let mut g = vec![0.0; u.len()];
+        let t = sequence_energy(st, plan, &w, u, Some(&mut g), &mut Default::default());
+        (t, g)
+    })
+}
+
 #[test]
-fn blocked_passes_match_the_sequential_pass_and_ignore_the_thread_count() {
+fn tiled_chunked_sweeps_match_the_sequential_pass_and_ignore_the_thread_count() {
+    // Birds entering and leaving at random frames: velocities, accelerations and pairs of every
+    // kind cross the tile and chunk cuts.
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let life: Vec<(usize, usize)> = (0..7)
+        .map(|_| {
+            let a = rng.gen_range(0..30);
+            (a, rng.gen_range(a + 2..=40))
+        })
+        .collect();
+    for (ray, l, u) in [
+        lists(),
+        lists_of(flock(40, 7, 11, |b, f| f < life[b].0 || f >= life[b].1)),
+    ] {
+        let st = structure(&ray, &l);
+        let one = SeqPlan::with_sizes(&st, usize::MAX, usize::MAX);
+        assert_eq!(one.cuts(), [1, 1]);
+        let (t1, g1) = run(&st, &one, &u, 1);
+        // Each entry's contributions arrive in list order whatever the cuts: the same gradient
+        // bits; the energy's partial sums are grouped by chunk.
+        for (tile, chunk) in [(1, 1), (1, 3), (4, 9), (1, usize::MAX), (10, 20)] {
+            let plan = SeqPlan::with_sizes(&st, tile, chunk);
+            let [tiles, chunks] = plan.cuts();
+            if tile == 1 {
+                assert!(tiles >= 5, "tile {tile}: {tiles} tiles");
+            }
+            if chunk <= 3 {
+                assert!(chunks >= 2, "chunk {chunk}: {chunks} chunks");
+            }
+            let (t, g) = run(&st, &plan, &u, 3);
+            assert!(
+                (t.total() - t1.total()).abs() < 1e-12 * t1.total(),
+                "{tile}/{chunk}: {t:?} vs {t1:?}"
+            );
+            assert_eq!(g, g1, "tile {tile}, chunk {chunk}");
+            for threads in [1, 2, 4] {
+                assert_eq!(
+                    run(&st, &plan, &u, threads),
+                    (t, g.clone()),
+                    "{threads} threads"
+                );
+            }
+            // Without the gradient, the same terms.
+            let w = weights(u.len());
+            let bare = sequence_energy(&st, &plan, &w, &u, None, &mut Default::default());
+            assert_eq!(bare, t);
+        }
+    }
+}
+
+#[test]
+fn lists_out_of_tile_order_run_as_one_tile_with_the_same_result() {
     let (ray, l, u) = lists();
     let st = structure(&ray, &l);
-    let w = weights(u.len());
-    let run = |plan: &SeqPlan, threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            let mut g = vec![0.0; u.len()];
-            let t = sequence_energy(&st, plan, &w, &u, Some(&mut g), &mut Default::default());
-            (t, g)
-        })
-    };
-    let one = SeqPlan::with_block(&st, usize::MAX);
-    assert_eq!(one.blocks(), [1; 4]);
-    // Blocks of 3: every list is cut (14 observations, 11 velocities).
-    let many = SeqPlan::with_block(&st, 3);
-    assert!(many.blocks().iter().all(|&b| b >= 4), "{:?}", many.blocks());
-    let (t1, g1) = run(&one, 1);
-    let (t3, g3) = run(&many, 3);
-    assert!((t1.total() - t3.total()).abs() < 1e-12 * t1.total());
-    for (a, b) in g1.iter().zip(&g3) {
-        assert!((a - b).abs() < 1e-12 * (1.0 + a.abs()), "{a} vs {b}");
-    }
-    // Same plan, other thread counts: the same bits.
-    for threads in [1, 2, 4] {
-        let (t, g) = run(&many, threads);
-        assert_eq!((t, g.clone()), (t3, g3.clone()), "{threads} threads");
-    }
-    // A list out of block order runs sequentially, with the same result.
+    let (t1, g1) = run(&st, &SeqPlan::with_sizes(&st, 1, 3), &u, 2);
     let mut rev = l.clone();
     rev[2].reverse();
     let st_rev = structure(&ray, &rev);
-    let plan_rev = SeqPlan::with_block(&st_rev, 3);
-    assert_eq!(plan_rev.blocks()[3], 1);
-    let mut g = vec![0.0; u.len()];
-    let t = sequence_energy(
-        &st_rev,
-        &plan_rev,
-        &w,
-        &u,
-        Some(&mut g),
-        &mut Default::default(),
-    );
+    let plan_rev = SeqPlan::with_sizes(&st_rev, 1, 3);
+    assert_eq!(plan_rev.cuts(), [1, 1]);
+    let (t, g) = run(&st_rev, &plan_rev, &u, 2);
     assert!((t.total() - t1.total()).abs() < 1e-12 * t1.total());
+    for (a, b) in g.iter().zip(&g1) {
+        assert!((a - b).abs() < 1e-12 * (1.0 + a.abs()), "{a} vs {b}");
+    }
 }
