@@ -15,10 +15,15 @@ use herdfit::progress::NoProgress;
 /// A 12-bird flock over 150 frames seen through a 40° view (birds leave and enter it), and the
 /// lift settings of the demo with tensors in f64.
 fn problem() -> (Observations, LiftConfig) {
-    let b = BoidsConfig::demo();
+    let (obs, cfg) = problem_of(BoidsConfig::demo());
+    assert!(obs.len() < 12 * 150, "some points leave the view");
+    (obs, cfg)
+}
+
+/// The flock of `b` and the demo's lift settings with tensors in f64.
+fn problem_of(b: BoidsConfig) -> (Observations, LiftConfig) {
     let syn = synth_flock(&b, &mut NoProgress).unwrap();
     let obs = Observations::new(&syn.tracks, &syn.camera).unwrap();
-    assert!(obs.len() < 12 * 150, "some points leave the view");
     let mut cfg = demo_config(&b);
     cfg.sequence.precision = Precision::F64;
     (obs, cfg)
@@ -33,18 +38,48 @@ fn with(cfg: &LiftConfig, how: Gradient) -> LiftConfig {
 #[test]
 fn the_analytic_gradient_equals_burn_autodiff_at_every_log_depth() {
     let (obs, cfg) = problem();
+    gradients_agree(&obs, &cfg);
+}
+
+#[test]
+fn the_analytic_gradient_equals_burn_autodiff_across_the_kernels_parallel_chunks() {
+    // 12,000 points: more than one chunk of the kernel's sweep (≥ 8,192 points each), so the
+    // chunks' hand-over at their boundary is checked against the reference too.
+    let (obs, cfg) = problem_of(BoidsConfig {
+        birds: 60,
+        frames: 200,
+        crop: false,
+        hfov: 80.0,
+        ..BoidsConfig::default()
+    });
+    assert_eq!(obs.len(), 12_000);
     let s = Structure::new(&obs, cfg.sequence.neighbours);
-    let fbf = frame_by_frame(&obs, &cfg, &mut NoProgress).unwrap();
+    let st = herdfit_kernels::lift::SeqStructure {
+        ray: &obs.ray,
+        vel: &s.vel,
+        acc: &s.acc,
+        pairs: &s.pairs,
+        align: &s.align,
+    };
+    let [tiles, chunks] = herdfit_kernels::lift::SeqPlan::new(&st).cuts();
+    assert!(tiles >= 20 && chunks == 2, "{tiles} tiles, {chunks} chunks");
+    gradients_agree(&obs, &cfg);
+}
+
+/// Both gradients and every term at the frame-by-frame start and at a squeezed flock.
+fn gradients_agree(obs: &Observations, cfg: &LiftConfig) {
+    let s = Structure::new(obs, cfg.sequence.neighbours);
+    let fbf = frame_by_frame(obs, cfg, &mut NoProgress).unwrap();
     // Two points: the frame-by-frame start (large accelerations) and its depths squeezed to 2 %
     // of their spread around the median, where pairs come inside d_sep (the separation hinge).
     let mut med = fbf.clone();
     med.sort_by(f64::total_cmp);
     let m = med[med.len() / 2];
     let squeezed: Vec<f64> = fbf.iter().map(|d| m + 0.02 * (d - m)).collect();
-    let ca = with(&cfg, Gradient::Analytic);
-    let cd = with(&cfg, Gradient::Autodiff);
-    let mut analytic = Energy::new(&obs, &s, &ca).unwrap();
-    let mut autodiff = Energy::new(&obs, &s, &cd).unwrap();
+    let ca = with(cfg, Gradient::Analytic);
+    let cd = with(cfg, Gradient::Autodiff);
+    let mut analytic = Energy::new(obs, &s, &ca).unwrap();
+    let mut autodiff = Energy::new(obs, &s, &cd).unwrap();
     for depth in [&fbf, &squeezed] {
         let u: Vec<f64> = depth.iter().map(|d| d.ln()).collect();
         let (mut ga, mut gd) = (vec![0.0; u.len()], vec![0.0; u.len()]);
