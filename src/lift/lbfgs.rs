@@ -32,31 +32,70 @@ pub struct LbfgsLog {
 /// the same bytes for any thread count; vectors of one chunk or less run on the calling thread.
 const CHUNK: usize = 16_384;
 
+/// The sums `chunk(c)` of the chunks of [`CHUNK`] elements of a vector of `n` added in order (one
+/// chunk: its sum alone) — [`dot`]'s grouping, which every fused pass keeps so that it gives the
+/// same bytes. Chunks run in parallel for long vectors.
+fn chunked(n: usize, chunk: impl Fn(usize) -> f64 + Send + Sync) -> f64 {
+    use rayon::prelude::*;
+    if n <= CHUNK {
+        return chunk(0);
+    }
+    let parts: Vec<f64> = (0..n.div_ceil(CHUNK)).into_par_iter().map(chunk).collect();
+    parts.iter().sum()
+}
+
 /// a · b, in chunks of [`CHUNK`] added in order.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let r = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(a.len());
+    chunked(a.len(), |c| {
+        let r = r(c);
+        a[r.clone()].iter().zip(&b[r]).map(|(x, y)| x * y).sum()
+    })
+}
+
+/// One pass over `d`: d_i = update(d_i, x_i) for every i, returning Σ_i w_i · d_i (new) grouped
+/// as [`dot`] (`w` empty: 0). The two-loop recursion's axpy and the next pair's dot product in
+/// one read of `d` instead of two.
+fn update_dot(d: &mut [f64], x: &[f64], w: &[f64], update: impl Fn(f64, f64) -> f64 + Sync) -> f64 {
     use rayon::prelude::*;
-    let one = |(a, b): (&[f64], &[f64])| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
-    if a.len() <= CHUNK {
-        return one((a, b));
+    let one = |(ds, xs, ws): (&mut [f64], &[f64], &[f64])| -> f64 {
+        if ws.is_empty() {
+            ds.iter_mut().zip(xs).for_each(|(q, &v)| *q = update(*q, v));
+            return 0.0;
+        }
+        ds.iter_mut()
+            .zip(xs)
+            .zip(ws)
+            .map(|((q, &v), &wi)| {
+                *q = update(*q, v);
+                wi * *q
+            })
+            .sum()
+    };
+    if d.len() <= CHUNK {
+        return one((d, x, w));
     }
-    let parts: Vec<f64> = a
-        .par_chunks(CHUNK)
-        .zip(b.par_chunks(CHUNK))
-        .map(one)
+    let ws: Vec<&[f64]> = if w.is_empty() {
+        vec![&[][..]; d.len().div_ceil(CHUNK)]
+    } else {
+        w.chunks(CHUNK).collect()
+    };
+    let parts: Vec<f64> = d
+        .par_chunks_mut(CHUNK)
+        .zip(x.par_chunks(CHUNK))
+        .zip(ws)
+        .map(|((ds, xs), ws)| one((ds, xs, ws)))
         .collect();
-    parts.iter().sum()
+    if w.is_empty() {
+        0.0
+    } else {
+        parts.iter().sum()
+    }
 }
 
 /// y_i = f(y_i, x_i) for every i (element-wise, in parallel chunks for long vectors).
 fn zip_map(y: &mut [f64], x: &[f64], f: impl Fn(f64, f64) -> f64 + Sync) {
-    use rayon::prelude::*;
-    if y.len() <= CHUNK {
-        y.iter_mut().zip(x).for_each(|(a, &b)| *a = f(*a, b));
-        return;
-    }
-    y.par_chunks_mut(CHUNK)
-        .zip(x.par_chunks(CHUNK))
-        .for_each(|(ys, xs)| ys.iter_mut().zip(xs).for_each(|(a, &b)| *a = f(*a, b)));
+    update_dot(y, x, &[], f);
 }
 
 /// out_i = f(a_i, b_i) for every i (element-wise, in parallel chunks for long vectors).
@@ -77,15 +116,95 @@ fn zip_into(out: &mut [f64], a: &[f64], b: &[f64], f: impl Fn(f64, f64) -> f64 +
         });
 }
 
+/// s = a − x and y = b − g in one pass, with sᵀy, yᵀy and sᵀs grouped as [`dot`].
+fn pair_of(
+    s: &mut [f64],
+    y: &mut [f64],
+    (a, x, b, g): (&[f64], &[f64], &[f64], &[f64]),
+) -> [f64; 3] {
+    use rayon::prelude::*;
+    let one = |(ss, ys, c): (&mut [f64], &mut [f64], usize)| -> [f64; 3] {
+        let at = c * CHUNK;
+        for (k, (si, yi)) in ss.iter_mut().zip(ys.iter_mut()).enumerate() {
+            *si = a[at + k] - x[at + k];
+            *yi = b[at + k] - g[at + k];
+        }
+        // The three sums in dot's order, while the chunk is in cache.
+        let sy: f64 = ss.iter().zip(ys.iter()).map(|(p, q)| p * q).sum();
+        let yy: f64 = ys.iter().map(|q| q * q).sum();
+        let s2: f64 = ss.iter().map(|p| p * p).sum();
+        [sy, yy, s2]
+    };
+    let parts: Vec<[f64; 3]> = if s.len() <= CHUNK {
+        vec![one((s, y, 0))]
+    } else {
+        s.par_chunks_mut(CHUNK)
+            .zip(y.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(c, (ss, ys))| one((ss, ys, c)))
+            .collect()
+    };
+    if parts.len() == 1 {
+        return parts[0];
+    }
+    [0, 1, 2].map(|k| parts.iter().map(|p| p[k]).sum())
+}
+
 /// Armijo constant and the step's shrink factor of the line search.
 const C1: f64 = 1e-4;
 const SHRINK: f64 = 0.5;
 const MAX_BACKTRACK: usize = 30;
 
+/// One stored pair: s, y, 1 / sᵀy, and sᵀy / yᵀy (the initial Hessian scale γ it gives).
+type Pair = (Vec<f64>, Vec<f64>, f64, f64);
+
+/// The two-loop recursion (Nocedal & Wright, Algorithm 7.4): d = −H g for the history `hist`
+/// (oldest first), returning the slope g · d. Each pair's axpy is fused with the next pair's dot
+/// product (one pass over d per pair and loop instead of two), and the initial scale, the final
+/// negation and the slope likewise; every sum is grouped as [`dot`] groups it, so the bytes are
+/// those of the textbook loops (`the_fused_two_loop_recursion_gives_the_textbook_bytes`).
+fn direction(
+    hist: &std::collections::VecDeque<Pair>,
+    g: &[f64],
+    d: &mut [f64],
+    alpha: &mut [f64],
+) -> f64 {
+    let m = hist.len();
+    // s of pair i, or nothing.
+    let s_at = |i: Option<usize>| i.map_or(&[][..], |i| &hist[i].0[..]);
+    // d = g, with s_newest · d.
+    let mut next = update_dot(d, g, s_at(m.checked_sub(1)), |_, gi| gi);
+    for i in (0..m).rev() {
+        let a = hist[i].2 * next;
+        alpha[i] = a;
+        next = update_dot(d, &hist[i].1, s_at(i.checked_sub(1)), |qi, yi| qi - a * yi);
+    }
+    if m == 0 {
+        let gamma = 1.0 / dot(g, g).sqrt().max(1e-300);
+        zip_map(d, g, |qi, _| qi * gamma);
+        return update_dot(d, g, g, |qi, _| -qi);
+    }
+    // d = γ d (γ = sᵀy / yᵀy of the newest pair), with y_oldest · d.
+    let gamma = hist[m - 1].3;
+    next = update_dot(d, g, &hist[0].1, |qi, _| qi * gamma);
+    for i in 0..m {
+        let (a, b) = (alpha[i], hist[i].2 * next);
+        if i + 1 < m {
+            next = update_dot(d, &hist[i].0, &hist[i + 1].1, |qi, si| qi + (a - b) * si);
+        } else {
+            // The last pair, the negation and the slope g · d in one pass.
+            return update_dot(d, &hist[i].0, g, |qi, si| -(qi + (a - b) * si));
+        }
+    }
+    unreachable!("m > 0")
+}
+
 impl Lbfgs {
     /// Minimises `f` from `x`: `f(x, g)` returns the value at `x` and writes the gradient into `g`.
     /// `x` holds the best point on return. `on_iteration` sees the iteration number and the value.
-    /// Every vector is allocated once per call (the history's pairs are recycled).
+    /// Every vector is allocated once per call (the history's pairs are recycled), and each
+    /// iteration makes about half the passes over its vectors of the textbook form ([`direction`],
+    /// [`pair_of`]) with the same bytes.
     pub fn minimise(
         &self,
         x: &mut [f64],
@@ -97,32 +216,16 @@ impl Lbfgs {
         let mut fx = f(x, &mut g)?;
         let start = fx;
         let mut evaluations = 1;
-        // (s, y, 1 / sᵀy), oldest first.
-        let mut hist: std::collections::VecDeque<(Vec<f64>, Vec<f64>, f64)> = Default::default();
+        // Oldest first.
+        let mut hist: std::collections::VecDeque<Pair> = Default::default();
         let (mut d, mut trial, mut gt) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        let mut alpha = Vec::with_capacity(self.memory);
+        let mut xv = x.to_vec();
+        let mut alpha = vec![0.0; self.memory];
         let mut spare: Option<(Vec<f64>, Vec<f64>)> = None;
         let mut done = 0;
         for it in 0..self.iterations {
             // Two-loop recursion: d = −H g.
-            d.copy_from_slice(&g);
-            alpha.clear();
-            for (s, y, rho) in hist.iter().rev() {
-                let a = rho * dot(s, &d);
-                zip_map(&mut d, y, |qi, yi| qi - a * yi);
-                alpha.push(a);
-            }
-            let gamma = match hist.back() {
-                Some((s, y, _)) => dot(s, y) / dot(y, y).max(1e-300),
-                None => 1.0 / dot(&g, &g).sqrt().max(1e-300),
-            };
-            zip_map(&mut d, &g, |qi, _| qi * gamma);
-            for ((s, y, rho), a) in hist.iter().zip(alpha.iter().rev()) {
-                let b = rho * dot(y, &d);
-                zip_map(&mut d, s, |qi, si| qi + (a - b) * si);
-            }
-            zip_map(&mut d, &g, |qi, _| -qi);
-            let mut slope = dot(&g, &d);
+            let mut slope = direction(&hist, &g, &mut d, &mut alpha);
             if slope >= 0.0 || !slope.is_finite() {
                 // Not a descent direction: restart from steepest descent.
                 hist.clear();
@@ -137,7 +240,7 @@ impl Lbfgs {
             let mut step = 1.0;
             let mut accepted = None;
             for _ in 0..MAX_BACKTRACK {
-                zip_into(&mut trial, x, &d, |xi, di| xi + step * di);
+                zip_into(&mut trial, &xv, &d, |xi, di| xi + step * di);
                 let ft = f(&trial, &mut gt)?;
                 evaluations += 1;
                 if ft.is_finite() && ft <= fx + C1 * step * slope {
@@ -151,19 +254,17 @@ impl Lbfgs {
             };
             // s = trial − x and y = gt − g, in recycled storage (the pair the memory last dropped).
             let (mut s, mut y) = spare.take().unwrap_or_else(|| (vec![0.0; n], vec![0.0; n]));
-            zip_into(&mut s, &trial, x, |a, b| a - b);
-            zip_into(&mut y, &gt, &g, |a, b| a - b);
-            let sy = dot(&s, &y);
-            if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
+            let [sy, yy, ss] = pair_of(&mut s, &mut y, (&trial, &xv, &gt, &g));
+            if sy > 1e-12 * yy.sqrt() * ss.sqrt() {
                 if hist.len() == self.memory {
-                    spare = hist.pop_front().map(|(s, y, _)| (s, y));
+                    spare = hist.pop_front().map(|(s, y, _, _)| (s, y));
                 }
-                hist.push_back((s, y, 1.0 / sy));
+                hist.push_back((s, y, 1.0 / sy, sy / yy.max(1e-300)));
             } else {
                 spare = Some((s, y));
             }
             let gain = fx - ft;
-            x.copy_from_slice(&trial);
+            std::mem::swap(&mut xv, &mut trial);
             fx = ft;
             std::mem::swap(&mut g, &mut gt);
             done = it + 1;
@@ -172,6 +273,7 @@ impl Lbfgs {
                 break;
             }
         }
+        x.copy_from_slice(&xv);
         Ok(LbfgsLog {
             iterations: done,
             evaluations,
@@ -184,6 +286,63 @@ impl Lbfgs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The textbook two-loop recursion with separate dot and axpy passes (the code before the
+    /// fusion), for the bytes the fused one must give.
+    fn textbook(hist: &std::collections::VecDeque<Pair>, g: &[f64], d: &mut [f64]) -> f64 {
+        d.copy_from_slice(g);
+        let mut alpha = Vec::new();
+        for (s, y, rho, _) in hist.iter().rev() {
+            let a = rho * dot(s, d);
+            zip_map(d, y, |qi, yi| qi - a * yi);
+            alpha.push(a);
+        }
+        let gamma = match hist.back() {
+            Some((s, y, _, _)) => dot(s, y) / dot(y, y).max(1e-300),
+            None => 1.0 / dot(g, g).sqrt().max(1e-300),
+        };
+        zip_map(d, g, |qi, _| qi * gamma);
+        for ((s, y, rho, _), a) in hist.iter().zip(alpha.iter().rev()) {
+            let b = rho * dot(y, d);
+            zip_map(d, s, |qi, si| qi + (a - b) * si);
+        }
+        zip_map(d, g, |qi, _| -qi);
+        dot(g, d)
+    }
+
+    #[test]
+    fn the_fused_two_loop_recursion_gives_the_textbook_bytes() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // One chunk and several (with a short last one).
+        for n in [1000, 3 * CHUNK + 123] {
+            let mut v =
+                |k: f64| -> Vec<f64> { (0..n).map(|_| k * rng.gen_range(-1.0..1.0)).collect() };
+            let g = v(1.0);
+            let mut hist: std::collections::VecDeque<Pair> = Default::default();
+            for m in 0..=4 {
+                let (mut d1, mut d2) = (vec![0.0; n], vec![0.0; n]);
+                let mut alpha = vec![0.0; 4];
+                let fused = direction(&hist, &g, &mut d1, &mut alpha);
+                let plain = textbook(&hist, &g, &mut d2);
+                assert_eq!(fused.to_bits(), plain.to_bits(), "n {n}, m {m}");
+                assert!(
+                    d1.iter().zip(&d2).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "n {n}, m {m}"
+                );
+                // A new pair (y ≈ s: positive curvature), with pair_of's sums.
+                let (x, trial, gt) = (v(1.0), v(1.0), v(0.1));
+                let (mut s, mut y) = (vec![0.0; n], vec![0.0; n]);
+                let gy: Vec<f64> = (0..n).map(|i| gt[i] - (trial[i] - x[i])).collect();
+                let [sy, yy, ss] = pair_of(&mut s, &mut y, (&trial, &x, &g, &gy));
+                assert_eq!(
+                    [sy, yy, ss].map(f64::to_bits),
+                    [dot(&s, &y), dot(&y, &y), dot(&s, &s)].map(f64::to_bits)
+                );
+                hist.push_back((s, y, 1.0 / sy, sy / yy.max(1e-300)));
+            }
+        }
+    }
 
     #[test]
     fn minimises_an_ill_conditioned_rosenbrock_chain() {
