@@ -63,13 +63,6 @@ pub struct Tree<const D: usize> {
     nodes: Vec<Node>,
 }
 
-/// (squared distance, position) ordered by distance, then the row `rows[position]`.
-#[inline]
-fn cmp(rows: &[u32], a: &(f64, u32), b: &(f64, u32)) -> Ordering {
-    a.0.total_cmp(&b.0)
-        .then_with(|| rows[a.1 as usize].cmp(&rows[b.1 as usize]))
-}
-
 /// (squared distance, row) ordered by distance, then row.
 fn cmp_rows(a: &(f64, u32), b: &(f64, u32)) -> Ordering {
     a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
@@ -167,22 +160,25 @@ impl<const D: usize> Tree<D> {
         let mut off = [0.0; D];
         let qn = q.iter().map(|v| v * v).sum::<f64>().sqrt();
         let q32 = q.map(|v| v as f32);
-        let mut best = Best {
-            k,
-            bound: f64::INFINITY,
-            buf: out,
-            rows: &self.rows,
-        };
-        let query = Query {
-            q,
-            q32: &q32,
-            // |‖x̃ − q̃‖ − ‖x − q‖| ≤ 2⁻²⁴ (‖x‖ + ‖q‖) for the f32 roundings x̃, q̃.
-            delta: 1.2e-7 * (self.max_norm + qn),
-        };
-        self.search(0, &query, &mut off, 0.0, &mut best);
-        best.cut();
-        let rows = &self.rows;
-        out.sort_unstable_by(|a, b| cmp(rows, a, b));
+        KEYS.with_borrow_mut(|keys| {
+            keys.clear();
+            let mut best = Best {
+                k,
+                bound: f64::INFINITY,
+                buf: keys,
+                rows: &self.rows,
+            };
+            let query = Query {
+                q,
+                q32: &q32,
+                // |‖x̃ − q̃‖ − ‖x − q‖| ≤ 2⁻²⁴ (‖x‖ + ‖q‖) for the f32 roundings x̃, q̃.
+                delta: 1.2e-7 * (self.max_norm + qn),
+            };
+            self.search(0, &query, &mut off, 0.0, &mut best);
+            best.cut();
+            keys.sort_unstable();
+            out.extend(keys.iter().map(|&key| unkey(key)));
+        });
     }
 
     /// The points in tree order, row-major.
@@ -270,37 +266,55 @@ fn block_distances<const D: usize>(block: &[f32], q: &[f32; D]) -> [f32; LEAF] {
 }
 
 /// The candidates of one query: every point offered no farther than `bound` is kept in `buf`;
-/// when `buf` holds `2k`, a selection cuts it to the `k` best (by [`cmp`]) and `bound` becomes
+/// when `buf` holds `2k`, a selection cuts it to the `k` best (by [`key`]) and `bound` becomes
 /// the k-th distance. Cheaper than a heap when many candidates arrive (a query outside the
 /// samples' range), and exact: a point beyond the k-th distance cannot be among the k best.
 struct Best<'a> {
     k: usize,
     bound: f64,
-    buf: &'a mut Vec<(f64, u32)>,
+    buf: &'a mut Vec<u128>,
     rows: &'a [u32],
+}
+
+thread_local! {
+    /// The candidate keys of this thread's queries (no allocation once they hold `2k`).
+    static KEYS: std::cell::RefCell<Vec<u128>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A candidate as one integer ordered by distance, then row: a squared
+/// distance is never negative, so its bits order like its value; then the row, then the
+/// position (which the row determines), each in its own bits.
+#[inline]
+fn key(d: f64, row: u32, pos: u32) -> u128 {
+    (u128::from(d.to_bits()) << 64) | (u128::from(row) << 32) | u128::from(pos)
+}
+
+/// (squared distance, position) of a [`key`].
+#[inline]
+fn unkey(k: u128) -> (f64, u32) {
+    (f64::from_bits((k >> 64) as u64), k as u32)
 }
 
 impl Best<'_> {
     #[inline]
     fn offer(&mut self, d: f64, pos: u32) {
         if d <= self.bound {
-            self.buf.push((d, pos));
+            self.buf.push(key(d, self.rows[pos as usize], pos));
             if self.buf.len() >= 2 * self.k {
                 self.cut();
             }
         }
     }
 
-    /// Keeps the `k` best and tightens the bound (once `k` are known).
+    /// Keeps the `k` best and tightens the bound to the k-th distance (once `k` are known).
     fn cut(&mut self) {
-        let (k, rows) = (self.k, self.rows);
+        let k = self.k;
         if self.buf.len() > k {
-            self.buf
-                .select_nth_unstable_by(k - 1, |a, b| cmp(rows, a, b));
+            self.buf.select_nth_unstable(k - 1);
             self.buf.truncate(k);
         }
         if self.buf.len() == k {
-            self.bound = self.buf.iter().map(|h| h.0).fold(0.0, f64::max);
+            self.bound = self.buf.iter().map(|&h| unkey(h).0).fold(0.0, f64::max);
         }
     }
 }
