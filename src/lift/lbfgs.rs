@@ -203,8 +203,8 @@ impl Lbfgs {
     /// Minimises `f` from `x`: `f(x, g)` returns the value at `x` and writes the gradient into `g`.
     /// `x` holds the best point on return. `on_iteration` sees the iteration number and the value.
     /// Every vector is allocated once per call (the history's pairs are recycled), and each
-    /// iteration makes about half the passes over its vectors of the textbook form ([`direction`],
-    /// [`pair_of`]) with the same bytes.
+    /// iteration makes about half the passes over its vectors of the textbook form (`direction`,
+    /// `pair_of`) with the same bytes.
     pub fn minimise(
         &self,
         x: &mut [f64],
