@@ -23,7 +23,7 @@ const CHUNK: usize = 8192;
 /// pairs and ∂E/∂u of tile t − 2 — instead of one pass over the whole problem per term, which
 /// streams it from memory a dozen times (BENCHMARKS.md, "Lift").
 ///
-/// Tiles are grouped into **chunks** of at least [`CHUNK`] observations and two tiles, swept in
+/// Tiles are grouped into **chunks** of at least 8192 observations and two tiles, swept in
 /// parallel. A chunk's first tile reaches into the previous chunk's last one: it recomputes the
 /// positions and velocities it reads there from the log-depths, and its gradient contributions
 /// there are handed over in order and added by their owner after the sweep. Each entry's
