@@ -48,19 +48,35 @@ pub struct SeqPlan {
     pub(super) chunks: Vec<usize>,
 }
 
-/// Tile starts of a list whose entry e is in tile `key(e)`, if the keys never decrease and every
-/// entry passes `ok`.
-fn starts_of<E>(
-    list: &[E],
+/// Which index of an entry decides its tile, and how far back the other may lie.
+#[derive(Clone, Copy)]
+enum Rule {
+    /// The second (the later velocity or observation); the first in that tile or the one before.
+    Later,
+    /// The first; the second in the same tile.
+    Same,
+}
+
+/// Tile starts of a list of index pairs, the tile of index i being `tile(i)`, if every entry
+/// follows `rule` and the entries' tiles never decrease.
+fn starts_of(
+    list: &[(usize, usize)],
     tiles: usize,
-    key: impl Fn(&E) -> usize,
-    ok: impl Fn(&E, usize) -> bool,
+    tile: impl Fn(usize) -> Option<usize>,
+    rule: Rule,
 ) -> Option<Vec<usize>> {
     let mut starts = Vec::with_capacity(tiles + 1);
     let mut last = 0;
-    for (i, e) in list.iter().enumerate() {
-        let t = key(e);
-        if t < last || !ok(e, t) {
+    for (i, &(a, b)) in list.iter().enumerate() {
+        let (t, o) = match rule {
+            Rule::Later => (tile(b)?, tile(a)?),
+            Rule::Same => (tile(a)?, tile(b)?),
+        };
+        let ok = match rule {
+            Rule::Later => o <= t && o + 1 >= t,
+            Rule::Same => o == t,
+        };
+        if t < last || !ok {
             return None;
         }
         while starts.len() <= t {
@@ -129,36 +145,15 @@ impl SeqPlan {
             tile_of[obs[t]..obs[t + 1]].fill(t);
         }
         let of = |i: usize| tile_of.get(i).copied();
-        let near = |a: Option<usize>, t: usize| a.is_some_and(|a| a <= t && a + 1 >= t);
-        let vel = starts_of(
-            st.vel,
-            tiles,
-            |&(_, c)| of(c).unwrap_or(0),
-            |&(p, c), t| of(c).is_some() && near(of(p), t),
-        )?;
+        let vel = starts_of(st.vel, tiles, of, Rule::Later)?;
         let mut vtile = vec![0; nv];
         for t in 0..tiles {
             vtile[vel[t]..vel[t + 1]].fill(t);
         }
         let vof = |k: usize| vtile.get(k).copied();
-        let acc = starts_of(
-            st.acc,
-            tiles,
-            |&(_, b)| vof(b).unwrap_or(0),
-            |&(a, b), t| vof(b).is_some() && near(vof(a), t),
-        )?;
-        let pairs = starts_of(
-            st.pairs,
-            tiles,
-            |&(i, _)| of(i).unwrap_or(0),
-            |&(i, j), t| of(i).is_some() && of(j) == Some(t),
-        )?;
-        let align = starts_of(
-            st.align,
-            tiles,
-            |&(a, _)| vof(a).unwrap_or(0),
-            |&(a, b), t| vof(a).is_some() && vof(b) == Some(t),
-        )?;
+        let acc = starts_of(st.acc, tiles, vof, Rule::Later)?;
+        let pairs = starts_of(st.pairs, tiles, of, Rule::Same)?;
+        let align = starts_of(st.align, tiles, vof, Rule::Same)?;
         // Chunks of ≥ `chunk` observations and ≥ 2 tiles (a chunk's first tile must finish its
         // velocity backward within the chunk's own sweep: its hand-over is read by the previous
         // chunk).
