@@ -6,8 +6,9 @@
 //! multiple of 16 points nearest the median (so that every leaf is one 16-point block). The PCA
 //! states have most of their variance in the leading components, so splitting the widest
 //! dimension prunes far more than the round-robin splits of kiddo's trees (which, at ~9 levels
-//! over 10–12 dimensions, split each dimension about once); the query keeps its candidates in
-//! the caller's buffer, cut to the k best by selection, and allocates nothing. The dimension is
+//! over 10–12 dimensions, split each dimension about once); the query keeps its candidates as
+//! integer keys (distance bits, row, position) in a per-thread buffer, cut to the k best by
+//! selection, and allocates nothing once that buffer has grown. The dimension is
 //! a const generic; [`StateTree`] picks one of 1–12 at run time (the paper's PCA keeps 8–12).
 //! Ties in distance are ordered by row, so the result equals [`brute_force`]'s exactly.
 //!
@@ -281,9 +282,9 @@ thread_local! {
     static KEYS: std::cell::RefCell<Vec<u128>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// A candidate as one integer ordered by distance, then row: a squared
-/// distance is never negative, so its bits order like its value; then the row, then the
-/// position (which the row determines), each in its own bits.
+/// A candidate as one integer ordered by distance, then row: a squared distance is never
+/// negative, so its bits order like its value; then the row, then the position (which the row
+/// determines), each in its own bits.
 #[inline]
 fn key(d: f64, row: u32, pos: u32) -> u128 {
     (u128::from(d.to_bits()) << 64) | (u128::from(row) << 32) | u128::from(pos)

@@ -32,25 +32,19 @@ pub struct LbfgsLog {
 /// the same bytes for any thread count; vectors of one chunk or less run on the calling thread.
 const CHUNK: usize = 16_384;
 
-/// The sums `chunk(c)` of the chunks of [`CHUNK`] elements of a vector of `n` added in order (one
-/// chunk: its sum alone) — [`dot`]'s grouping, which every fused pass keeps so that it gives the
-/// same bytes. Chunks run in parallel for long vectors.
-fn chunked(n: usize, chunk: impl Fn(usize) -> f64 + Send + Sync) -> f64 {
-    use rayon::prelude::*;
-    if n <= CHUNK {
-        return chunk(0);
-    }
-    let parts: Vec<f64> = (0..n.div_ceil(CHUNK)).into_par_iter().map(chunk).collect();
-    parts.iter().sum()
-}
-
 /// a · b, in chunks of [`CHUNK`] added in order.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let r = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(a.len());
-    chunked(a.len(), |c| {
-        let r = r(c);
-        a[r.clone()].iter().zip(&b[r]).map(|(x, y)| x * y).sum()
-    })
+    use rayon::prelude::*;
+    let one = |(a, b): (&[f64], &[f64])| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
+    if a.len() <= CHUNK {
+        return one((a, b));
+    }
+    let parts: Vec<f64> = a
+        .par_chunks(CHUNK)
+        .zip(b.par_chunks(CHUNK))
+        .map(one)
+        .collect();
+    parts.iter().sum()
 }
 
 /// One pass over `d`: d_i = update(d_i, x_i) for every i, returning Σ_i w_i · d_i (new) grouped
@@ -75,16 +69,16 @@ fn update_dot(d: &mut [f64], x: &[f64], w: &[f64], update: impl Fn(f64, f64) -> 
     if d.len() <= CHUNK {
         return one((d, x, w));
     }
-    let ws: Vec<&[f64]> = if w.is_empty() {
-        vec![&[][..]; d.len().div_ceil(CHUNK)]
-    } else {
-        w.chunks(CHUNK).collect()
-    };
     let parts: Vec<f64> = d
         .par_chunks_mut(CHUNK)
         .zip(x.par_chunks(CHUNK))
-        .zip(ws)
-        .map(|((ds, xs), ws)| one((ds, xs, ws)))
+        .enumerate()
+        .map(|(c, (ds, xs))| {
+            let ws = w
+                .get(c * CHUNK..)
+                .map_or(&[][..], |w| &w[..ds.len().min(w.len())]);
+            one((ds, xs, ws))
+        })
         .collect();
     if w.is_empty() {
         0.0
