@@ -391,13 +391,12 @@ pub fn sequence_energy(
     ws.dq.resize(n, [0.0; 4]);
     ws.vel.resize(nv, Vel::default());
     ws.gq.resize(if want { n } else { 0 }, [0.0; 4]);
-    let mut no_grad = Vec::new();
     let gu = match grad {
         Some(g) => {
             assert_eq!(g.len(), n, "one gradient entry per log-depth");
             g
         }
-        None => &mut no_grad[..],
+        None => &mut [],
     };
     let vt = w.v_target;
     let s = Shared {
