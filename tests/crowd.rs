@@ -190,6 +190,37 @@ fn kd_tree_knn_equals_brute_force() {
             assert_eq!(got_far, brute_force(&far, 10, &q, k), "far points, k {k}");
         }
     }
+    // Coordinates near 10³⁹, beyond f32: every point is a candidate and
+    // the exact distances decide.
+    let huge: Vec<f64> = (0..500 * 4)
+        .map(|i| 1.0e39 * (1.0 + (i % 4) as f64) + rng.gen_range(-1e36..1e36))
+        .collect();
+    let tree = StateTree::build(&huge, 4).unwrap();
+    for _ in 0..5 {
+        let q: Vec<f64> = (0..4)
+            .map(|k| 1.0e39 * (1.0 + k as f64) + rng.gen_range(-2e36..2e36))
+            .collect();
+        for k in [1, 30, 100] {
+            tree.nearest(&q, k, &mut got_far);
+            assert_eq!(got_far, brute_force(&huge, 4, &q, k), "huge points, k {k}");
+        }
+    }
+    // Hundreds of copies of one point among the others: many candidates tie at the k-th
+    // distance, so the candidate buffer must grow rather than cut them.
+    let mut copies: Vec<f64> = (0..2000 * 6).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    for i in (0..2000).step_by(4) {
+        copies[i * 6..(i + 1) * 6].copy_from_slice(&[0.1, 0.2, 0.3, -0.1, 0.0, 0.5]);
+    }
+    let tree = StateTree::build(&copies, 6).unwrap();
+    for q in [
+        [0.1, 0.2, 0.3, -0.1, 0.0, 0.5],
+        [0.3, 0.2, 0.1, 0.0, 0.0, 0.4],
+    ] {
+        for k in [1, 100, 499, 500, 501, 700] {
+            tree.nearest(&q, k, &mut got_far);
+            assert_eq!(got_far, brute_force(&copies, 6, &q, k), "copies, k {k}");
+        }
+    }
     // Ties: a lattice with many equal distances; rows of equal distance come in row order.
     let lattice: Vec<f64> = (0..400)
         .flat_map(|i| [(i % 20) as f64, (i / 20) as f64])
@@ -220,7 +251,7 @@ fn tree_memory_is_linear_in_the_samples() {
     let per = a as f64 / 5000.0;
     assert!(
         per < 140.0,
-        "{per} bytes per 10-D sample (80 for the point, 40 for its f32 copy)"
+        "{per} bytes per 10-D sample (80 for the point, 40 for its f32 copy, ≈ 10 for the boxes)"
     );
     let ratio = b as f64 / a as f64;
     assert!(

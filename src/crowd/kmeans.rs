@@ -74,35 +74,11 @@ pub(super) fn kmeans_into(
     sum.resize(centres.len(), [0.0, 0.0, 0.0]);
     let (cs, sum, assign) = (&mut centres[..], &mut sum[..], &mut assign[..]);
     for it in 0..iters {
-        let mut changed = it == 0;
-        for (a, p) in assign.iter_mut().zip(pts) {
-            let mut best = 0;
-            let mut best_d = d2(*p, cs[0]);
-            for (c, m) in cs.iter().enumerate().skip(1) {
-                let dc = d2(*p, *m);
-                if dc < best_d {
-                    best = c;
-                    best_d = dc;
-                }
-            }
-            changed |= *a != best;
-            *a = best;
-        }
+        let changed = assign_nearest(pts, cs, assign) || it == 0;
         if !changed {
             break;
         }
-        // Per cluster, a masked sum over all points: no chain of loads and stores through
-        // one accumulator in memory, and the points are still added in their order.
-        for (c, s) in sum.iter_mut().enumerate() {
-            let mut t = [0.0, 0.0, 0.0];
-            for (a, p) in assign.iter().zip(pts) {
-                let m = f64::from(u8::from(*a == c));
-                t[0] += m * p[0];
-                t[1] += m * p[1];
-                t[2] += m;
-            }
-            *s = t;
-        }
+        cluster_sums(assign, pts, sum);
         for (m, s) in cs.iter_mut().zip(sum.iter()) {
             if s[2] > 0.0 {
                 *m = [s[0] / s[2], s[1] / s[2]];
@@ -125,4 +101,75 @@ pub(super) fn kmeans_into(
         kept += 1;
     }
     centres.truncate(kept);
+}
+
+/// Assigns each point to its nearest centre (the first of equally near ones); whether any
+/// assignment changed. Up to four centres held in registers, each point's choice made without
+/// branches.
+fn assign_nearest(pts: &[V2], cs: &[V2], assign: &mut [usize]) -> bool {
+    const R: usize = 4;
+    let mut changed = false;
+    if cs.len() > R {
+        for (a, p) in assign.iter_mut().zip(pts) {
+            let mut best = 0;
+            let mut best_d = d2(*p, cs[0]);
+            for (c, m) in cs.iter().enumerate().skip(1) {
+                let dc = d2(*p, *m);
+                if dc < best_d {
+                    best = c;
+                    best_d = dc;
+                }
+            }
+            changed |= *a != best;
+            *a = best;
+        }
+        return changed;
+    }
+    let n = cs.len();
+    let mut m = [[0.0f64; 2]; R];
+    m[..n].copy_from_slice(cs);
+    for (a, p) in assign.iter_mut().zip(pts) {
+        let mut best = 0;
+        let mut best_d = d2(*p, m[0]);
+        for (c, mc) in m.iter().enumerate().skip(1) {
+            let dc = d2(*p, *mc);
+            let nearer = c < n && dc < best_d;
+            best = if nearer { c } else { best };
+            best_d = if nearer { dc } else { best_d };
+        }
+        changed |= *a != best;
+        *a = best;
+    }
+    changed
+}
+
+/// Each cluster's sums (x, y, count) of its points, added in the points' order. Up to four
+/// clusters in one pass with every sum in a register: each point adds its coordinates to its
+/// own cluster's sums and 0 to the others' (a sum starts at +0 and so never becomes −0, and
+/// x + 0 = x for every other x, so the sums are those of the points alone). No chain of loads
+/// and stores through one accumulator in memory.
+fn cluster_sums(assign: &[usize], pts: &[V2], sum: &mut [[f64; 3]]) {
+    const R: usize = 4;
+    if sum.len() > R {
+        for (c, s) in sum.iter_mut().enumerate() {
+            let mut t = [0.0, 0.0, 0.0];
+            for (_, p) in assign.iter().zip(pts).filter(|(a, _)| **a == c) {
+                t[0] += p[0];
+                t[1] += p[1];
+                t[2] += 1.0;
+            }
+            *s = t;
+        }
+        return;
+    }
+    let mut t = [[0.0f64; 3]; R];
+    for (&a, p) in assign.iter().zip(pts) {
+        for (c, tc) in t.iter_mut().enumerate() {
+            let m = a == c;
+            tc[0] += if m { p[0] } else { 0.0 };
+            tc[1] += if m { p[1] } else { 0.0 };
+            tc[2] += if m { 1.0 } else { 0.0 };
+        }
+    }
+    sum.copy_from_slice(&t[..sum.len()]);
 }

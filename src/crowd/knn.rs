@@ -7,16 +7,18 @@
 //! states have most of their variance in the leading components, so splitting the widest
 //! dimension prunes far more than the round-robin splits of kiddo's trees (which, at ~9 levels
 //! over 10–12 dimensions, split each dimension about once); the query keeps its candidates as
-//! integer keys (distance bits, row, position) in a per-thread buffer, cut to the k best by
-//! selection, and allocates nothing once that buffer has grown. The dimension is
-//! a const generic; [`StateTree`] picks one of 1–12 at run time (the paper's PCA keeps 8–12).
-//! Ties in distance are ordered by row, so the result equals [`brute_force`]'s exactly.
+//! integer keys in per-thread buffers, cut by selection, and allocates nothing once those
+//! buffers have grown. The dimension is a const generic; [`StateTree`] picks one of 1–12 at run
+//! time (the paper's PCA keeps 8–12). Ties in distance are ordered by row, so the result equals
+//! [`brute_force`]'s exactly.
 //!
-//! A leaf's points are scanned first in f32, column by column in SIMD lanes (AVX2 where the CPU
-//! has it, through `pulp`'s run-time dispatch): half the bytes of the f64 points, which a query
-//! far from the samples streams almost entirely. Only the points whose f32 distance is within
-//! the bound widened by the roundings' proven allowance get their exact f64 distance, so the
-//! neighbours and distances are the f64 search's, bit for bit.
+//! The search works in f32 and proves its way back to f64. A leaf's points are also stored as
+//! f32, column by column, and their distances computed in SIMD lanes (AVX2 where the CPU has it,
+//! through `pulp`'s run-time dispatch). Candidates are kept by their f32 distance, and a subtree
+//! is skipped when its bounding box lies beyond what the k-th f32 distance so far proves about
+//! the k-th f64 distance. At the end, only the points whose f32 distance lies within the
+//! roundings' allowance of the k-th get their exact f64 distance (typically k and a few), so
+//! the neighbours and distances are the f64 search's, bit for bit.
 
 use crate::error::{Error, Result};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
@@ -62,6 +64,9 @@ pub struct Tree<const D: usize> {
     /// Row of each point in the input.
     rows: Vec<u32>,
     nodes: Vec<Node>,
+    /// Each node's bounding box (its points' lowest and highest coordinates, rounded outward
+    /// to f32), indexed like `nodes`: the search's lower bound on a subtree's distances.
+    boxes: Vec<([f32; D], [f32; D])>,
 }
 
 /// (squared distance, row) ordered by distance, then row.
@@ -74,8 +79,9 @@ impl<const D: usize> Tree<D> {
     pub fn new(pts: &[[f64; D]]) -> Tree<D> {
         let mut perm: Vec<u32> = (0..pts.len() as u32).collect();
         let mut nodes = Vec::with_capacity(2 * pts.len() / LEAF + 1);
+        let mut boxes = Vec::with_capacity(2 * pts.len() / LEAF + 1);
         if !pts.is_empty() {
-            Self::build(pts, &mut perm, 0, &mut nodes);
+            Self::build(pts, &mut perm, 0, &mut nodes, &mut boxes);
         }
         let mut cols = vec![0.0f32; pts.len().div_ceil(LEAF) * LEAF * D];
         for (pos, &i) in perm.iter().enumerate() {
@@ -91,6 +97,7 @@ impl<const D: usize> Tree<D> {
             pts: perm.iter().map(|&i| pts[i as usize]).collect(),
             rows: perm,
             nodes,
+            boxes,
             cols,
             max_norm,
             arch: pulp::Arch::new(),
@@ -98,7 +105,13 @@ impl<const D: usize> Tree<D> {
     }
 
     /// Builds the subtree of `perm` (which starts at tree position `at`); returns its node.
-    fn build(pts: &[[f64; D]], perm: &mut [u32], at: usize, nodes: &mut Vec<Node>) -> u32 {
+    fn build(
+        pts: &[[f64; D]],
+        perm: &mut [u32],
+        at: usize,
+        nodes: &mut Vec<Node>,
+        boxes: &mut Vec<([f32; D], [f32; D])>,
+    ) -> u32 {
         let me = nodes.len();
         nodes.push(Node {
             dim: u32::MAX,
@@ -106,15 +119,16 @@ impl<const D: usize> Tree<D> {
             a: at as u32,
             b: (at + perm.len()) as u32,
         });
-        if perm.len() <= LEAF {
-            return me as u32;
-        }
         let (mut lo, mut hi) = ([f64::INFINITY; D], [f64::NEG_INFINITY; D]);
         for &i in perm.iter() {
             for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(&pts[i as usize]) {
                 *l = l.min(*v);
                 *h = h.max(*v);
             }
+        }
+        boxes.push((lo.map(|v| -up32(-v)), hi.map(up32)));
+        if perm.len() <= LEAF {
+            return me as u32;
         }
         let mut dim = 0;
         for j in 1..D {
@@ -133,8 +147,8 @@ impl<const D: usize> Tree<D> {
         });
         let split = pts[perm[mid] as usize][dim];
         let (l, r) = perm.split_at_mut(mid);
-        let a = Self::build(pts, l, at, nodes);
-        let b = Self::build(pts, r, at + mid, nodes);
+        let a = Self::build(pts, l, at, nodes, boxes);
+        let b = Self::build(pts, r, at + mid, nodes, boxes);
         nodes[me] = Node {
             dim: dim as u32,
             split,
@@ -152,33 +166,57 @@ impl<const D: usize> Tree<D> {
 
     /// As [`Tree::nearest`] with each point given by its position in tree order (see
     /// [`Tree::points`]); the order is still by distance, then index.
+    ///
+    /// The search keeps its candidates by their f32 distances; the points that may be among
+    /// the `k` nearest in f64 (their f32 distance within the roundings' allowance of the k-th
+    /// f32 distance) then get their exact distance, so the result is [`brute_force`]'s.
     pub fn nearest_pos(&self, q: &[f64; D], k: usize, out: &mut Vec<(f64, u32)>) {
         out.clear();
         if k == 0 || self.nodes.is_empty() {
             return;
         }
         let k = k.min(self.pts.len());
-        let mut off = [0.0; D];
         let qn = q.iter().map(|v| v * v).sum::<f64>().sqrt();
         let q32 = q.map(|v| v as f32);
-        KEYS.with_borrow_mut(|keys| {
-            keys.clear();
+        // |‖x̃ − q̃‖ − ‖x − q‖| ≤ 2⁻²⁴ (‖x‖ + ‖q‖) for the f32 roundings x̃, q̃. Norms from 10¹⁸
+        // up may overflow f32's squares or its range (NaN distances): every point is then a
+        // candidate.
+        let huge = (self.max_norm + qn).partial_cmp(&1e18) != Some(Ordering::Less);
+        let delta = 1.2e-7 * (self.max_norm + qn);
+        CANDIDATES.with_borrow_mut(|cands| {
+            cands.clear();
             let mut best = Best {
                 k,
-                bound: f64::INFINITY,
-                buf: keys,
-                rows: &self.rows,
+                huge,
+                delta,
+                prune: f64::INFINITY,
+                reach: f32::INFINITY,
+                cut_at: if huge { usize::MAX } else { 2 * k },
+                buf: cands,
             };
-            let query = Query {
-                q,
-                q32: &q32,
-                // |‖x̃ − q̃‖ − ‖x − q‖| ≤ 2⁻²⁴ (‖x‖ + ‖q‖) for the f32 roundings x̃, q̃.
-                delta: 1.2e-7 * (self.max_norm + qn),
-            };
-            self.search(0, &query, &mut off, 0.0, &mut best);
+            let query = Query { q, q32: &q32 };
+            self.search(0, &query, &mut [0.0; D], 0.0, &mut best);
             best.cut();
-            keys.sort_unstable();
-            out.extend(keys.iter().map(|&key| unkey(key)));
+            let reach = best.reach;
+            KEYS.with_borrow_mut(|keys| {
+                keys.clear();
+                for &c in best.buf.iter() {
+                    let (d32, pos) = (f32::from_bits((c >> 32) as u32), c as u32);
+                    if huge || d32 <= reach {
+                        let mut d = 0.0;
+                        for (x, y) in self.pts[pos as usize].iter().zip(q) {
+                            d += (x - y) * (x - y);
+                        }
+                        keys.push(key(d, self.rows[pos as usize], pos));
+                    }
+                }
+                if keys.len() > k {
+                    keys.select_nth_unstable(k - 1);
+                    keys.truncate(k);
+                }
+                keys.sort_unstable();
+                out.extend(keys.iter().map(|&key| unkey(key)));
+            });
         });
     }
 
@@ -199,27 +237,18 @@ impl<const D: usize> Tree<D> {
             let (a, b) = (n.a as usize, n.b as usize);
             let block = &self.cols[a * D..(a + LEAF) * D];
             let d32 = self.arch.dispatch(|| block_distances::<D>(block, qq.q32));
-            // A point can be within the bound only if its f32 distance is within the bound
-            // widened by the roundings; those get the exact f64 distance (summed in order, as
-            // brute_force does), so the result is the f64 search's.
-            let reach = (best.bound.sqrt() + qq.delta).powi(2) * (1.0 + F32_SLACK);
-            let reach = if reach.is_finite() {
-                reach as f32
+            let reach = best.reach;
+            let mut inside = if best.huge {
+                u32::MAX
             } else {
-                f32::INFINITY
-            };
-            let mut inside = d32.iter().enumerate().fold(0u32, |m, (j, &d)| {
-                m | (u32::from(d <= reach || !d.is_finite()) << j)
-            }) & (u32::MAX >> (32 - (b - a)));
+                d32.iter()
+                    .enumerate()
+                    .fold(0u32, |m, (j, &d)| m | (u32::from(d <= reach) << j))
+            } & (u32::MAX >> (32 - (b - a)));
             while inside != 0 {
                 let j = inside.trailing_zeros() as usize;
                 inside &= inside - 1;
-                let p = &self.pts[a + j];
-                let mut d = 0.0;
-                for (x, y) in p.iter().zip(q) {
-                    d += (x - y) * (x - y);
-                }
-                best.offer(d, (a + j) as u32);
+                best.offer(d32[j], (a + j) as u32);
             }
             return;
         }
@@ -227,14 +256,28 @@ impl<const D: usize> Tree<D> {
         let diff = q[dim] - n.split;
         let (near, far) = if diff < 0.0 { (n.a, n.b) } else { (n.b, n.a) };
         self.search(near, qq, off, rd, best);
+        // The far side: first the cheap bound (the distance to its half-space, built up
+        // dimension by dimension), then its box's.
         let old = off[dim];
         let far_rd = rd - old * old + diff * diff;
-        // A little slack keeps a point tied with the k-th at equal distance despite rounding.
-        if far_rd <= best.bound * (1.0 + 1e-12) {
+        if far_rd <= best.prune && self.box_dist(far, q) <= best.prune {
             off[dim] = diff;
             self.search(far, qq, off, far_rd, best);
             off[dim] = old;
         }
+    }
+
+    /// Squared distance from `q` to node `node`'s bounding box: no more than the distance to
+    /// any of its points (each term is, and the terms are summed in the same order).
+    #[inline]
+    fn box_dist(&self, node: u32, q: &[f64; D]) -> f64 {
+        let (lo, hi) = &self.boxes[node as usize];
+        let mut d = 0.0;
+        for ((&l, &h), x) in lo.iter().zip(hi).zip(q) {
+            let t = (f64::from(l) - x).max(x - f64::from(h)).max(0.0);
+            d += t * t;
+        }
+        d
     }
 
     /// Memory held by the tree, in bytes (linear in the number of points).
@@ -243,14 +286,28 @@ impl<const D: usize> Tree<D> {
             + self.cols.len() * 4
             + self.rows.len() * 4
             + self.nodes.len() * std::mem::size_of::<Node>()
+            + self.boxes.len() * std::mem::size_of::<([f32; D], [f32; D])>()
     }
 }
 
-/// A query in f64 and f32, with the f32 distances' allowance (in distance, not squared).
+/// The smallest f32 no less than `v` (+∞ above f32's range).
+fn up32(v: f64) -> f32 {
+    let r = v as f32;
+    if f64::from(r) >= v {
+        r
+    } else if r == 0.0 {
+        f32::from_bits(1)
+    } else if r > 0.0 {
+        f32::from_bits(r.to_bits() + 1)
+    } else {
+        f32::from_bits(r.to_bits() - 1)
+    }
+}
+
+/// A query in f64 and f32.
 struct Query<'a, const D: usize> {
     q: &'a [f64; D],
     q32: &'a [f32; D],
-    delta: f64,
 }
 
 /// Squared f32 distances of one leaf's points (column by column, [`LEAF`] lanes) to `q`.
@@ -266,19 +323,29 @@ fn block_distances<const D: usize>(block: &[f32], q: &[f32; D]) -> [f32; LEAF] {
     acc
 }
 
-/// The candidates of one query: every point offered no farther than `bound` is kept in `buf`;
-/// when `buf` holds `2k`, a selection cuts it to the `k` best (by [`key`]) and `bound` becomes
-/// the k-th distance. Cheaper than a heap when many candidates arrive (a query outside the
-/// samples' range), and exact: a point beyond the k-th distance cannot be among the k best.
+/// The candidates of one query, kept by their f32 distances d̃ as keys (d̃ bits, position):
+/// every point offered with d̃ ≤ `reach` is kept in `buf`; when `buf` holds `cut_at`, a selection
+/// finds the k-th d̃, t, and the bounds tighten to what t proves (see [`Best::cut`]). Cheaper
+/// than a heap when many candidates arrive (a query outside the samples' range), and exact: a
+/// point dropped or pruned cannot be among the k nearest in f64.
 struct Best<'a> {
     k: usize,
-    bound: f64,
-    buf: &'a mut Vec<u128>,
-    rows: &'a [u32],
+    /// Coordinates so large that f32 squares may overflow: keep every point.
+    huge: bool,
+    /// The f32 distances' allowance, in distance (not squared).
+    delta: f64,
+    /// A subtree whose box is farther than this (squared, f64) holds none of the k nearest.
+    prune: f64,
+    /// A point whose f32 distance is beyond this cannot be among the k nearest.
+    reach: f32,
+    cut_at: usize,
+    buf: &'a mut Vec<u64>,
 }
 
 thread_local! {
-    /// The candidate keys of this thread's queries (no allocation once they hold `2k`).
+    /// The f32 candidate keys of this thread's queries (no allocation once they hold `2k`).
+    static CANDIDATES: std::cell::RefCell<Vec<u64>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// The exact candidate keys of this thread's queries.
     static KEYS: std::cell::RefCell<Vec<u128>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
@@ -298,25 +365,36 @@ fn unkey(k: u128) -> (f64, u32) {
 
 impl Best<'_> {
     #[inline]
-    fn offer(&mut self, d: f64, pos: u32) {
-        if d <= self.bound {
-            self.buf.push(key(d, self.rows[pos as usize], pos));
-            if self.buf.len() >= 2 * self.k {
-                self.cut();
-            }
+    fn offer(&mut self, d32: f32, pos: u32) {
+        self.buf
+            .push((u64::from(d32.to_bits()) << 32) | u64::from(pos));
+        if self.buf.len() >= self.cut_at {
+            self.cut();
         }
     }
 
-    /// Keeps the `k` best and tightens the bound to the k-th distance (once `k` are known).
+    /// With t the k-th smallest f32 distance kept (once `k` are known): at least k points lie
+    /// within f64 distance² `prune` = (√t (1 + ε) + δ)², so the k nearest do; a point within
+    /// that has f32 distance² at most `reach` = ((√prune + δ)(1 + ε))². Keeps the candidates
+    /// within `reach` and grows the buffer's limit when many tie near t.
     fn cut(&mut self) {
         let k = self.k;
-        if self.buf.len() > k {
-            self.buf.select_nth_unstable(k - 1);
-            self.buf.truncate(k);
+        if self.huge || self.buf.len() < k {
+            return;
         }
-        if self.buf.len() == k {
-            self.bound = self.buf.iter().map(|&h| unkey(h).0).fold(0.0, f64::max);
+        let (_, kth, _) = self.buf.select_nth_unstable(k - 1);
+        let t = f64::from(f32::from_bits((*kth >> 32) as u32));
+        let prune = ((t.sqrt() * (1.0 + F32_SLACK) + self.delta).powi(2)) * (1.0 + 1e-12);
+        let reach = ((prune.sqrt() + self.delta) * (1.0 + F32_SLACK)).powi(2);
+        // Rounded up to f32, so that the comparison in f32 keeps everything within it.
+        let r32 = up32(reach);
+        if r32 < self.reach {
+            self.reach = r32;
+            self.prune = prune;
         }
+        let r = self.reach;
+        self.buf.retain(|&c| f32::from_bits((c >> 32) as u32) <= r);
+        self.cut_at = (2 * self.buf.len()).max(2 * k);
     }
 }
 
