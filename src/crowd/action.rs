@@ -139,6 +139,8 @@ pub struct ActionModel {
     /// The samples' actions in the tree's order: a query reads the states and actions of its
     /// neighbours from memory the search has just touched.
     tree_actions: Vec<V2>,
+    /// Each of those actions in polar form ([`polar`]), computed once rather than per query.
+    tree_polar: Vec<Polar>,
 }
 
 /// Scratch buffers of one query (reused across queries of a thread: a query allocates nothing
@@ -154,7 +156,7 @@ pub struct Scratch {
     sums: Vec<[f64; 3]>,
     probs: Vec<f64>,
     lwr: LwrScratch,
-    polar: Vec<(f64, f64)>,
+    polar: Vec<Polar>,
 }
 
 /// The outcome of one query.
@@ -189,15 +191,17 @@ impl ActionModel {
             return Err(Error::invalid("samples: values are not finite"));
         }
         let tree = StateTree::build(&samples.states, samples.dims)?;
-        let tree_actions = tree
+        let tree_actions: Vec<V2> = tree
             .order()
             .iter()
             .map(|&i| samples.actions[i as usize])
             .collect();
+        let tree_polar = tree_actions.iter().map(|&a| polar(a)).collect();
         Ok(ActionModel {
             samples,
             tree,
             tree_actions,
+            tree_polar,
         })
     }
 
@@ -254,6 +258,7 @@ impl ActionModel {
             (&points[i * dims..(i + 1) * dims], acts[j], d2)
         };
         let lwr_out = lwr_by(s, members.len(), row, h2, cfg.ridge, &mut sc.lwr);
+        let tree_polar = &self.tree_polar;
         let action = attract_by(
             lwr_out,
             members.len(),
@@ -261,6 +266,7 @@ impl ActionModel {
                 let (_, a, d2) = row(r);
                 (a, d2)
             },
+            |r| tree_polar[nn[members[r]].1 as usize],
             h2,
             &AttractConfig {
                 c: cfg.attraction,
@@ -351,42 +357,67 @@ pub fn attract(
         out,
         rows.len(),
         |r| (rows[r].1, rows[r].2),
+        |r| polar(rows[r].1),
         h2,
         &AttractConfig { c, grid, limit },
         &mut Vec::new(),
     )
 }
 
-/// [`attract`] over `n` rows given by `row(r) = (action, squared state distance)`; `polar` is a
-/// reusable buffer.
+/// An action `a` in polar form: speed `|a|`, direction `atan2`, and the direction's cosine and
+/// sine (as `f64::cos`/`f64::sin` of that angle, not `a / |a|`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Polar {
+    pub speed: f64,
+    pub angle: f64,
+    pub cos: f64,
+    pub sin: f64,
+}
+
+/// [`Polar`] of `a`.
+pub fn polar(a: V2) -> Polar {
+    let angle = a[1].atan2(a[0]);
+    Polar {
+        speed: a[0].hypot(a[1]),
+        angle,
+        cos: angle.cos(),
+        sin: angle.sin(),
+    }
+}
+
+/// [`attract`] over `n` rows given by `row(r) = (action, squared state distance)` and
+/// `polar_of(r)`, the row's action in polar form; `polar` is a reusable buffer.
 pub fn attract_by(
     out: V2,
     n: usize,
     row: impl Fn(usize) -> (V2, f64),
+    polar_of: impl Fn(usize) -> Polar,
     h2: f64,
     cfg: &AttractConfig,
-    polar: &mut Vec<(f64, f64)>,
+    polar: &mut Vec<Polar>,
 ) -> V2 {
     let (c, grid, limit) = (cfg.c, cfg.grid, cfg.limit);
     if n < 2 {
         return if n == 1 { row(0).0 } else { out };
     }
     polar.clear();
-    polar.extend((0..n).map(|r| {
-        let a = row(r).0;
-        (a[0].hypot(a[1]), a[1].atan2(a[0]))
-    }));
+    polar.extend((0..n).map(polar_of));
     let nf = n as f64;
-    let mean_v = polar.iter().map(|p| p.0).sum::<f64>() / nf;
-    let sd_v = (polar.iter().map(|p| (p.0 - mean_v).powi(2)).sum::<f64>() / nf).sqrt();
+    let mean_v = polar.iter().map(|p| p.speed).sum::<f64>() / nf;
+    let sd_v = (polar
+        .iter()
+        .map(|p| (p.speed - mean_v).powi(2))
+        .sum::<f64>()
+        / nf)
+        .sqrt();
     // Circular spread of the directions about their mean.
     let (cs, sn) = polar
         .iter()
-        .fold((0.0, 0.0), |(c, s), p| (c + p.1.cos(), s + p.1.sin()));
+        .fold((0.0, 0.0), |(c, s), p| (c + p.cos, s + p.sin));
     let mean_a = sn.atan2(cs);
     let sd_a = (polar
         .iter()
-        .map(|p| wrap(p.1 - mean_a).powi(2))
+        .map(|p| wrap(p.angle - mean_a).powi(2))
         .sum::<f64>()
         / nf)
         .sqrt();

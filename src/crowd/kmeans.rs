@@ -73,15 +73,19 @@ pub(super) fn kmeans_into(
     sum.clear();
     sum.resize(centres.len(), [0.0, 0.0, 0.0]);
     let (cs, sum, assign) = (&mut centres[..], &mut sum[..], &mut assign[..]);
-    for it in 0..iters {
-        let changed = assign_nearest(pts, cs, assign) || it == 0;
-        if !changed {
-            break;
-        }
-        cluster_sums(assign, pts, sum);
-        for (m, s) in cs.iter_mut().zip(sum.iter()) {
-            if s[2] > 0.0 {
-                *m = [s[0] / s[2], s[1] / s[2]];
+    match cs.len() {
+        1 => lloyd_n::<1>(pts, cs, assign, iters),
+        2 => lloyd_n::<2>(pts, cs, assign, iters),
+        3 => lloyd_n::<3>(pts, cs, assign, iters),
+        4 => lloyd_n::<4>(pts, cs, assign, iters),
+        _ => {
+            for it in 0..iters {
+                let changed = assign_nearest(pts, cs, assign) || it == 0;
+                if !changed {
+                    break;
+                }
+                cluster_sums(assign, pts, sum);
+                update_means(cs, sum);
             }
         }
     }
@@ -103,37 +107,42 @@ pub(super) fn kmeans_into(
     centres.truncate(kept);
 }
 
-/// Assigns each point to its nearest centre (the first of equally near ones); whether any
-/// assignment changed. Up to four centres held in registers, each point's choice made without
-/// branches.
-fn assign_nearest(pts: &[V2], cs: &[V2], assign: &mut [usize]) -> bool {
-    const R: usize = 4;
-    let mut changed = false;
-    if cs.len() > R {
-        for (a, p) in assign.iter_mut().zip(pts) {
-            let mut best = 0;
-            let mut best_d = d2(*p, cs[0]);
-            for (c, m) in cs.iter().enumerate().skip(1) {
-                let dc = d2(*p, *m);
-                if dc < best_d {
-                    best = c;
-                    best_d = dc;
-                }
-            }
-            changed |= *a != best;
-            *a = best;
+/// A mean moves to its cluster's centroid; an empty cluster's stays.
+fn update_means(cs: &mut [V2], sum: &[[f64; 3]]) {
+    for (m, s) in cs.iter_mut().zip(sum) {
+        if s[2] > 0.0 {
+            *m = [s[0] / s[2], s[1] / s[2]];
         }
-        return changed;
     }
-    let n = cs.len();
-    let mut m = [[0.0f64; 2]; R];
-    m[..n].copy_from_slice(cs);
+}
+
+/// Lloyd's iteration for exactly `N` centres (up to four), the centres and every sum held in
+/// registers; the same passes, comparisons and sums, in the same order, as the general loop.
+fn lloyd_n<const N: usize>(pts: &[V2], cs: &mut [V2], assign: &mut [usize], iters: usize) {
+    let mut m = [[0.0f64; 2]; N];
+    m.copy_from_slice(cs);
+    for it in 0..iters {
+        let changed = assign_nearest_n(pts, &m, assign) || it == 0;
+        if !changed {
+            break;
+        }
+        let sum = cluster_sums_n::<N>(assign, pts);
+        update_means(&mut m, &sum);
+    }
+    cs.copy_from_slice(&m);
+}
+
+/// Assigns each point to its nearest of `N` centres (the first of equally near ones), each
+/// choice made without branches; whether any assignment changed.
+#[inline(always)]
+fn assign_nearest_n<const N: usize>(pts: &[V2], m: &[V2; N], assign: &mut [usize]) -> bool {
+    let mut changed = false;
     for (a, p) in assign.iter_mut().zip(pts) {
         let mut best = 0;
         let mut best_d = d2(*p, m[0]);
         for (c, mc) in m.iter().enumerate().skip(1) {
             let dc = d2(*p, *mc);
-            let nearer = c < n && dc < best_d;
+            let nearer = dc < best_d;
             best = if nearer { c } else { best };
             best_d = if nearer { dc } else { best_d };
         }
@@ -143,26 +152,14 @@ fn assign_nearest(pts: &[V2], cs: &[V2], assign: &mut [usize]) -> bool {
     changed
 }
 
-/// Each cluster's sums (x, y, count) of its points, added in the points' order. Up to four
-/// clusters in one pass with every sum in a register: each point adds its coordinates to its
-/// own cluster's sums and 0 to the others' (a sum starts at +0 and so never becomes −0, and
-/// x + 0 = x for every other x, so the sums are those of the points alone). No chain of loads
-/// and stores through one accumulator in memory.
-fn cluster_sums(assign: &[usize], pts: &[V2], sum: &mut [[f64; 3]]) {
-    const R: usize = 4;
-    if sum.len() > R {
-        for (c, s) in sum.iter_mut().enumerate() {
-            let mut t = [0.0, 0.0, 0.0];
-            for (_, p) in assign.iter().zip(pts).filter(|(a, _)| **a == c) {
-                t[0] += p[0];
-                t[1] += p[1];
-                t[2] += 1.0;
-            }
-            *s = t;
-        }
-        return;
-    }
-    let mut t = [[0.0f64; 3]; R];
+/// Each of `N` clusters' sums (x, y, count) of its points, added in the points' order, in one
+/// pass with every sum in a register: each point adds its coordinates to its own cluster's sums
+/// and 0 to the others' (a sum starts at +0 and so never becomes −0, and x + 0 = x for every
+/// other x, so the sums are those of the points alone). No chain of loads and stores through
+/// one accumulator in memory.
+#[inline(always)]
+fn cluster_sums_n<const N: usize>(assign: &[usize], pts: &[V2]) -> [[f64; 3]; N] {
+    let mut t = [[0.0f64; 3]; N];
     for (&a, p) in assign.iter().zip(pts) {
         for (c, tc) in t.iter_mut().enumerate() {
             let m = a == c;
@@ -171,5 +168,84 @@ fn cluster_sums(assign: &[usize], pts: &[V2], sum: &mut [[f64; 3]]) {
             tc[2] += if m { 1.0 } else { 0.0 };
         }
     }
-    sum.copy_from_slice(&t[..sum.len()]);
+    t
+}
+
+/// Assigns each point to its nearest centre (the first of equally near ones); whether any
+/// assignment changed. Any number of centres (more than four: see [`lloyd_n`] for fewer).
+fn assign_nearest(pts: &[V2], cs: &[V2], assign: &mut [usize]) -> bool {
+    let mut changed = false;
+    for (a, p) in assign.iter_mut().zip(pts) {
+        let mut best = 0;
+        let mut best_d = d2(*p, cs[0]);
+        for (c, m) in cs.iter().enumerate().skip(1) {
+            let dc = d2(*p, *m);
+            if dc < best_d {
+                best = c;
+                best_d = dc;
+            }
+        }
+        changed |= *a != best;
+        *a = best;
+    }
+    changed
+}
+
+/// Each cluster's sums (x, y, count) of its points, added in the points' order (any number
+/// of clusters).
+fn cluster_sums(assign: &[usize], pts: &[V2], sum: &mut [[f64; 3]]) {
+    for (c, s) in sum.iter_mut().enumerate() {
+        let mut t = [0.0, 0.0, 0.0];
+        for (_, p) in assign.iter().zip(pts).filter(|(a, _)| **a == c) {
+            t[0] += p[0];
+            t[1] += p[1];
+            t[2] += 1.0;
+        }
+        *s = t;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    /// The general loop (any number of centres), as the specialised ones must reproduce it.
+    fn general(pts: &[V2], cs: &mut [V2], assign: &mut [usize], iters: usize) {
+        let mut sum = vec![[0.0; 3]; cs.len()];
+        for it in 0..iters {
+            if !(assign_nearest(pts, cs, assign) || it == 0) {
+                break;
+            }
+            cluster_sums(assign, pts, &mut sum);
+            update_means(cs, &sum);
+        }
+    }
+
+    #[test]
+    fn specialised_lloyd_equals_the_general_loop_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for n in 1..=4 {
+            for trial in 0..50 {
+                let pts: Vec<V2> = (0..60 + trial)
+                    .map(|_| [rng.gen_range(-2.0..2.0), rng.gen_range(-1.0..3.0)])
+                    .collect();
+                let start: Vec<V2> = pts[..n].to_vec();
+                let iters = 1 + trial % 20;
+                let (mut a, mut b) = (start.clone(), start);
+                let (mut aa, mut ab) = (vec![0; pts.len()], vec![0; pts.len()]);
+                general(&pts, &mut a, &mut aa, iters);
+                match n {
+                    1 => lloyd_n::<1>(&pts, &mut b, &mut ab, iters),
+                    2 => lloyd_n::<2>(&pts, &mut b, &mut ab, iters),
+                    3 => lloyd_n::<3>(&pts, &mut b, &mut ab, iters),
+                    _ => lloyd_n::<4>(&pts, &mut b, &mut ab, iters),
+                }
+                assert_eq!(aa, ab, "{n} centres, trial {trial}");
+                let bits = |v: &[V2]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a), bits(&b), "{n} centres, trial {trial}");
+            }
+        }
+    }
 }
