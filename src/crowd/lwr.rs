@@ -55,11 +55,10 @@ pub fn lwr_by<'a>(
         }
     };
     // The design matrix [1, s_i − s] column by column, the weights and the actions.
-    sc.x.clear();
-    sc.x.resize(m * n, 0.0);
-    sc.w.clear();
-    sc.w.resize(4 * n, 0.0);
-    let (x, w) = (&mut sc.x[..], &mut sc.w[..]);
+    // Every entry of these buffers is written before it is read: grown, never cleared.
+    grow(&mut sc.x, m * n);
+    grow(&mut sc.w, 4 * n);
+    let (x, w) = (&mut sc.x[..m * n], &mut sc.w[..4 * n]);
     let (w, rest) = w.split_at_mut(n);
     let (y0, rest) = rest.split_at_mut(n);
     let (y1, wx) = rest.split_at_mut(n);
@@ -89,11 +88,9 @@ pub fn lwr_by<'a>(
         return mean;
     }
     // SᵀWS (upper triangle, then mirrored) and SᵀWa as dot products of columns.
-    sc.ata.clear();
-    sc.ata.resize(m * m, 0.0);
-    sc.atb.clear();
-    sc.atb.resize(2 * m, 0.0);
-    let (ata, atb) = (&mut sc.ata[..], &mut sc.atb[..]);
+    grow(&mut sc.ata, m * m);
+    grow(&mut sc.atb, 2 * m);
+    let (ata, atb) = (&mut sc.ata[..m * m], &mut sc.atb[..2 * m]);
     for i in 0..m {
         let xi = &x[i * n..(i + 1) * n];
         for ((v, a), b) in wx.iter_mut().zip(w.iter()).zip(xi) {
@@ -116,10 +113,17 @@ pub fn lwr_by<'a>(
             ata[i * m + i] += lam;
         }
     }
-    if cholesky_solve(&mut sc.ata, &mut sc.atb, m) {
+    if cholesky_solve(ata, atb, m) {
         [sc.atb[0], sc.atb[m]]
     } else {
         mean
+    }
+}
+
+/// Makes `v` at least `len` long (new entries 0; old ones kept, to be overwritten).
+fn grow(v: &mut Vec<f64>, len: usize) {
+    if v.len() < len {
+        v.resize(len, 0.0);
     }
 }
 
