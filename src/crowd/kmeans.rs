@@ -31,6 +31,7 @@ pub fn kmeans(
 
 /// [`kmeans`] with the means written to `centres` and the buffers `dmin`, `sum` reused.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub(super) fn kmeans_into(
     pts: &[V2],
     k: usize,
@@ -108,6 +109,7 @@ pub(super) fn kmeans_into(
 }
 
 /// A mean moves to its cluster's centroid; an empty cluster's stays.
+#[inline(always)]
 fn update_means(cs: &mut [V2], sum: &[[f64; 3]]) {
     for (m, s) in cs.iter_mut().zip(sum) {
         if s[2] > 0.0 {
@@ -118,6 +120,7 @@ fn update_means(cs: &mut [V2], sum: &[[f64; 3]]) {
 
 /// Lloyd's iteration for exactly `N` centres (up to four), the centres and every sum held in
 /// registers; the same passes, comparisons and sums, in the same order, as the general loop.
+#[inline(always)]
 fn lloyd_n<const N: usize>(pts: &[V2], cs: &mut [V2], assign: &mut [usize], iters: usize) {
     let mut m = [[0.0f64; 2]; N];
     m.copy_from_slice(cs);
@@ -173,6 +176,7 @@ fn cluster_sums_n<const N: usize>(assign: &[usize], pts: &[V2]) -> [[f64; 3]; N]
 
 /// Assigns each point to its nearest centre (the first of equally near ones); whether any
 /// assignment changed. Any number of centres (more than four: see [`lloyd_n`] for fewer).
+#[inline(always)]
 fn assign_nearest(pts: &[V2], cs: &[V2], assign: &mut [usize]) -> bool {
     let mut changed = false;
     for (a, p) in assign.iter_mut().zip(pts) {
@@ -193,6 +197,7 @@ fn assign_nearest(pts: &[V2], cs: &[V2], assign: &mut [usize]) -> bool {
 
 /// Each cluster's sums (x, y, count) of its points, added in the points' order (any number
 /// of clusters).
+#[inline(always)]
 fn cluster_sums(assign: &[usize], pts: &[V2], sum: &mut [[f64; 3]]) {
     for (c, s) in sum.iter_mut().enumerate() {
         let mut t = [0.0, 0.0, 0.0];

@@ -37,6 +37,7 @@ pub fn lwr(
 }
 
 /// [`lwr`] over `n` rows given by `row(r)`, with reusable buffers.
+#[inline(always)]
 pub fn lwr_by<'a>(
     s: &[f64],
     n: usize,
@@ -121,6 +122,7 @@ pub fn lwr_by<'a>(
 }
 
 /// Makes `v` at least `len` long (new entries 0; old ones kept, to be overwritten).
+#[inline(always)]
 fn grow(v: &mut Vec<f64>, len: usize) {
     if v.len() < len {
         v.resize(len, 0.0);
@@ -128,6 +130,7 @@ fn grow(v: &mut Vec<f64>, len: usize) {
 }
 
 /// Σ a_i b_i in four interleaved partial sums (vectorised; a fixed order, so deterministic).
+#[inline(always)]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 4];
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
@@ -146,6 +149,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 /// Solves `A [x y] = [b0 b1]` for symmetric positive definite `A` (`m × m`) in place (the
 /// solutions replace `b`); `false` when A is not (numerically) positive definite.
+#[inline(always)]
 fn cholesky_solve(a: &mut [f64], b: &mut [f64], m: usize) -> bool {
     let scale = (0..m).map(|i| a[i * m + i].abs()).fold(0.0, f64::max);
     for j in 0..m {
