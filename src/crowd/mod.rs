@@ -19,6 +19,7 @@
 //! - [`synth`]: a social-force corridor crowd as a stand-in for video-tracked data.
 
 pub mod action;
+pub mod attract;
 pub mod behaviour;
 pub mod eval;
 pub mod features;
