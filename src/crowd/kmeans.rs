@@ -71,15 +71,15 @@ pub(super) fn kmeans_into(
             *d = d.min(d2(*p, pts[j]));
         }
     }
-    sum.clear();
-    sum.resize(centres.len(), [0.0, 0.0, 0.0]);
-    let (cs, sum, assign) = (&mut centres[..], &mut sum[..], &mut assign[..]);
+    let (cs, assign) = (&mut centres[..], &mut assign[..]);
     match cs.len() {
         1 => lloyd_n::<1>(pts, cs, assign, iters),
         2 => lloyd_n::<2>(pts, cs, assign, iters),
         3 => lloyd_n::<3>(pts, cs, assign, iters),
         4 => lloyd_n::<4>(pts, cs, assign, iters),
         _ => {
+            sum.clear();
+            sum.resize(cs.len(), [0.0, 0.0, 0.0]);
             for it in 0..iters {
                 let changed = assign_nearest(pts, cs, assign) || it == 0;
                 if !changed {
