@@ -233,7 +233,28 @@ fn kd_tree_knn_equals_brute_force() {
             assert_eq!(got, brute_force(&lattice, 2, &q, k), "{q:?} {k}");
         }
     }
+    // Few samples: one partial leaf, a leaf and one point, fewer leaves than a SIMD row of
+    // leaf boxes; k up to beyond the samples.
+    for dims in [1, 5] {
+        for n in [1, 3, 16, 17, 130] {
+            let pts: Vec<f64> = (0..n * dims).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let tree = StateTree::build(&pts, dims).unwrap();
+            for _ in 0..5 {
+                let q: Vec<f64> = (0..dims).map(|_| rng.gen_range(-1.5..1.5)).collect();
+                for k in [1, 2, n, n + 3] {
+                    tree.nearest(&q, k, &mut got);
+                    assert_eq!(got.len(), k.min(n), "dims {dims}, {n} samples, k {k}");
+                    assert_eq!(
+                        got,
+                        brute_force(&pts, dims, &q, k),
+                        "dims {dims}, n {n}, k {k}"
+                    );
+                }
+            }
+        }
+    }
     // More than the samples: all of them.
+    let tree = StateTree::build(&lattice, 2).unwrap();
     tree.nearest(&[1.0, 1.0], 1000, &mut got);
     assert_eq!(got.len(), 400);
     assert!(StateTree::build(&[0.0; 26], 13).is_err());

@@ -2,23 +2,31 @@
 //! an exact brute-force search to check against, and `kiddo`'s immutable kd-tree as the peer the
 //! benchmark compares with.
 //!
-//! [`StateTree`] is a bucketed kd-tree that splits each node on its widest dimension, at the
-//! multiple of 16 points nearest the median (so that every leaf is one 16-point block). The PCA
-//! states have most of their variance in the leading components, so splitting the widest
-//! dimension prunes far more than the round-robin splits of kiddo's trees (which, at ~9 levels
-//! over 10–12 dimensions, split each dimension about once); the query keeps its candidates as
-//! integer keys in per-thread buffers, cut by selection, and allocates nothing once those
-//! buffers have grown. The dimension is a const generic; [`StateTree`] picks one of 1–12 at run
-//! time (the paper's PCA keeps 8–12). Ties in distance are ordered by row, so the result equals
+//! [`StateTree`] is a bucketed kd-tree: the samples are ordered by splitting on the widest
+//! dimension at the multiple of 16 points nearest the median (so that every leaf is one 16-point
+//! block), and each leaf keeps its bounding box. The PCA states have most of their variance in
+//! the leading components, so splitting the widest dimension makes tighter leaves than the
+//! round-robin splits of kiddo's trees (which, at ~9 levels over 10–12 dimensions, split each
+//! dimension about once). A query does not descend the tree: it computes a lower bound on the
+//! distance to every leaf's box, eight boxes per SIMD row, visits the ⌈2k/16⌉ leaves with the
+//! smallest bounds (found by selection), and then every other leaf whose bound is within what
+//! the k-th distance so far allows. For queries far from the samples, where a descent visits a
+//! third of the leaves through branchy recursion, this flat pass is branch-free and cheap; for
+//! queries among the samples it costs about as much as the descent. Candidates are integer keys
+//! in per-thread buffers, cut by selection; nothing is allocated once those buffers have grown.
+//! The dimension is a const generic; [`StateTree`] picks one of 1–12 at run time (the paper's
+//! PCA keeps 8–12). Ties in distance are ordered by row, so the result equals
 //! [`brute_force`]'s exactly.
 //!
 //! The search works in f32 and proves its way back to f64. A leaf's points are also stored as
 //! f32, column by column, and their distances computed in SIMD lanes (AVX2 where the CPU has it,
-//! through `pulp`'s run-time dispatch). Candidates are kept by their f32 distance, and a subtree
-//! is skipped when its bounding box lies beyond what the k-th f32 distance so far proves about
-//! the k-th f64 distance. At the end, only the points whose f32 distance lies within the
-//! roundings' allowance of the k-th get their exact f64 distance (typically k and a few), so
-//! the neighbours and distances are the f64 search's, bit for bit.
+//! through `pulp`'s run-time dispatch). A leaf's bound is computed in f32 with the same
+//! operations in the same order as its points' distances, on coordinates no nearer the query,
+//! so it is no more than any of them (rounding is monotone) and skipping a leaf beyond the
+//! bound loses nothing. Candidates are kept by their f32 distance; at the end only the points
+//! whose f32 distance lies within the roundings' allowance of the k-th get their exact f64
+//! distance (typically k and a few), so the neighbours and distances are the f64 search's, bit
+//! for bit.
 
 use crate::error::{Error, Result};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
@@ -38,17 +46,8 @@ const _: () = assert!(LEAF <= 32, "a leaf's candidates are bits of a u32");
 /// coordinate rounded once to f32: far below 1e-5 relative).
 const F32_SLACK: f64 = 1e-5;
 
-/// A node: inner (`dim` < D, children `a`, `b` holding coordinates ≤ / ≥ `split`) or leaf
-/// (`dim` = u32::MAX, points `a..b`).
-#[derive(Clone, Copy, Debug)]
-struct Node {
-    dim: u32,
-    split: f64,
-    a: u32,
-    b: u32,
-}
-
-/// A kd-tree over points of dimension `D` (split on the widest dimension, median split).
+/// A kd-tree's leaves over points of dimension `D` (split on the widest dimension, median
+/// split), with their bounding boxes.
 pub struct Tree<const D: usize> {
     /// Points in tree order.
     pts: Vec<[f64; D]>,
@@ -63,10 +62,12 @@ pub struct Tree<const D: usize> {
     arch: pulp::Arch,
     /// Row of each point in the input.
     rows: Vec<u32>,
-    nodes: Vec<Node>,
-    /// Each node's bounding box (its points' lowest and highest coordinates, rounded outward
-    /// to f32), indexed like `nodes`: the search's lower bound on a subtree's distances.
-    boxes: Vec<([f32; D], [f32; D])>,
+    /// Each leaf's bounding box over its f32 points, eight leaves at a time column by column:
+    /// coordinate `d` of leaf `l`'s lowest corner at `(l / 8) * 8 * D + d * 8 + l % 8` (the
+    /// last group padded with empty boxes at +∞).
+    leaf_lo: Vec<f32>,
+    /// The highest corners, laid out as `leaf_lo`.
+    leaf_hi: Vec<f32>,
 }
 
 /// (squared distance, row) ordered by distance, then row.
@@ -78,17 +79,14 @@ impl<const D: usize> Tree<D> {
     /// A tree over `pts`; items are indices into `pts`.
     pub fn new(pts: &[[f64; D]]) -> Tree<D> {
         let mut perm: Vec<u32> = (0..pts.len() as u32).collect();
-        let mut nodes = Vec::with_capacity(2 * pts.len() / LEAF + 1);
-        let mut boxes = Vec::with_capacity(2 * pts.len() / LEAF + 1);
-        if !pts.is_empty() {
-            Self::build(pts, &mut perm, 0, &mut nodes, &mut boxes);
-        }
+        Self::partition(pts, &mut perm);
         let mut cols = vec![0.0f32; pts.len().div_ceil(LEAF) * LEAF * D];
         for (pos, &i) in perm.iter().enumerate() {
             for (d, &v) in pts[i as usize].iter().enumerate() {
                 cols[(pos / LEAF) * LEAF * D + d * LEAF + pos % LEAF] = v as f32;
             }
         }
+        let (leaf_lo, leaf_hi) = leaf_boxes::<D>(&cols, pts.len());
         let max_norm = pts
             .iter()
             .map(|p| p.iter().map(|v| v * v).sum::<f64>().sqrt())
@@ -96,39 +94,26 @@ impl<const D: usize> Tree<D> {
         Tree {
             pts: perm.iter().map(|&i| pts[i as usize]).collect(),
             rows: perm,
-            nodes,
-            boxes,
+            leaf_lo,
+            leaf_hi,
             cols,
             max_norm,
             arch: pulp::Arch::new(),
         }
     }
 
-    /// Builds the subtree of `perm` (which starts at tree position `at`); returns its node.
-    fn build(
-        pts: &[[f64; D]],
-        perm: &mut [u32],
-        at: usize,
-        nodes: &mut Vec<Node>,
-        boxes: &mut Vec<([f32; D], [f32; D])>,
-    ) -> u32 {
-        let me = nodes.len();
-        nodes.push(Node {
-            dim: u32::MAX,
-            split: 0.0,
-            a: at as u32,
-            b: (at + perm.len()) as u32,
-        });
+    /// Orders `perm` as a kd-tree's leaves: split on the widest dimension at the multiple of
+    /// [`LEAF`] points nearest the median, each side recursively, until a part fits in a leaf.
+    fn partition(pts: &[[f64; D]], perm: &mut [u32]) {
+        if perm.len() <= LEAF {
+            return;
+        }
         let (mut lo, mut hi) = ([f64::INFINITY; D], [f64::NEG_INFINITY; D]);
         for &i in perm.iter() {
             for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(&pts[i as usize]) {
                 *l = l.min(*v);
                 *h = h.max(*v);
             }
-        }
-        boxes.push((lo.map(|v| -up32(-v)), hi.map(up32)));
-        if perm.len() <= LEAF {
-            return me as u32;
         }
         let mut dim = 0;
         for j in 1..D {
@@ -137,25 +122,16 @@ impl<const D: usize> Tree<D> {
             }
         }
         // The left part a whole number of leaves (at least one, short of all the points), so
-        // that every leaf starts at a multiple of LEAF. Points that all coincide still split:
-        // the search then visits both sides.
+        // that every leaf starts at a multiple of LEAF.
         let mid = (perm.len().div_ceil(LEAF) / 2).max(1) * LEAF;
         perm.select_nth_unstable_by(mid, |&x, &y| {
             pts[x as usize][dim]
                 .total_cmp(&pts[y as usize][dim])
                 .then(x.cmp(&y))
         });
-        let split = pts[perm[mid] as usize][dim];
         let (l, r) = perm.split_at_mut(mid);
-        let a = Self::build(pts, l, at, nodes, boxes);
-        let b = Self::build(pts, r, at + mid, nodes, boxes);
-        nodes[me] = Node {
-            dim: dim as u32,
-            split,
-            a,
-            b,
-        };
-        me as u32
+        Self::partition(pts, l);
+        Self::partition(pts, r);
     }
 
     /// The `k` nearest points to `q` as (squared distance, index), nearest first, ties by index.
@@ -172,7 +148,7 @@ impl<const D: usize> Tree<D> {
     /// f32 distance) then get their exact distance, so the result is [`brute_force`]'s.
     pub fn nearest_pos(&self, q: &[f64; D], k: usize, out: &mut Vec<(f64, u32)>) {
         out.clear();
-        if k == 0 || self.nodes.is_empty() {
+        if k == 0 || self.pts.is_empty() {
             return;
         }
         let k = k.min(self.pts.len());
@@ -189,13 +165,20 @@ impl<const D: usize> Tree<D> {
                 k,
                 huge,
                 delta,
-                prune: f64::INFINITY,
                 reach: f32::INFINITY,
                 cut_at: if huge { usize::MAX } else { 2 * k },
                 buf: cands,
             };
-            let query = Query { q, q32: &q32 };
-            self.search(0, &query, &mut [0.0; D], 0.0, &mut best);
+            // The bounds' buffer taken out of its thread-local for the call, so that the whole
+            // scan is inlined into the dispatched function (no closure of its own).
+            let mut sc = SCAN.take();
+            self.arch.dispatch(Scan {
+                tree: self,
+                q32: &q32,
+                best: &mut best,
+                sc: &mut sc,
+            });
+            SCAN.set(sc);
             best.cut();
             let reach = best.reach;
             KEYS.with_borrow_mut(|keys| {
@@ -230,54 +213,63 @@ impl<const D: usize> Tree<D> {
         &self.rows
     }
 
-    fn search(&self, node: u32, qq: &Query<D>, off: &mut [f64; D], rd: f64, best: &mut Best) {
-        let q = qq.q;
-        let n = self.nodes[node as usize];
-        if n.dim == u32::MAX {
-            let (a, b) = (n.a as usize, n.b as usize);
-            let block = &self.cols[a * D..(a + LEAF) * D];
-            let d32 = self.arch.dispatch(|| block_distances::<D>(block, qq.q32));
-            let reach = best.reach;
-            let mut inside = if best.huge {
-                u32::MAX
-            } else {
-                d32.iter()
-                    .enumerate()
-                    .fold(0u32, |m, (j, &d)| m | (u32::from(d <= reach) << j))
-            } & (u32::MAX >> (32 - (b - a)));
-            while inside != 0 {
-                let j = inside.trailing_zeros() as usize;
-                inside &= inside - 1;
-                best.offer(d32[j], (a + j) as u32);
-            }
+    /// Offers every point that may be among the k nearest: first the ⌈2k/16⌉ leaves whose
+    /// boxes are nearest `q` (whose k-th f32 distance bounds the search), then every other
+    /// leaf whose box lies within the bound. The leaves' lower bounds are
+    /// computed eight leaves at a time; each is no more than any of its points' f32 distances
+    /// (same operations in the same order on coordinates no nearer `q`, and rounding is
+    /// monotone), so a leaf beyond `reach` holds no point the search would keep.
+    #[inline(always)]
+    fn scan(&self, q32: &[f32; D], best: &mut Best, sc: &mut ScanScratch) {
+        let leaves = self.pts.len().div_ceil(LEAF);
+        if best.huge {
+            (0..leaves).for_each(|l| self.visit(l, q32, best));
             return;
         }
-        let dim = n.dim as usize;
-        let diff = q[dim] - n.split;
-        let (near, far) = if diff < 0.0 { (n.a, n.b) } else { (n.b, n.a) };
-        self.search(near, qq, off, rd, best);
-        // The far side: first the cheap bound (the distance to its half-space, built up
-        // dimension by dimension), then its box's.
-        let old = off[dim];
-        let far_rd = rd - old * old + diff * diff;
-        if far_rd <= best.prune && self.box_dist(far, q) <= best.prune {
-            off[dim] = diff;
-            self.search(far, qq, off, far_rd, best);
-            off[dim] = old;
+        sc.lb.resize(leaves.div_ceil(8) * 8, 0.0);
+        leaf_bounds::<D>(&self.leaf_lo, &self.leaf_hi, q32, &mut sc.lb);
+        sc.keys.clear();
+        sc.keys.extend(
+            sc.lb[..leaves]
+                .iter()
+                .enumerate()
+                .map(|(l, &b)| (u64::from(b.to_bits()) << 32) | l as u64),
+        );
+        // The leaves nearest by their bounds first (found by selection, not a sort: the rest
+        // are only compared with the bound, in any order).
+        let first = (2 * best.k).div_ceil(LEAF).min(leaves);
+        if first < leaves {
+            sc.keys.select_nth_unstable(first - 1);
+        }
+        for &key in &sc.keys[..first] {
+            self.visit(key as u32 as usize, q32, best);
+        }
+        for &key in &sc.keys[first..] {
+            if f32::from_bits((key >> 32) as u32) <= best.reach {
+                self.visit(key as u32 as usize, q32, best);
+            }
         }
     }
 
-    /// Squared distance from `q` to node `node`'s bounding box: no more than the distance to
-    /// any of its points (each term is, and the terms are summed in the same order).
-    #[inline]
-    fn box_dist(&self, node: u32, q: &[f64; D]) -> f64 {
-        let (lo, hi) = &self.boxes[node as usize];
-        let mut d = 0.0;
-        for ((&l, &h), x) in lo.iter().zip(hi).zip(q) {
-            let t = (f64::from(l) - x).max(x - f64::from(h)).max(0.0);
-            d += t * t;
+    /// Offers the points of leaf `leaf` whose f32 distance is within `reach` (all when `huge`).
+    #[inline(always)]
+    fn visit(&self, leaf: usize, q32: &[f32; D], best: &mut Best) {
+        let a = leaf * LEAF;
+        let b = (a + LEAF).min(self.pts.len());
+        let d32 = block_distances::<D>(&self.cols[a * D..(a + LEAF) * D], q32);
+        let reach = best.reach;
+        let mut inside = if best.huge {
+            u32::MAX
+        } else {
+            d32.iter()
+                .enumerate()
+                .fold(0u32, |m, (j, &d)| m | (u32::from(d <= reach) << j))
+        } & (u32::MAX >> (32 - (b - a)));
+        while inside != 0 {
+            let j = inside.trailing_zeros() as usize;
+            inside &= inside - 1;
+            best.offer(d32[j], (a + j) as u32);
         }
-        d
     }
 
     /// Memory held by the tree, in bytes (linear in the number of points).
@@ -285,8 +277,7 @@ impl<const D: usize> Tree<D> {
         self.pts.len() * std::mem::size_of::<[f64; D]>()
             + self.cols.len() * 4
             + self.rows.len() * 4
-            + self.nodes.len() * std::mem::size_of::<Node>()
-            + self.boxes.len() * std::mem::size_of::<([f32; D], [f32; D])>()
+            + (self.leaf_lo.len() + self.leaf_hi.len()) * 4
     }
 }
 
@@ -304,10 +295,70 @@ fn up32(v: f64) -> f32 {
     }
 }
 
-/// A query in f64 and f32.
-struct Query<'a, const D: usize> {
-    q: &'a [f64; D],
+/// [`Tree::scan`] as a `pulp` operation: a closure would not be inlined into the dispatched
+/// function whole, and what it calls would be compiled for the baseline instruction set.
+struct Scan<'a, 'b, const D: usize> {
+    tree: &'a Tree<D>,
     q32: &'a [f32; D],
+    best: &'a mut Best<'b>,
+    sc: &'a mut ScanScratch,
+}
+
+/// A thread's buffers for [`Tree::scan`]: the leaves' lower bounds, and the same as keys
+/// (bound bits, leaf).
+#[derive(Default)]
+struct ScanScratch {
+    lb: Vec<f32>,
+    keys: Vec<u64>,
+}
+
+impl<const D: usize> pulp::WithSimd for Scan<'_, '_, D> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        self.tree.scan(self.q32, self.best, self.sc);
+    }
+}
+
+/// Each leaf's box over its f32 points (see [`Tree::leaf_lo`]) from the leaves' columns.
+fn leaf_boxes<const D: usize>(cols: &[f32], n: usize) -> (Vec<f32>, Vec<f32>) {
+    let leaves = n.div_ceil(LEAF);
+    let mut lo = vec![f32::INFINITY; leaves.div_ceil(8) * 8 * D];
+    let mut hi = lo.clone();
+    for leaf in 0..leaves {
+        let m = LEAF.min(n - leaf * LEAF);
+        for d in 0..D {
+            let col = &cols[leaf * LEAF * D + d * LEAF..][..m];
+            let at = (leaf / 8) * 8 * D + d * 8 + leaf % 8;
+            lo[at] = col.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+            hi[at] = col.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        }
+    }
+    (lo, hi)
+}
+
+/// Lower bounds on the squared f32 distances of each leaf's points to `q`, eight leaves at a
+/// time: per coordinate the gap to the box (0 inside it), squared and summed in
+/// [`block_distances`]' order. Empty boxes (+∞) give +∞.
+#[inline(always)]
+fn leaf_bounds<const D: usize>(lo: &[f32], hi: &[f32], q: &[f32; D], out: &mut [f32]) {
+    for ((l, h), o) in lo
+        .chunks_exact(8 * D)
+        .zip(hi.chunks_exact(8 * D))
+        .zip(out.chunks_exact_mut(8))
+    {
+        let mut acc = [0.0f32; 8];
+        for ((lc, hc), &qd) in l.chunks_exact(8).zip(h.chunks_exact(8)).zip(q) {
+            for ((a, &x), &y) in acc.iter_mut().zip(lc).zip(hc) {
+                let (u, v) = (x - qd, qd - y);
+                let t = if u > v { u } else { v };
+                let t = if t > 0.0 { t } else { 0.0 };
+                *a += t * t;
+            }
+        }
+        o.copy_from_slice(&acc);
+    }
 }
 
 /// Squared f32 distances of one leaf's points (column by column, [`LEAF`] lanes) to `q`.
@@ -334,8 +385,6 @@ struct Best<'a> {
     huge: bool,
     /// The f32 distances' allowance, in distance (not squared).
     delta: f64,
-    /// A subtree whose box is farther than this (squared, f64) holds none of the k nearest.
-    prune: f64,
     /// A point whose f32 distance is beyond this cannot be among the k nearest.
     reach: f32,
     cut_at: usize,
@@ -345,6 +394,8 @@ struct Best<'a> {
 thread_local! {
     /// The f32 candidate keys of this thread's queries (no allocation once they hold `2k`).
     static CANDIDATES: std::cell::RefCell<Vec<u64>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// The leaves' lower bounds of this thread's queries.
+    static SCAN: std::cell::Cell<ScanScratch> = const { std::cell::Cell::new(ScanScratch { lb: Vec::new(), keys: Vec::new() }) };
     /// The exact candidate keys of this thread's queries.
     static KEYS: std::cell::RefCell<Vec<u128>> = const { std::cell::RefCell::new(Vec::new()) };
 }
@@ -390,7 +441,6 @@ impl Best<'_> {
         let r32 = up32(reach);
         if r32 < self.reach {
             self.reach = r32;
-            self.prune = prune;
         }
         let r = self.reach;
         self.buf.retain(|&c| f32::from_bits((c >> 32) as u32) <= r);
