@@ -52,10 +52,10 @@ pub struct Tree<const D: usize> {
     /// Points in tree order.
     pts: Vec<[f64; D]>,
     /// The same points as f32, leaf by leaf column by column: coordinate `d` of position `p` at
-    /// `(p / LEAF) * LEAF * D + d * LEAF + p % LEAF` (the last leaf padded with zeros). A leaf's
+    /// `[(p / LEAF) * D + d][p % LEAF]` (the last leaf padded with zeros). A leaf's
     /// distances are first computed from them in SIMD lanes; only the points that may lie
     /// within the bound get their exact f64 distance.
-    cols: Vec<f32>,
+    cols: Vec<[f32; LEAF]>,
     /// Largest point norm, for the f32 filter's allowance.
     max_norm: f64,
     /// The instruction set the f32 distances are compiled for (chosen at run time).
@@ -80,10 +80,10 @@ impl<const D: usize> Tree<D> {
     pub fn new(pts: &[[f64; D]]) -> Tree<D> {
         let mut perm: Vec<u32> = (0..pts.len() as u32).collect();
         Self::partition(pts, &mut perm);
-        let mut cols = vec![0.0f32; pts.len().div_ceil(LEAF) * LEAF * D];
+        let mut cols = vec![[0.0f32; LEAF]; pts.len().div_ceil(LEAF) * D];
         for (pos, &i) in perm.iter().enumerate() {
             for (d, &v) in pts[i as usize].iter().enumerate() {
-                cols[(pos / LEAF) * LEAF * D + d * LEAF + pos % LEAF] = v as f32;
+                cols[(pos / LEAF) * D + d][pos % LEAF] = v as f32;
             }
         }
         let (leaf_lo, leaf_hi) = leaf_boxes::<D>(&cols, pts.len());
@@ -256,7 +256,10 @@ impl<const D: usize> Tree<D> {
     fn visit(&self, leaf: usize, q32: &[f32; D], best: &mut Best) {
         let a = leaf * LEAF;
         let b = (a + LEAF).min(self.pts.len());
-        let d32 = block_distances::<D>(&self.cols[a * D..(a + LEAF) * D], q32);
+        let block = self.cols[leaf * D..(leaf + 1) * D]
+            .try_into()
+            .expect("a leaf is D columns");
+        let d32 = block_distances::<D>(block, q32);
         let reach = best.reach;
         let mut inside = if best.huge {
             u32::MAX
@@ -275,7 +278,7 @@ impl<const D: usize> Tree<D> {
     /// Memory held by the tree, in bytes (linear in the number of points).
     pub fn bytes(&self) -> usize {
         self.pts.len() * std::mem::size_of::<[f64; D]>()
-            + self.cols.len() * 4
+            + self.cols.len() * LEAF * 4
             + self.rows.len() * 4
             + (self.leaf_lo.len() + self.leaf_hi.len()) * 4
     }
@@ -322,14 +325,14 @@ impl<const D: usize> pulp::WithSimd for Scan<'_, '_, D> {
 }
 
 /// Each leaf's box over its f32 points (see [`Tree::leaf_lo`]) from the leaves' columns.
-fn leaf_boxes<const D: usize>(cols: &[f32], n: usize) -> (Vec<f32>, Vec<f32>) {
+fn leaf_boxes<const D: usize>(cols: &[[f32; LEAF]], n: usize) -> (Vec<f32>, Vec<f32>) {
     let leaves = n.div_ceil(LEAF);
     let mut lo = vec![f32::INFINITY; leaves.div_ceil(8) * 8 * D];
     let mut hi = lo.clone();
     for leaf in 0..leaves {
         let m = LEAF.min(n - leaf * LEAF);
         for d in 0..D {
-            let col = &cols[leaf * LEAF * D + d * LEAF..][..m];
+            let col = &cols[leaf * D + d][..m];
             let at = (leaf / 8) * 8 * D + d * 8 + leaf % 8;
             lo[at] = col.iter().fold(f32::INFINITY, |a, &b| a.min(b));
             hi[at] = col.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
@@ -363,12 +366,12 @@ fn leaf_bounds<const D: usize>(lo: &[f32], hi: &[f32], q: &[f32; D], out: &mut [
 
 /// Squared f32 distances of one leaf's points (column by column, [`LEAF`] lanes) to `q`.
 #[inline(always)]
-fn block_distances<const D: usize>(block: &[f32], q: &[f32; D]) -> [f32; LEAF] {
+fn block_distances<const D: usize>(block: &[[f32; LEAF]; D], q: &[f32; D]) -> [f32; LEAF] {
     let mut acc = [0.0f32; LEAF];
-    for (col, &qd) in block.chunks_exact(LEAF).zip(q) {
-        for (a, &x) in acc.iter_mut().zip(col) {
-            let t = x - qd;
-            *a += t * t;
+    for (col, &qd) in block.iter().zip(q) {
+        for j in 0..LEAF {
+            let t = col[j] - qd;
+            acc[j] += t * t;
         }
     }
     acc
