@@ -33,6 +33,16 @@ pub struct FeatureWeights {
     pub formation: f64,
     pub pivot: f64,
     pub direction: f64,
+    /// Not in Table 1: the weight of the neighbours' headings ([`alignment`]). The paper's
+    /// pedestrians need no such feature, but agents that align (the Reynolds imitation of §7) turn
+    /// toward their neighbours' headings, which eq. 1's positions alone do not show. 0 (the
+    /// default) leaves the feature out of the state altogether.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub alignment: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Default for FeatureWeights {
@@ -43,6 +53,7 @@ impl Default for FeatureWeights {
             formation: 100.0,
             pivot: 0.0,
             direction: 1.0,
+            alignment: 0.0,
         }
     }
 }
@@ -92,6 +103,7 @@ impl FeatureConfig {
             (w.formation, "formation"),
             (w.pivot, "pivot"),
             (w.direction, "direction"),
+            (w.alignment, "alignment"),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(format!(
@@ -111,9 +123,10 @@ impl FeatureConfig {
         Ok(())
     }
 
-    /// Length of the state vector: speed, 2 × 8 sectors, 4 pivot values when `pivot`, 2 direction.
-    pub fn dims(&self, pivot: bool) -> usize {
-        1 + 2 * SECTORS + if pivot { 4 } else { 0 } + 2
+    /// Length of the state vector under weights `w`: speed, 2 × 8 sectors, 4 pivot values when
+    /// `pivot`, 2 direction, and 2 alignment values when `w.alignment` > 0.
+    pub fn dims(pivot: bool, w: &FeatureWeights) -> usize {
+        1 + 2 * SECTORS + if pivot { 4 } else { 0 } + 2 + if w.alignment > 0.0 { 2 } else { 0 }
     }
 }
 
@@ -130,6 +143,8 @@ pub struct StateParts {
     pub pivot: Option<[f64; 4]>,
     /// Intended direction in the agent's frame (cos, sin of its angle to the heading).
     pub intent: V2,
+    /// The neighbours' headings ([`alignment`]), computed only when its weight is > 0.
+    pub align: Option<V2>,
 }
 
 impl StateParts {
@@ -149,6 +164,12 @@ impl StateParts {
         }
         out.push(wd * self.intent[0]);
         out.push(wd * self.intent[1]);
+        if w.alignment > 0.0 {
+            let wa = w.alignment.sqrt();
+            let a = self.align.unwrap_or([0.0, 0.0]);
+            out.push(wa * a[0]);
+            out.push(wa * a[1]);
+        }
     }
 }
 
@@ -197,6 +218,24 @@ pub fn formation(p: V2, frame: V2, neighbours: impl Iterator<Item = V2>, r: f64)
             0.0
         }
     })
+}
+
+/// The neighbours' headings in the frame of an agent at `p` heading `h`: Σ f_j ĥ_j over the
+/// neighbours j within `r`, with eq. 1's weight f_j = (r − d_j)²/r², so a neighbour enters the
+/// sum continuously at the radius. `neighbours` yields (position, unit heading). An extension of
+/// §4 (see [`FeatureWeights::alignment`]).
+pub fn alignment(p: V2, h: V2, neighbours: impl Iterator<Item = (V2, V2)>, r: f64) -> V2 {
+    let mut s = [0.0, 0.0];
+    for (q, hq) in neighbours {
+        let dist = (q[0] - p[0]).hypot(q[1] - p[1]);
+        if dist >= r || dist <= 0.0 {
+            continue;
+        }
+        let f = (r - dist) * (r - dist) / (r * r);
+        s[0] += f * hq[0];
+        s[1] += f * hq[1];
+    }
+    to_local(s, h)
 }
 
 /// One tracked individual over consecutive frames (a track with a gap becomes two segments).
@@ -302,6 +341,23 @@ impl Scene {
             .iter()
             .filter(move |&&k| k != me)
             .filter_map(move |&k| self.segments[k].at(f))
+    }
+
+    /// Positions and headings (`heads[k]`: segment k's, from [`headings`]) of the other segments
+    /// present at frame `f`.
+    pub fn others_headed<'a>(
+        &'a self,
+        f: usize,
+        me: usize,
+        heads: &'a [Vec<V2>],
+    ) -> impl Iterator<Item = (V2, V2)> + 'a {
+        self.at_frame[f]
+            .iter()
+            .filter(move |&&k| k != me)
+            .filter_map(move |&k| {
+                let s = &self.segments[k];
+                s.at(f).map(|p| (p, heads[k][f - s.start]))
+            })
     }
 }
 

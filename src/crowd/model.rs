@@ -5,8 +5,8 @@
 use super::action::{ActionConfig, ActionModel, ActionSamples};
 use super::behaviour::{self, FsmStats, LabelConfig, INTERACTION, LOCOMOTION};
 use super::features::{
-    formation, headings, intent_at, pivot_parts, to_local, unit, FeatureConfig, FeatureWeights,
-    IntentWindow, Scene, StateParts, V2,
+    alignment, formation, headings, intent_at, pivot_parts, to_local, unit, FeatureConfig,
+    FeatureWeights, IntentWindow, Scene, StateParts, V2,
 };
 use super::pca::Pca;
 use crate::data::tracks::{Tracks, Units};
@@ -94,6 +94,7 @@ impl Default for LearnConfig {
                         formation: 100.0,
                         pivot: 0.0,
                         direction: 0.0,
+                        alignment: 0.0,
                     }),
                     pivot: None,
                 },
@@ -108,7 +109,12 @@ impl LearnConfig {
         self.features.check()?;
         self.action.check()?;
         self.labels.check()?;
-        let max_dims = self.features.dims(false).min(super::knn::MAX_DIMS);
+        // The smallest state any behaviour can have (no pivot, no alignment).
+        let bare = FeatureWeights {
+            alignment: 0.0,
+            ..FeatureWeights::default()
+        };
+        let max_dims = FeatureConfig::dims(false, &bare).min(super::knn::MAX_DIMS);
         if self.pca_dims == 0 || self.pca_dims > max_dims {
             return Err(Error::invalid(format!(
                 "pca_dims = {} must be in 1..={max_dims}",
@@ -221,14 +227,13 @@ impl CrowdModel {
         for (i, b) in f.behaviours.into_iter().enumerate() {
             let at = |e: Error| Error::invalid(format!("behaviours[{i}].{e}"));
             b.pca.check().map_err(at)?;
-            if b.pca.dims() != b.samples.dims
-                || b.pca.input() != f.config.features.dims(b.pivot.is_some())
-            {
+            let input = FeatureConfig::dims(b.pivot.is_some(), &b.weights);
+            if b.pca.dims() != b.samples.dims || b.pca.input() != input {
                 return Err(Error::invalid(format!(
                     "behaviours[{i}]: PCA {} → {} does not fit states of {} values and samples of {}",
                     b.pca.input(),
                     b.pca.dims(),
-                    f.config.features.dims(b.pivot.is_some()),
+                    input,
                     b.samples.dims
                 )));
             }
@@ -299,21 +304,24 @@ pub fn read_tracks(path: &Path, eth_fps: f64) -> Result<Tracks> {
     }
 }
 
-/// The unweighted state of segment `k` at its index `j` (needs j ≥ 1); `centred` picks the
-/// intended-direction window, `pivot` the frame of the sectors.
+/// The unweighted state of segment `k` at its index `j` (needs j ≥ 1), given every segment's
+/// headings; `centred` picks the intended-direction window, `pivot` the frame of the sectors,
+/// `align` whether to compute the neighbours' headings.
+#[allow(clippy::too_many_arguments)]
 pub fn state_at(
     scene: &Scene,
     k: usize,
     j: usize,
-    heads: &[V2],
+    heads: &[Vec<V2>],
     cfg: &FeatureConfig,
     centred: bool,
     pivot: Option<&Pivot>,
+    align: bool,
 ) -> StateParts {
     let s = &scene.segments[k];
     let f = s.start + j;
-    let (p, h) = (s.pos[j], heads[j]);
-    let (pp, hp) = (s.pos[j - 1], heads[j - 1]);
+    let (p, h) = (s.pos[j], heads[k][j]);
+    let (pp, hp) = (s.pos[j - 1], heads[k][j - 1]);
     let fr = |h: V2| pivot.map_or(h, |pv| pv.dir());
     let intent = intent_at(&s.pos, j, cfg.intent_window, centred, h);
     StateParts {
@@ -322,6 +330,7 @@ pub fn state_at(
         prev: formation(pp, fr(hp), scene.others(f - 1, k), cfg.radius),
         pivot: pivot.map(|pv| pivot_parts(p, h, pv.position, pv.dir())),
         intent: to_local(intent, h),
+        align: align.then(|| alignment(p, h, scene.others_headed(f, k, heads), cfg.radius)),
     }
 }
 
@@ -344,22 +353,27 @@ pub fn raw_samples(
     out: &mut RawSamples,
 ) {
     let centred = cfg.intent == IntentWindow::Centred;
+    let align = weights.alignment > 0.0;
+    let heads: Vec<Vec<V2>> = scene
+        .segments
+        .iter()
+        .map(|s| headings(&s.pos, cfg.still_speed * scene.dt))
+        .collect();
     for (k, s) in scene.segments.iter().enumerate() {
         if s.pos.len() < 3 {
             continue;
         }
-        let heads = headings(&s.pos, cfg.still_speed * scene.dt);
         for j in 1..s.pos.len() - 1 {
             if want.is_some_and(|w| labels[k][j] != w) {
                 continue;
             }
-            let st = state_at(scene, k, j, &heads, cfg, centred, pivot);
+            let st = state_at(scene, k, j, &heads, cfg, centred, pivot, align);
             st.write(weights, &mut out.states);
             let v = [
                 (s.pos[j + 1][0] - s.pos[j][0]) / scene.dt,
                 (s.pos[j + 1][1] - s.pos[j][1]) / scene.dt,
             ];
-            out.actions.push(to_local(v, heads[j]));
+            out.actions.push(to_local(v, heads[k][j]));
         }
     }
 }
@@ -409,7 +423,7 @@ pub fn learn(
             .weights
             .clone()
             .unwrap_or_else(|| cfg.features.weights.clone());
-        let dims = cfg.features.dims(spec.pivot.is_some());
+        let dims = FeatureConfig::dims(spec.pivot.is_some(), &weights);
         let mut raw = RawSamples {
             dims,
             states: Vec::new(),

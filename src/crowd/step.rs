@@ -5,7 +5,8 @@
 
 use super::action::{Decision, Scratch};
 use super::features::{
-    formation, mean_direction, pivot_parts, to_local, to_world, unit, StateParts, SECTORS, V2,
+    alignment, formation, mean_direction, pivot_parts, to_local, to_world, unit, StateParts,
+    SECTORS, V2,
 };
 use super::layout::Layout;
 use super::model::{CrowdModel, Pivot};
@@ -158,8 +159,16 @@ pub struct Planned {
     pub decision: Decision,
 }
 
-/// The state of `a` (unweighted) given the others' positions.
-pub fn perceive(model: &CrowdModel, a: &Agent, i: usize, pos: &[V2], grid: &Grid) -> StateParts {
+/// The state of `a` (unweighted) given the others' positions and headings; `align` computes the
+/// neighbours' headings too.
+pub fn perceive(
+    model: &CrowdModel,
+    a: &Agent,
+    i: usize,
+    (pos, heads): (&[V2], &[V2]),
+    grid: &Grid,
+    align: bool,
+) -> StateParts {
     let f = &model.config.features;
     let frame = a.pivot.as_ref().map_or(a.heading, |p| p.dir());
     let now = formation(
@@ -191,12 +200,17 @@ pub fn perceive(model: &CrowdModel, a: &Agent, i: usize, pos: &[V2], grid: &Grid
             .as_ref()
             .map(|p| pivot_parts(a.pos, a.heading, p.position, p.dir())),
         intent: to_local(intent, a.heading),
+        align: align.then(|| {
+            let near = grid.near(a.pos, f.radius).filter(|&j| j != i);
+            alignment(a.pos, a.heading, near.map(|j| (pos[j], heads[j])), f.radius)
+        }),
     }
 }
 
 /// Every agent's decision for this step (in parallel; the order of the output is the agents').
 pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
     let pos: Vec<V2> = agents.iter().map(|a| a.pos).collect();
+    let heads: Vec<V2> = agents.iter().map(|a| a.heading).collect();
     let grid = Grid::new(&pos, model.config.features.radius);
     agents
         .par_iter_mut()
@@ -204,8 +218,9 @@ pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
         .map_init(
             || (Scratch::default(), Vec::new(), Vec::new()),
             |(sc, raw, z), (i, a)| {
-                let parts = perceive(model, a, i, &pos, &grid);
                 let b = &model.behaviours[a.behaviour.min(model.behaviours.len() - 1)];
+                let align = b.weights.alignment > 0.0;
+                let parts = perceive(model, a, i, (&pos, &heads), &grid, align);
                 raw.clear();
                 parts.write(&b.weights, raw);
                 if raw.len() != b.pca.input() {

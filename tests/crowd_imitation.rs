@@ -1,0 +1,161 @@
+//! The crowd system's alignment feature (`features.weights.alignment`, an extension of §4) and the
+//! imitation of herdfit's own herd model that needs it (issue #20; `scripts/imitation.py` runs the
+//! full protocol for RESULTS.md §4).
+
+mod common;
+
+use common::{ok, s};
+use herdfit::crowd::features::{alignment, FeatureConfig, FeatureWeights, StateParts, SECTORS};
+use std::path::{Path, PathBuf};
+
+#[test]
+fn alignment_sums_eq1_weighted_headings_in_the_agents_frame() {
+    let r = 2.0;
+    // Agent at the origin heading +y: "ahead" is +y, "left" is −x.
+    let n = [
+        ([1.0, 0.0], [1.0, 0.0]), // d = 1, heading +x (to the agent's right): f = 0.25
+        ([0.0, 0.5], [0.0, 1.0]), // d = 0.5, heading like the agent: f = 0.5625
+        ([3.0, 0.0], [-1.0, 0.0]), // d = 3 ≥ r: left out
+        ([0.0, 0.0], [-1.0, 0.0]), // the agent's own position: left out
+        ([-2.0, 0.0], [0.0, -1.0]), // d = r: f = 0, enters continuously
+    ];
+    let a = alignment([0.0, 0.0], [0.0, 1.0], n.into_iter(), r);
+    assert!((a[0] - 0.5625).abs() < 1e-12, "ahead component {a:?}");
+    assert!((a[1] + 0.25).abs() < 1e-12, "left component {a:?}");
+}
+
+#[test]
+fn alignment_adds_two_state_values_only_when_weighted() {
+    let parts = StateParts {
+        speed: 1.0,
+        now: [0.5; SECTORS],
+        prev: [0.25; SECTORS],
+        pivot: None,
+        intent: [1.0, 0.0],
+        align: Some([0.3, -0.4]),
+    };
+    let plain = FeatureWeights::default();
+    let mut out = Vec::new();
+    parts.write(&plain, &mut out);
+    assert_eq!(out.len(), 19);
+    assert_eq!(out.len(), FeatureConfig::dims(false, &plain));
+    let w = FeatureWeights {
+        alignment: 25.0,
+        ..FeatureWeights::default()
+    };
+    let mut with = Vec::new();
+    parts.write(&w, &mut with);
+    assert_eq!(with.len(), FeatureConfig::dims(false, &w));
+    assert_eq!(&with[..19], &out[..], "the other values are unchanged");
+    assert_eq!(&with[19..], &[5.0 * 0.3, 5.0 * -0.4], "√25 × the alignment");
+}
+
+fn source(dir: &Path, seed: u64) -> PathBuf {
+    let p = dir.join(format!("src{seed}.csv"));
+    ok(&[
+        "simulate",
+        "--agents",
+        "100",
+        "--steps",
+        "120",
+        "--guidance",
+        "1,0",
+        "--seed",
+        &seed.to_string(),
+        "--out",
+        s(&p),
+    ]);
+    p
+}
+
+/// W1 of speed, nearest neighbour, turning rate and polarization between two crowds.
+fn compare(dir: &Path, a: &Path, b: &Path) -> [f64; 4] {
+    let out = dir.join("compare.json");
+    ok(&["crowd", "compare", s(a), s(b), "--json", s(&out)]);
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let m = v["measures"].as_array().unwrap();
+    let names = ["speed", "nearest_neighbour", "turning_rate", "polarization"];
+    names.map(|n| {
+        m.iter().find(|x| x["name"] == n).unwrap()["wasserstein"]
+            .as_f64()
+            .unwrap()
+    })
+}
+
+/// Mean W1 of the imitations of sources 1.. by a model learnt from source 0 with `config`.
+fn imitate(dir: &Path, src: &[PathBuf], config: &str) -> [f64; 4] {
+    let cfg = dir.join("learn.json");
+    std::fs::write(&cfg, config).unwrap();
+    let model = dir.join("model.json");
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src[0]),
+        "--config",
+        s(&cfg),
+        "--out",
+        s(&model),
+    ]);
+    let mut sum = [0.0; 4];
+    for (seed, target) in src.iter().enumerate().skip(1) {
+        let out = dir.join("imitation.csv");
+        ok(&[
+            "crowd",
+            "simulate",
+            s(&model),
+            "--entries",
+            s(target),
+            "--no-goals",
+            "--seed",
+            &seed.to_string(),
+            "--out",
+            s(&out),
+        ]);
+        let w = compare(dir, target, &out);
+        (0..4).for_each(|i| sum[i] += w[i] / (src.len() - 1) as f64);
+    }
+    sum
+}
+
+/// The paper's Reynolds experiment on herdfit's herd model: the imitation's speed, spacing,
+/// turning and polarization distributions within 2× the sources' own run-to-run spread (mean
+/// W1 over 15 source pairs and over 5 imitations), and the alignment feature is what brings the
+/// polarization within.
+#[test]
+fn the_herd_imitation_with_alignment_is_within_twice_the_sources_spread() {
+    let dir = tempfile::tempdir().unwrap();
+    let src: Vec<PathBuf> = (0..6).map(|k| source(dir.path(), k)).collect();
+    let mut spread = [0.0; 4];
+    let mut pairs = 0.0;
+    for i in 0..src.len() {
+        for j in i + 1..src.len() {
+            let w = compare(dir.path(), &src[i], &src[j]);
+            (0..4).for_each(|m| spread[m] += w[m]);
+            pairs += 1.0;
+        }
+    }
+    let limit = spread.map(|x| 2.0 * x / pairs);
+    let plain = imitate(dir.path(), &src, r#"{"action":{"k":30}}"#);
+    let aligned = imitate(
+        dir.path(),
+        &src,
+        r#"{"action":{"k":30},"features":{"weights":{"alignment":100}}}"#,
+    );
+    for (m, name) in ["speed", "nearest neighbour", "turning rate", "polarization"]
+        .iter()
+        .enumerate()
+    {
+        assert!(
+            aligned[m] <= limit[m],
+            "{name}: imitation W1 {} vs 2× spread {}",
+            aligned[m],
+            limit[m]
+        );
+    }
+    assert!(
+        aligned[3] < 0.8 * plain[3],
+        "polarization W1 with alignment {} vs without {}",
+        aligned[3],
+        plain[3]
+    );
+}
