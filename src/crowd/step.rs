@@ -200,17 +200,32 @@ pub fn perceive(
             .as_ref()
             .map(|p| pivot_parts(a.pos, a.heading, p.position, p.dir())),
         intent: to_local(intent, a.heading),
-        align: align.then(|| {
-            let near = grid.near(a.pos, f.radius).filter(|&j| j != i);
-            alignment(a.pos, a.heading, near.map(|j| (pos[j], heads[j])), f.radius)
-        }),
+        align: align.then(|| neighbour_headings(a, i, (pos, heads), grid, f.radius)),
     }
+}
+
+/// The alignment feature of `a` (out of line: most models have none).
+#[inline(never)]
+fn neighbour_headings(
+    a: &Agent,
+    i: usize,
+    (pos, heads): (&[V2], &[V2]),
+    grid: &Grid,
+    r: f64,
+) -> V2 {
+    let near = grid.near(a.pos, r).filter(|&j| j != i);
+    alignment(a.pos, a.heading, near.map(|j| (pos[j], heads[j])), r)
 }
 
 /// Every agent's decision for this step (in parallel; the order of the output is the agents').
 pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
     let pos: Vec<V2> = agents.iter().map(|a| a.pos).collect();
-    let heads: Vec<V2> = agents.iter().map(|a| a.heading).collect();
+    // The others' headings, only for a model with an alignment feature.
+    let heads: Vec<V2> = if model.behaviours.iter().any(|b| b.weights.alignment > 0.0) {
+        agents.iter().map(|a| a.heading).collect()
+    } else {
+        Vec::new()
+    };
     let grid = Grid::new(&pos, model.config.features.radius);
     agents
         .par_iter_mut()
