@@ -451,6 +451,27 @@ fn bad_input_gets_one_line_and_writes_nothing() {
         e.contains("layout.json") && e.contains("obstacles[0]") && e.contains("at least 3 points"),
         "{e}"
     );
+    // A line region whose join probability is not a probability.
+    let lay2 = write(
+        "layout2.json",
+        r#"{"schema": "herdfit.crowd-layout/1", "pivots": [{"name": "b", "position": [5, 5],
+            "orientation_deg": 90}], "regions": [{"behaviour": "line", "pivot": "b", "join": 1.5,
+            "polygon": [[4, 2], [6, 2], [6, 6], [4, 6]]}],
+            "spawns": [{"position": [0, 1], "goal": [10, 1], "count": 3}]}"#,
+    );
+    let e = fails(&[
+        "crowd",
+        "simulate",
+        s(&out),
+        "--layout",
+        s(&lay2),
+        "--out",
+        s(&sim),
+    ]);
+    assert!(
+        e.contains("layout2.json") && e.contains("regions[0].join = 1.5"),
+        "{e}"
+    );
     let e = fails(&[
         "crowd",
         "learn",
@@ -503,6 +524,18 @@ fn layout_simulation_forms_a_line_and_writes_a_picture() {
         s(&out),
     ]);
     assert!(text.contains("80 agents"), "{text}");
+    // Most walk through the hall to their exits; about 30 % (the region's `join`) queue.
+    let count = |what: &str| -> usize {
+        let at = text.find(what).unwrap_or_else(|| panic!("{what}: {text}"));
+        text[..at]
+            .split_whitespace()
+            .last()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert!(count(" arrived") >= 40, "{text}");
+    assert!((8..=40).contains(&count(" joined a line")), "{text}");
     let t = herdfit::data::tracks::Tracks::load(&out).unwrap();
     let roles: std::collections::BTreeSet<&str> =
         t.rows.iter().filter_map(|r| r.role.as_deref()).collect();
@@ -510,6 +543,18 @@ fn layout_simulation_forms_a_line_and_writes_a_picture() {
         roles.contains("line") && roles.contains("locomotion"),
         "{roles:?}"
     );
+    // A line forms: in some frame at least four queueing agents stand on the places behind the
+    // booth (22, 9), 0.8 m apart along −y, each within 0.1 m of one.
+    let on_place = |p: [f64; 3]| {
+        let r = ((9.0 - p[1]) / 0.8).round();
+        r >= 0.0 && (p[0] - 22.0).hypot(p[1] - (9.0 - 0.8 * r)) < 0.1
+    };
+    let mut standing: std::collections::BTreeMap<u64, usize> = Default::default();
+    for r in t.rows.iter().filter(|r| r.role.as_deref() == Some("line")) {
+        *standing.entry(r.frame).or_default() += usize::from(on_place(r.pos));
+    }
+    let most = standing.values().copied().max().unwrap_or(0);
+    assert!(most >= 4, "at most {most} agents in line on their places");
     // Nobody steps through the walls at y = 0 and y = 10 (segments from x = 0 to 30; the hall's
     // ends are open, so an agent may walk out and round a wall's end) or into the pillar.
     let cross = |p: [f64; 3], q: [f64; 3], y: f64| {

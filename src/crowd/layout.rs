@@ -41,6 +41,18 @@ pub struct Region {
     /// Name of the region's pivot object.
     #[serde(default)]
     pub pivot: Option<String>,
+    /// For a `line` region: the probability that an agent entering it joins the line, drawn
+    /// once per agent (1, the default: everyone who passes through queues).
+    #[serde(default = "always", skip_serializing_if = "is_always")]
+    pub join: f64,
+}
+
+fn always() -> f64 {
+    1.0
+}
+
+fn is_always(v: &f64) -> bool {
+    *v == 1.0
 }
 
 /// Agents entering the scene.
@@ -135,6 +147,12 @@ impl Layout {
         }
         for (i, r) in self.regions.iter().enumerate() {
             polygon(&r.polygon, format!("regions[{i}].polygon"))?;
+            if !(0.0..=1.0).contains(&r.join) {
+                return Err(Error::invalid(format!(
+                    "regions[{i}].join = {} must be a probability in 0..=1",
+                    r.join
+                )));
+            }
             if let Some(n) = &r.pivot {
                 if !self.pivots.iter().any(|p| &p.name == n) {
                     return Err(Error::invalid(format!(

@@ -32,6 +32,7 @@ pub mod model;
 pub mod pca;
 pub mod render;
 pub mod sim;
+pub mod steer;
 pub mod step;
 pub mod synth;
 pub mod tune;
@@ -49,6 +50,8 @@ pub struct DemoSummary {
     pub agent_steps: u64,
     pub seconds_simulating: f64,
     pub line_joins: usize,
+    /// Agents that reached their exits before the hall's duration ran out.
+    pub arrived: usize,
     pub comparison: measure::Comparison,
     pub picture: PathBuf,
     pub out: PathBuf,
@@ -65,9 +68,13 @@ impl std::fmt::Display for DemoSummary {
         )?;
         writeln!(
             f,
-            "crowd: simulated {} agents in a new hall with a pillar and a ticket line ({} joined it): \
-             {} agent-steps in {:.2} s",
-            self.simulated_agents, self.line_joins, self.agent_steps, self.seconds_simulating
+            "crowd: simulated {} agents in a new hall with a pillar and a ticket line ({} joined it, \
+             {} reached their exits): {} agent-steps in {:.2} s",
+            self.simulated_agents,
+            self.line_joins,
+            self.arrived,
+            self.agent_steps,
+            self.seconds_simulating
         )?;
         for m in &self.comparison.measures {
             writeln!(
@@ -104,6 +111,7 @@ pub fn demo_layout() -> layout::Layout {
             behaviour: behaviour::LINE.into(),
             polygon: vec![[21.0, 4.5], [23.0, 4.5], [23.0, 9.5], [21.0, 9.5]],
             pivot: Some("booth".into()),
+            join: 0.3,
         }],
         spawns: vec![
             Spawn {
@@ -143,14 +151,20 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
     let m = model::learn(std::slice::from_ref(&source), &cfg, progress)?;
     m.save(&out.join("model.json"))?;
     let hall = demo_layout();
-    hall.save(&out.join("hall.json"))?;
+    // Not `hall.json`: that is the sidecar of `hall.csv`.
+    hall.save(&out.join("hall-layout.json"))?;
     let entries = sim::entries_from_layout(&hall, m.dt, sim::typical_speed(&m), 1);
     let t0 = std::time::Instant::now();
     let run = sim::simulate(
         &m,
         Some(&hall),
         &entries,
-        &sim::SimConfig::default(),
+        // The seed of the entries too: `herdfit crowd simulate model.json --layout
+        // hall-layout.json --seed 1` repeats this run.
+        &sim::SimConfig {
+            seed: 1,
+            ..sim::SimConfig::default()
+        },
         progress,
     )?;
     let seconds = t0.elapsed().as_secs_f64();
@@ -182,6 +196,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
         agent_steps: run.agent_steps,
         seconds_simulating: seconds,
         line_joins: run.line_joins,
+        arrived: run.arrived,
         comparison,
         picture,
         out: out.to_path_buf(),

@@ -8,6 +8,8 @@ use super::behaviour::{INTERACTION, LINE, LOCOMOTION};
 use super::features::{unit, Scene, V2};
 use super::layout::Layout;
 use super::model::{toward, CrowdModel};
+pub use super::steer::steer_to_goals;
+use super::steer::stop_at_places;
 use super::step::{advance, plan, separate, Agent, Planned};
 use crate::data::tracks::{TrackRow, Tracks, TracksMeta};
 use crate::error::{Error, Result};
@@ -186,6 +188,8 @@ struct Mind {
     /// Index of the line region it queues in, and whether it has been served.
     line: Option<usize>,
     served: bool,
+    /// Lines it decided not to join (`join` < 1).
+    declined: Vec<usize>,
     deadline: usize,
 }
 
@@ -367,6 +371,14 @@ impl Machine<'_> {
                 .iter()
                 .position(|(ri, _)| super::layout::inside(&layout.regions[*ri].polygon, a.pos))
             {
+                if m.declined.contains(&li) {
+                    continue;
+                }
+                let join = layout.regions[self.lines[li].0].join;
+                if join < 1.0 && self.rng.gen::<f64>() >= join {
+                    m.declined.push(li);
+                    continue;
+                }
                 self.lines[li].1.push(a.id);
                 m.line = Some(li);
                 m.until = 0;
@@ -467,7 +479,8 @@ pub fn simulate(
         } else {
             plan(model, &mut agents)
         };
-        steer_to_goals(&agents, &mut plans, cfg.goal_cone_deg, loco_only(&minds));
+        steer_to_goals(&agents, &mut plans, cfg.goal_cone_deg, not_grouped(&minds));
+        stop_at_places(&agents, &mut plans, &in_line(&minds), dt);
         for ((a, p), role) in agents.iter().zip(&plans).zip(&roles) {
             rows.push(TrackRow {
                 frame: t as u64,
@@ -525,43 +538,15 @@ pub fn simulate(
     })
 }
 
-/// Per agent: whether goal steering applies (walking to its goal, not grouped or queueing).
-fn loco_only(minds: &[Mind]) -> Vec<bool> {
-    minds
-        .iter()
-        .map(|m| m.group.is_none() && m.line.is_none())
-        .collect()
+/// Per agent: whether goal steering applies (walking to its goal or to its place in a line;
+/// not while in a group).
+fn not_grouped(minds: &[Mind]) -> Vec<bool> {
+    minds.iter().map(|m| m.group.is_none()).collect()
 }
 
-/// Turns each steered agent's planned velocity into the cone of half-angle `cone_deg` about the
-/// direction to its goal (keeping its speed); agents without a goal, or with `steer` false, keep
-/// theirs. `cone_deg` ≥ 180 does nothing.
-pub fn steer_to_goals(agents: &[Agent], plans: &mut [Planned], cone_deg: f64, steer: Vec<bool>) {
-    if cone_deg >= 180.0 {
-        return;
-    }
-    let cone = cone_deg.to_radians();
-    for ((a, p), on) in agents.iter().zip(plans.iter_mut()).zip(steer) {
-        let Some(g) = a.goal.filter(|_| on) else {
-            continue;
-        };
-        let Some(u) = unit([g[0] - a.pos[0], g[1] - a.pos[1]]) else {
-            continue;
-        };
-        let v = p.velocity;
-        let speed = v[0].hypot(v[1]);
-        if speed <= 0.0 {
-            continue;
-        }
-        // Angle of v from u, in (−π, π].
-        let ang = (u[0] * v[1] - u[1] * v[0]).atan2(u[0] * v[0] + u[1] * v[1]);
-        if ang.abs() <= cone {
-            continue;
-        }
-        let t = cone.copysign(ang);
-        let (c, s) = (t.cos(), t.sin());
-        p.velocity = [speed * (u[0] * c - u[1] * s), speed * (u[0] * s + u[1] * c)];
-    }
+/// Per agent: whether it queues in a line.
+fn in_line(minds: &[Mind]) -> Vec<bool> {
+    minds.iter().map(|m| m.line.is_some()).collect()
 }
 
 /// Steps an entry may walk before it times out.
