@@ -5,7 +5,7 @@ use super::features::unit;
 use super::step::{Agent, Planned};
 
 /// Within this distance (units) of its place in a line an agent walks straight to it.
-const SLOT_APPROACH: f64 = 1.5;
+pub const SLOT_APPROACH: f64 = 1.5;
 
 /// An agent in a line walks straight to its place once within [`SLOT_APPROACH`] of it, at its
 /// planned speed, and stands there: its step is cut at the place (a model learnt from walkers
