@@ -2,14 +2,16 @@
 """The crowd system's imitation of herdfit's own herd model (issue #20, the paper's Reynolds
 experiment), as one command.
 
-Sources: `herdfit simulate --agents 100 --steps 120 --guidance 1,0 --seed S` for S = 0..N-1.
+Sources: `herdfit simulate --agents 100 --steps 120 --guidance 1,0 --seed S` for S = F..F+N-1
+(F = --first-seed, default 0; another F gives a fresh set of sources).
 Scale: the mean 1-Wasserstein distance of speed, nearest-neighbour distance, turning rate and
 polarization between every pair of sources (their run-to-run spread). Each configuration learns
 from source 0 (`crowd learn src0.csv --config C`) and imitates every other source S from its
 first frame (`crowd simulate --entries srcS.csv --no-goals --seed S+offset`) once per offset;
 the table gives the mean W1 over those runs and its ratio to 2x the spread (<= 1: within).
 
-    python3 scripts/imitation.py --herdfit target/release/herdfit [--sources 9] [--offsets 0,100]
+    python3 scripts/imitation.py --herdfit target/release/herdfit [--sources 9] [--first-seed 0]
+        [--offsets 0,100]
         [--config '{"action":{"k":30}}' ...] [--json out.json]
 """
 
@@ -53,6 +55,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--herdfit", default="target/release/herdfit")
     ap.add_argument("--sources", type=int, default=9)
+    ap.add_argument("--first-seed", type=int, default=0, help="seed of the first source")
     ap.add_argument("--offsets", default="0,100", help="imitation seed offsets")
     ap.add_argument("--config", action="append", help="learn config JSON (repeatable)")
     ap.add_argument("--json", help="write the table as JSON here")
@@ -66,13 +69,14 @@ def main():
         for s in range(a.sources):
             p = os.path.join(tmp, f"src{s}.csv")
             run(a.herdfit, "simulate", "--agents", "100", "--steps", "120", "--guidance", "1,0",
-                "--seed", str(s), "--out", p)
+                "--seed", str(a.first_seed + s), "--out", p)
             src.append(p)
         pairs = [compare(a.herdfit, src[i], src[j], tmp)
                  for i, j in itertools.combinations(range(a.sources), 2)]
         spread = mean(pairs)
         limit = [2 * x for x in spread]
-        print(f"source spread (mean W1 over {len(pairs)} pairs of {a.sources} sources): "
+        print(f"source spread (mean W1 over {len(pairs)} pairs of {a.sources} sources, seeds "
+              f"{a.first_seed}-{a.first_seed + a.sources - 1}): "
               + ", ".join(f"{k} {v:.4f}" for k, v in zip(MEASURES, spread)))
         print()
         print("| learn config | " + " | ".join(MEASURES) + " | within 2x spread |")
@@ -88,7 +92,7 @@ def main():
             for s, off in itertools.product(range(1, a.sources), offsets):
                 out = os.path.join(tmp, "imitation.csv")
                 run(a.herdfit, "crowd", "simulate", model, "--entries", src[s], "--no-goals",
-                    "--seed", str(s + off), "--out", out)
+                    "--seed", str(a.first_seed + s + off), "--out", out)
                 rows.append(compare(a.herdfit, src[s], out, tmp))
             m = mean(rows)
             ratio = [x / l for x, l in zip(m, limit)]

@@ -117,12 +117,13 @@ fn imitate(dir: &Path, src: &[PathBuf], config: &str) -> [f64; 4] {
     sum
 }
 
-/// The paper's Reynolds experiment on herdfit's herd model: the imitation's speed, spacing,
-/// turning and polarization distributions within 2× the sources' own run-to-run spread (mean
-/// W1 over 15 source pairs and over 5 imitations), and the alignment feature is what brings the
-/// polarization within.
+/// The paper's Reynolds experiment on herdfit's herd model (sources 0–5: 15 source pairs, 5
+/// imitations; model learnt from source 0 with k = 30). What holds on every set of sources
+/// measured (RESULTS.md §4, seeds 0–8, 200–208, 300–308): speed and spacing within 2× the
+/// sources' spread, and the alignment feature lowers the polarization error by at least a fifth.
+/// (Turning rate and polarization are within 2× on sources 0–8 only; not asserted.)
 #[test]
-fn the_herd_imitation_with_alignment_is_within_twice_the_sources_spread() {
+fn the_herd_imitation_keeps_speed_and_spacing_and_alignment_lowers_the_polarization_error() {
     let dir = tempfile::tempdir().unwrap();
     let src: Vec<PathBuf> = (0..6).map(|k| source(dir.path(), k)).collect();
     let mut spread = [0.0; 4];
@@ -141,16 +142,14 @@ fn the_herd_imitation_with_alignment_is_within_twice_the_sources_spread() {
         &src,
         r#"{"action":{"k":30},"features":{"weights":{"alignment":100}}}"#,
     );
-    for (m, name) in ["speed", "nearest neighbour", "turning rate", "polarization"]
-        .iter()
-        .enumerate()
-    {
-        assert!(
-            aligned[m] <= limit[m],
-            "{name}: imitation W1 {} vs 2× spread {}",
-            aligned[m],
-            limit[m]
-        );
+    for (m, name) in ["speed", "nearest neighbour"].iter().enumerate() {
+        for (w, which) in [(plain[m], "k 30"), (aligned[m], "k 30 + alignment")] {
+            assert!(
+                w <= limit[m],
+                "{name} ({which}): imitation W1 {w} vs 2× spread {}",
+                limit[m]
+            );
+        }
     }
     assert!(
         aligned[3] < 0.8 * plain[3],
