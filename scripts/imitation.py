@@ -6,7 +6,8 @@ Sources: `herdfit simulate --agents 100 --steps 120 --guidance 1,0 --seed S` for
 (F = --first-seed, default 0; another F gives a fresh set of sources).
 Scale: the mean 1-Wasserstein distance of speed, nearest-neighbour distance, turning rate and
 polarization between every pair of sources (their run-to-run spread). Each configuration learns
-from source 0 (`crowd learn src0.csv --config C`) and imitates every other source S from its
+from the first --train sources (default 1: `crowd learn src0.csv --config C`) and imitates each
+remaining source S from its
 first frame (`crowd simulate --entries srcS.csv --no-goals --seed S+offset`) once per offset;
 the table gives the mean W1 over those runs and its ratio to 2x the spread (<= 1: within).
 
@@ -56,12 +57,13 @@ def main():
     ap.add_argument("--herdfit", default="target/release/herdfit")
     ap.add_argument("--sources", type=int, default=9)
     ap.add_argument("--first-seed", type=int, default=0, help="seed of the first source")
+    ap.add_argument("--train", type=int, default=1, help="learn from the first N sources")
     ap.add_argument("--offsets", default="0,100", help="imitation seed offsets")
     ap.add_argument("--config", action="append", help="learn config JSON (repeatable)")
     ap.add_argument("--json", help="write the table as JSON here")
     a = ap.parse_args()
-    if a.sources < 3:
-        sys.exit("--sources must be >= 3")
+    if a.sources < 3 or not 1 <= a.train < a.sources:
+        sys.exit("--sources must be >= 3 and --train in 1..sources-1")
     offsets = [int(x) for x in a.offsets.split(",")]
     configs = a.config or DEFAULT_CONFIGS
     with tempfile.TemporaryDirectory() as tmp:
@@ -87,9 +89,9 @@ def main():
             with open(cfg, "w") as f:
                 f.write(c)
             model = os.path.join(tmp, "model.json")
-            run(a.herdfit, "crowd", "learn", src[0], "--config", cfg, "--out", model)
+            run(a.herdfit, "crowd", "learn", *src[:a.train], "--config", cfg, "--out", model)
             rows = []
-            for s, off in itertools.product(range(1, a.sources), offsets):
+            for s, off in itertools.product(range(a.train, a.sources), offsets):
                 out = os.path.join(tmp, "imitation.csv")
                 run(a.herdfit, "crowd", "simulate", model, "--entries", src[s], "--no-goals",
                     "--seed", str(a.first_seed + s + off), "--out", out)
