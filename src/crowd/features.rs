@@ -45,6 +45,13 @@ fn is_zero(v: &f64) -> bool {
     *v == 0.0
 }
 
+impl FeatureWeights {
+    /// Whether the state holds the alignment feature (its weight is > 0).
+    pub fn aligns(&self) -> bool {
+        self.alignment > 0.0
+    }
+}
+
 impl Default for FeatureWeights {
     /// Table 1's "Locomotion" row (speed 1, formation 100, pivot 0, direction 1).
     fn default() -> Self {
@@ -126,7 +133,7 @@ impl FeatureConfig {
     /// Length of the state vector under weights `w`: speed, 2 × 8 sectors, 4 pivot values when
     /// `pivot`, 2 direction, and 2 alignment values when `w.alignment` > 0.
     pub fn dims(pivot: bool, w: &FeatureWeights) -> usize {
-        1 + 2 * SECTORS + if pivot { 4 } else { 0 } + 2 + if w.alignment > 0.0 { 2 } else { 0 }
+        1 + 2 * SECTORS + if pivot { 4 } else { 0 } + 2 + if w.aligns() { 2 } else { 0 }
     }
 }
 
@@ -164,7 +171,7 @@ impl StateParts {
         }
         out.push(wd * self.intent[0]);
         out.push(wd * self.intent[1]);
-        if w.alignment > 0.0 {
+        if w.aligns() {
             let wa = w.alignment.sqrt();
             let a = self.align.unwrap_or([0.0, 0.0]);
             out.push(wa * a[0]);
@@ -211,13 +218,13 @@ pub fn formation(p: V2, frame: V2, neighbours: impl Iterator<Item = V2>, r: f64)
         let s = sector(to_local(d, frame));
         nearest[s] = nearest[s].min(dist);
     }
-    nearest.map(|d| {
-        if d < r {
-            (r - d) * (r - d) / (r * r)
-        } else {
-            0.0
-        }
-    })
+    nearest.map(|d| if d < r { eq1(d, r) } else { 0.0 })
+}
+
+/// Eq. 1's weight of a neighbour at distance `d` < `r`: (r − d)²/r².
+#[inline]
+fn eq1(d: f64, r: f64) -> f64 {
+    (r - d) * (r - d) / (r * r)
 }
 
 /// The neighbours' headings in the frame of an agent at `p` heading `h`: Σ f_j ĥ_j over the
@@ -231,7 +238,7 @@ pub fn alignment(p: V2, h: V2, neighbours: impl Iterator<Item = (V2, V2)>, r: f6
         if dist >= r || dist <= 0.0 {
             continue;
         }
-        let f = (r - dist) * (r - dist) / (r * r);
+        let f = eq1(dist, r);
         s[0] += f * hq[0];
         s[1] += f * hq[1];
     }

@@ -353,7 +353,7 @@ pub fn raw_samples(
     out: &mut RawSamples,
 ) {
     let centred = cfg.intent == IntentWindow::Centred;
-    let align = weights.alignment > 0.0;
+    let align = weights.aligns();
     let heads: Vec<Vec<V2>> = scene
         .segments
         .iter()

@@ -221,7 +221,7 @@ fn neighbour_headings(
 pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
     let pos: Vec<V2> = agents.iter().map(|a| a.pos).collect();
     // The others' headings, only for a model with an alignment feature.
-    let heads: Vec<V2> = if model.behaviours.iter().any(|b| b.weights.alignment > 0.0) {
+    let heads: Vec<V2> = if model.behaviours.iter().any(|b| b.weights.aligns()) {
         agents.iter().map(|a| a.heading).collect()
     } else {
         Vec::new()
@@ -234,7 +234,7 @@ pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
             || (Scratch::default(), Vec::new(), Vec::new()),
             |(sc, raw, z), (i, a)| {
                 let b = &model.behaviours[a.behaviour.min(model.behaviours.len() - 1)];
-                let align = b.weights.alignment > 0.0;
+                let align = b.weights.aligns();
                 let parts = perceive(model, a, i, (&pos, &heads), &grid, align);
                 raw.clear();
                 parts.write(&b.weights, raw);
