@@ -52,6 +52,11 @@ pub struct ActionConfig {
     pub choice: ClusterChoice,
     /// Lloyd iterations of k-means at most.
     pub kmeans_iterations: usize,
+    /// Inertia λ ∈ [0, 1] of the step (a departure, ARCHITECTURE.md): the planned velocity is
+    /// (1 − λ)·(the action in world coordinates) + λ·(the agent's last step / dt). 0 (the
+    /// default, not written) is §5's action as it is; 1 is constant velocity.
+    #[serde(skip_serializing_if = "super::features::is_zero")]
+    pub inertia: f64,
 }
 
 impl Default for ActionConfig {
@@ -67,6 +72,7 @@ impl Default for ActionConfig {
             max_deviation: 2.0,
             choice: ClusterChoice::Sample,
             kmeans_iterations: 20,
+            inertia: 0.0,
         }
     }
 }
@@ -107,6 +113,9 @@ impl ActionConfig {
         }
         if self.attraction_grid == 0 {
             return bad("attraction_grid", "must be ≥ 1".into());
+        }
+        if !(0.0..=1.0).contains(&self.inertia) {
+            return bad("inertia", format!("= {} must be in [0, 1]", self.inertia));
         }
         if self.kmeans_iterations == 0 {
             return bad("kmeans_iterations", "must be ≥ 1".into());

@@ -341,7 +341,10 @@ pub fn evaluate(cfg: &EvalConfig, progress: &mut dyn Progress) -> Result<EvalRep
         let lcfg = match chosen {
             Some(c) => {
                 let c = &inner[ti][c];
-                with(&cfg.learn, [c.smoothing, c.formation, c.bandwidth_scale])
+                with(
+                    &cfg.learn,
+                    [c.smoothing, c.formation, c.bandwidth_scale, c.inertia],
+                )
             }
             None => cfg.learn.clone(),
         };
@@ -464,11 +467,16 @@ impl std::fmt::Display for EvalReport {
                 writeln!(
                     f,
                     "{}: chosen in its training scenes: smoothing {}, formation weight {}, \
-                     bandwidth × {} (inner ADE/FDE {:.3}/{:.3} of {} candidates)",
+                     bandwidth × {}{} (inner ADE/FDE {:.3}/{:.3} of {} candidates)",
                     x.scene,
                     c.smoothing,
                     c.formation,
                     c.bandwidth_scale,
+                    if c.inertia > 0.0 {
+                        format!(", inertia {}", c.inertia)
+                    } else {
+                        String::new()
+                    },
                     c.inner_ade,
                     c.inner_fde,
                     x.candidates.len()

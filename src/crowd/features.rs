@@ -41,7 +41,7 @@ pub struct FeatureWeights {
     pub alignment: f64,
 }
 
-fn is_zero(v: &f64) -> bool {
+pub(crate) fn is_zero(v: &f64) -> bool {
     *v == 0.0
 }
 

@@ -248,13 +248,33 @@ pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
                     .model
                     .decide(z, a.m_prev, &model.config.action, &mut a.rng, sc);
                 Planned {
-                    velocity: to_world(d.action, a.heading),
+                    velocity: with_inertia(
+                        to_world(d.action, a.heading),
+                        &a.history,
+                        model.config.action.inertia,
+                        model.dt,
+                    ),
                     formation: parts.now,
                     decision: d,
                 }
             },
         )
         .collect()
+}
+
+/// `v` blended with the last step of `history` (positions `dt` apart) by inertia `lam`:
+/// (1 − λ)·v + λ·(last step / dt); `v` itself when λ = 0 or there is no last step.
+pub fn with_inertia(v: V2, history: &[V2], lam: f64, dt: f64) -> V2 {
+    match history {
+        [.., p, q] if lam > 0.0 => {
+            let last = [(q[0] - p[0]) / dt, (q[1] - p[1]) / dt];
+            [
+                (1.0 - lam) * v[0] + lam * last[0],
+                (1.0 - lam) * v[1] + lam * last[1],
+            ]
+        }
+        _ => v,
+    }
 }
 
 /// Applies planned decisions: moves (constrained by the layout's walls and obstacles), updates
@@ -374,6 +394,23 @@ mod tests {
 
     fn at(id: u64, p: V2) -> Agent {
         Agent::new(id, vec![p], [1.0, 0.0], None, 0, 0.4)
+    }
+
+    #[test]
+    fn inertia_blends_the_action_with_the_last_step() {
+        let hist = [[0.0, 0.0], [1.0, 0.0], [1.4, 0.2]];
+        let v = [3.0, -1.0];
+        // λ = 0: the action as it is; λ = 1: constant velocity (last step 0.4, 0.2 over 0.4 s).
+        assert_eq!(with_inertia(v, &hist, 0.0, 0.4), v);
+        let cv = with_inertia(v, &hist, 1.0, 0.4);
+        assert!(
+            (cv[0] - 1.0).abs() < 1e-12 && (cv[1] - 0.5).abs() < 1e-12,
+            "{cv:?}"
+        );
+        let half = with_inertia(v, &hist, 0.5, 0.4);
+        assert!((half[0] - 2.0).abs() < 1e-12 && (half[1] + 0.25).abs() < 1e-12);
+        // No last step: the action.
+        assert_eq!(with_inertia(v, &hist[..1], 0.5, 0.4), v);
     }
 
     #[test]

@@ -24,6 +24,8 @@ pub struct TuningConfig {
     pub bandwidth_scale: Vec<f64>,
     /// Candidate formation weights (`learn.features.weights.formation`, Table 1).
     pub formation: Vec<f64>,
+    /// Candidate step inertias (`learn.action.inertia`).
+    pub inertia: Vec<f64>,
     /// The inner folds score every `frame_stride`-th observation end (1: all of them).
     pub frame_stride: usize,
 }
@@ -34,6 +36,7 @@ impl Default for TuningConfig {
             smoothing: vec![1.0, 3.0],
             bandwidth_scale: vec![1.0, 3.0],
             formation: vec![],
+            inertia: vec![],
             frame_stride: 8,
         }
     }
@@ -45,6 +48,8 @@ pub struct Candidate {
     pub smoothing: f64,
     pub bandwidth_scale: f64,
     pub formation: f64,
+    #[serde(default, skip_serializing_if = "super::features::is_zero")]
+    pub inertia: f64,
     /// Mean ADE and FDE (m) over the held-out training scenes.
     pub inner_ade: f64,
     pub inner_fde: f64,
@@ -65,6 +70,9 @@ impl TuningConfig {
         {
             return Err(Error::invalid("tuning.bandwidth_scale must be > 0"));
         }
+        if self.inertia.iter().any(|x| !(0.0..=1.0).contains(x)) {
+            return Err(Error::invalid("tuning.inertia must be in [0, 1]"));
+        }
         if self.frame_stride == 0 {
             return Err(Error::invalid("tuning.frame_stride must be ≥ 1"));
         }
@@ -72,12 +80,13 @@ impl TuningConfig {
     }
 
     /// The candidate lists, `learn`'s value where a list is empty.
-    pub(crate) fn lists(&self, l: &LearnConfig) -> [Vec<f64>; 3] {
+    pub(crate) fn lists(&self, l: &LearnConfig) -> [Vec<f64>; 4] {
         let or = |v: &[f64], d: f64| if v.is_empty() { vec![d] } else { v.to_vec() };
         [
             or(&self.smoothing, l.smoothing),
             or(&self.formation, l.features.weights.formation),
             or(&self.bandwidth_scale, l.action.bandwidth_scale),
+            or(&self.inertia, l.action.inertia),
         ]
     }
 }
@@ -110,12 +119,14 @@ pub(crate) fn score_files(
     Ok(acc)
 }
 
-/// A learn configuration with candidate `c` = (smoothing, formation weight, bandwidth scale).
-pub(crate) fn with(l: &LearnConfig, c: [f64; 3]) -> LearnConfig {
+/// A learn configuration with candidate `c` = (smoothing, formation weight, bandwidth scale,
+/// inertia).
+pub(crate) fn with(l: &LearnConfig, c: [f64; 4]) -> LearnConfig {
     let mut l = l.clone();
     l.smoothing = c[0];
     l.features.weights.formation = c[1];
     l.action.bandwidth_scale = c[2];
+    l.action.inertia = c[3];
     l
 }
 
@@ -129,11 +140,13 @@ pub(crate) fn inner_scores(
     cfg: &EvalConfig,
     progress: &mut dyn Progress,
 ) -> Result<Vec<Vec<Candidate>>> {
-    let [sm, fo, bw] = cfg.tuning.lists(&cfg.learn);
-    let mut cands: Vec<[f64; 3]> = Vec::new();
+    let [sm, fo, bw, ine] = cfg.tuning.lists(&cfg.learn);
+    let mut cands: Vec<[f64; 4]> = Vec::new();
     for &a in &sm {
         for &b in &fo {
-            cands.extend(bw.iter().map(|&c| [a, b, c]));
+            for &c in &bw {
+                cands.extend(ine.iter().map(|&d| [a, b, c, d]));
+            }
         }
     }
     let names: Vec<&str> = files.iter().map(|(n, _)| *n).collect();
@@ -151,12 +164,17 @@ pub(crate) fn inner_scores(
         let train = training(files, extra, &[names[a], names[b]]);
         for &s in &sm {
             for &w in &fo {
-                let mut model = learn(&train, &with(&cfg.learn, [s, w, bw[0]]), &mut NoProgress)?;
+                let mut model = learn(
+                    &train,
+                    &with(&cfg.learn, [s, w, bw[0], ine[0]]),
+                    &mut NoProgress,
+                )?;
                 for (ci, c) in cands.iter().enumerate() {
                     if c[0] != s || c[1] != w {
                         continue;
                     }
                     model.config.action.bandwidth_scale = c[2];
+                    model.config.action.inertia = c[3];
                     for (t, h) in [(a, b), (b, a)] {
                         if let Some(ti) = tests.iter().position(|n| *n == names[t]) {
                             let acc =
@@ -183,6 +201,7 @@ pub(crate) fn inner_scores(
                     smoothing: c[0],
                     formation: c[1],
                     bandwidth_scale: c[2],
+                    inertia: c[3],
                     inner_ade: e[0] / e[2].max(1.0),
                     inner_fde: e[1] / e[2].max(1.0),
                 })

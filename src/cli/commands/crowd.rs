@@ -179,7 +179,7 @@ pub struct EvaluateArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Hyper-parameter candidates chosen inside each test scene's training scenes (TuningConfig
-    /// JSON file: smoothing, bandwidth_scale, formation lists, frame_stride).
+    /// JSON file: smoothing, bandwidth_scale, formation, inertia lists, frame_stride).
     #[arg(long, value_name = "TUNING.json")]
     pub tuning: Option<PathBuf>,
     /// Hard minimum distance (m) between rolled-out pedestrians (0: off).
