@@ -422,12 +422,12 @@ fn bad_input_gets_one_line_and_writes_nothing() {
     );
     assert!(!out.exists());
     // A step inertia outside [0, 1].
-    let src0 = synth(d, "c0.csv", 1, 30.0);
+    let src = synth(d, "c.csv", 1, 30.0);
     let bad = write("bad.json", r#"{"action": {"inertia": 1.5}}"#);
     let e = fails(&[
         "crowd",
         "learn",
-        s(&src0),
+        s(&src),
         "--config",
         s(&bad),
         "--out",
@@ -436,7 +436,6 @@ fn bad_input_gets_one_line_and_writes_nothing() {
     assert!(e.contains("action.inertia") && e.contains("[0, 1]"), "{e}");
     assert!(!out.exists());
     // A layout polygon with two points.
-    let src = synth(d, "c.csv", 1, 30.0);
     ok(&[
         "crowd",
         "learn",
