@@ -161,25 +161,24 @@ fn the_herd_imitation_keeps_speed_and_spacing_and_alignment_lowers_the_polarizat
     );
 }
 
-/// Learnt from three sources (0–2) with k = 20, the imitations of sources 3–5 are within 2× the
-/// spread on all four measures with the alignment feature, and out on polarization without it
-/// (RESULTS.md §4: within on 2 of 3 larger sets of sources; the third is out on turning).
+/// Learnt from three sources (0–2) with k = 20 from the raw tracks (`smoothing` 0: a simulation
+/// has no tracking noise), the imitations of sources 3–5 are within 2× the spread on all four
+/// measures with the alignment feature, and out on polarization without it; §3's default
+/// smoothing (σ = 1 frame) strips the sharp turns and raises the turning-rate error (RESULTS.md
+/// §4: within on all five larger sets of sources with 36 imitations each; smoothed, one set out
+/// on turning).
 #[test]
-fn learnt_from_three_sources_the_aligned_imitation_is_within_twice_the_spread() {
+fn learnt_from_three_raw_sources_the_aligned_imitation_is_within_twice_the_spread() {
     let dir = tempfile::tempdir().unwrap();
     let (src, limit) = sources_and_limits(dir.path());
-    let aligned = imitate(
-        dir.path(),
-        &src,
-        3,
-        r#"{"action":{"k":20},"max_samples":40000,"features":{"weights":{"alignment":100}}}"#,
-    );
-    let plain = imitate(
-        dir.path(),
-        &src,
-        3,
-        r#"{"action":{"k":20},"max_samples":40000}"#,
-    );
+    let config = |smoothing: &str, alignment: &str| {
+        format!(
+            r#"{{"action":{{"k":20}},"max_samples":40000,"smoothing":{smoothing},"features":{{"weights":{{"alignment":{alignment}}}}}}}"#
+        )
+    };
+    let aligned = imitate(dir.path(), &src, 3, &config("0", "100"));
+    let plain = imitate(dir.path(), &src, 3, &config("0", "0"));
+    let smoothed = imitate(dir.path(), &src, 3, &config("1", "100"));
     for (m, name) in ["speed", "nearest neighbour", "turning rate", "polarization"]
         .iter()
         .enumerate()
@@ -196,5 +195,11 @@ fn learnt_from_three_sources_the_aligned_imitation_is_within_twice_the_spread() 
         "without alignment the polarization W1 {} is within {}",
         plain[3],
         limit[3]
+    );
+    assert!(
+        aligned[2] < 0.9 * smoothed[2],
+        "turning-rate W1 from raw tracks {} vs smoothed {}",
+        aligned[2],
+        smoothed[2]
     );
 }
