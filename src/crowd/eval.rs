@@ -8,8 +8,9 @@
 //! frames only), so neighbours are predictions too, never future ground truth; the pedestrians
 //! with a complete window ending its observation at f are scored.
 
+use super::behaviour::LOCOMOTION;
 use super::features::{formation, headings, Scene, V2};
-use super::model::{learn, read_tracks, CrowdModel, LearnConfig};
+use super::model::{learn, read_tracks, BehaviourSpec, CrowdModel, LearnConfig};
 use super::sim::SEPARATION_PASSES;
 use super::step::{advance, plan, separate, Agent};
 use super::tune::{inner_scores, training, with, Candidate, TuningConfig};
@@ -62,8 +63,16 @@ impl Default for EvalConfig {
     /// (speed, intended direction; formation weight 0) in 4 PCA dimensions, tracks smoothed with
     /// σ = 3 frames, eq. 3 over all k = 100 neighbours with 3 × the 5th neighbour's distance as
     /// bandwidth, no clustering or attraction (both raised the error on every fold tried).
+    /// One behaviour learnt from every sample: a forecast runs no behaviour machine, so every
+    /// pedestrian is predicted by the locomotion model, which must then have seen the ones who
+    /// stand and talk too (§6.1's split leaves them to an interaction model).
     fn default() -> Self {
         let mut learn = LearnConfig::default();
+        learn.behaviours = vec![BehaviourSpec {
+            name: LOCOMOTION.into(),
+            weights: None,
+            pivot: None,
+        }];
         learn.action.choice = super::action::ClusterChoice::Nearest;
         learn.action.clusters = 1;
         learn.action.attraction = 0.0;
