@@ -6,12 +6,16 @@
 //! clip). "Without E_var, alignment by the split" is the paper's ablation: λ_var = 0 with the
 //! split kept, so alignment (learnt from E_var only) stays at the start's. A second table fits
 //! the 1.0 and 0.5 stills from random starts (the paper's Figure 15 "random parameters") with
-//! and without E_var (split kept), the contrast of Figure 14.
+//! and without E_var (split kept), the contrast of Figure 14. A third table runs every fitted
+//! set of the 0.5 and 1.0 stills far longer than the fit looked (`HORIZON`), since Figure 14's
+//! contrast is what the herd does given time.
 //!
 //! `cargo run --release --example still_table [-- OUT_DIR]` (default `out/still_table/`)
 
 use herdfit::herd::fit::job::{run, FitJob};
-use herdfit::herd::fit::still::StillMeasures;
+use herdfit::backend::Precision;
+use herdfit::data::ClipFields;
+use herdfit::herd::fit::still::{stationary_clip, still_measures, StillConfig, StillMeasures};
 use herdfit::herd::fit::FitConfig;
 use herdfit::herd::params::{Params, N_PARAMS};
 use herdfit::herd::synth::{write_clip, SynthJob};
@@ -95,7 +99,67 @@ fn main() -> herdfit::Result<()> {
             );
         }
     }
-    random_starts(&out)
+    random_starts(&out)?;
+    horizon(&out)
+}
+
+/// Steps run from the image before, and then while, the third table measures.
+const HORIZON: StillConfig = StillConfig {
+    settle: 500,
+    average: 250,
+};
+
+/// Figure 14 given time: each fitted set of the two tables above (the generic start's fits with
+/// E_var and without it by the split, and the random starts' fits) run from the image for
+/// `HORIZON.settle` steps and measured over the next `HORIZON.average` (2 seeds), beside the
+/// set's alignment weight and its measures over the fit's own 25 + 50 steps.
+fn horizon(out: &Path) -> herdfit::Result<()> {
+    println!();
+    println!(
+        "Over a longer run ({} steps settled, {} measured, 2 seeds):",
+        HORIZON.settle, HORIZON.average
+    );
+    println!();
+    println!("| density (agents/BL²) | fitted set | alignment weight | polarization, fit's horizon | polarization, long run | smoothed density error, long run | crowding, long run |");
+    println!("|---|---|---:|---:|---:|---:|---:|");
+    for density in [0.5, 1.0] {
+        let still = ClipFields::load(&out.join(format!("still-{density}")))?;
+        let mut sets = vec![
+            // The first table's file names number its rows: 0 is the fit with E_var, 4 the split
+            // without it.
+            ("generic start, with E_var".to_string(), 0),
+            ("generic start, without E_var (split)".to_string(), 4),
+        ]
+        .into_iter()
+        .map(|(n, arm)| (n, out.join(format!("fit-{density}-{arm}.json"))))
+        .collect::<Vec<_>>();
+        for k in 0..4 {
+            for (arm, name) in [(1, "with E_var"), (2, "without E_var (split)")] {
+                sets.push((
+                    format!("random start {k}, {name}"),
+                    out.join(format!("random-fit-{density}-{k}-{arm}.json")),
+                ));
+            }
+        }
+        for (name, path) in sets {
+            let p = Params::load(&path)?;
+            let short = StillConfig::default();
+            let m = |cfg: &StillConfig| {
+                let clip = stationary_clip(&still, cfg, &p.speed);
+                still_measures(&clip, &p, cfg, 0, 2, Precision::F32).map(|[_, m]| m)
+            };
+            let (a, b) = (m(&short)?, m(&HORIZON)?);
+            println!(
+                "| {density} | {name} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+                p.forces.alignment.weight,
+                a.polarization,
+                b.polarization,
+                b.smooth_density_error,
+                b.crowding
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Fits the still `clip` (16 epochs, from `start` or the generic start) into `fit`; returns the
