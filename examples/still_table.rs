@@ -12,9 +12,9 @@
 //!
 //! `cargo run --release --example still_table [-- OUT_DIR]` (default `out/still_table/`)
 
-use herdfit::herd::fit::job::{run, FitJob};
 use herdfit::backend::Precision;
 use herdfit::data::ClipFields;
+use herdfit::herd::fit::job::{run, FitJob};
 use herdfit::herd::fit::still::{stationary_clip, still_measures, StillConfig, StillMeasures};
 use herdfit::herd::fit::FitConfig;
 use herdfit::herd::params::{Params, N_PARAMS};

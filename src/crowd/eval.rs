@@ -67,12 +67,14 @@ impl Default for EvalConfig {
     /// pedestrian is predicted by the locomotion model, which must then have seen the ones who
     /// stand and talk too (§6.1's split leaves them to an interaction model).
     fn default() -> Self {
-        let mut learn = LearnConfig::default();
-        learn.behaviours = vec![BehaviourSpec {
-            name: LOCOMOTION.into(),
-            weights: None,
-            pivot: None,
-        }];
+        let mut learn = LearnConfig {
+            behaviours: vec![BehaviourSpec {
+                name: LOCOMOTION.into(),
+                weights: None,
+                pivot: None,
+            }],
+            ..LearnConfig::default()
+        };
         learn.action.choice = super::action::ClusterChoice::Nearest;
         learn.action.clusters = 1;
         learn.action.attraction = 0.0;
