@@ -141,9 +141,9 @@ fn horizon(out: &Path) -> herdfit::Result<()> {
                 ));
             }
         }
+        let short = StillConfig::default();
         for (name, path) in sets {
             let p = Params::load(&path)?;
-            let short = StillConfig::default();
             let m = |cfg: &StillConfig| {
                 let clip = stationary_clip(&still, cfg, &p.speed);
                 still_measures(&clip, &p, cfg, 0, 2, Precision::F32).map(|[_, m]| m)

@@ -165,7 +165,7 @@ fn the_herd_imitation_keeps_speed_and_spacing_and_alignment_lowers_the_polarizat
 /// has no tracking noise), the imitations of sources 3–5 are within 2× the spread on all four
 /// measures with the alignment feature, and out on polarization without it; §3's default
 /// smoothing (σ = 1 frame) strips the sharp turns and raises the turning-rate error (RESULTS.md
-/// §4: within on all five larger sets of sources with 36 imitations each; smoothed, one set out
+/// §4: within on all five larger sets of sources with 36 imitations each; smoothed, two sets out
 /// on turning).
 #[test]
 fn learnt_from_three_raw_sources_the_aligned_imitation_is_within_twice_the_spread() {

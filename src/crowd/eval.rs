@@ -59,7 +59,7 @@ pub struct EvalConfig {
 }
 
 impl Default for EvalConfig {
-    /// The forecasting configuration measured best in RESULTS.md §3: the kinematic features
+    /// The forecasting configuration measured best in RESULTS.md §4: the kinematic features
     /// (speed, intended direction; formation weight 0) in 4 PCA dimensions, tracks smoothed with
     /// σ = 3 frames, eq. 3 over all k = 100 neighbours with 3 × the 5th neighbour's distance as
     /// bandwidth, no clustering or attraction (both raised the error on every fold tried).
