@@ -15,6 +15,7 @@ extract. Uses only the herdfit CLI and the Python standard library; every comman
 
     python3 scripts/real-clips.py --herdfit target/release/herdfit --work /tmp/rc [--make]
         [--clips fish,students,testA] [--settings default,fields,...] [--out rc.json]
+        [--constants leader_max_neighbours=0] [--start-from disordered]
 """
 import argparse
 import json
@@ -99,6 +100,9 @@ def main():
     ap.add_argument("--constants", default="",
                     help="model constants of every start and baseline, k=v,… (e.g. "
                          "leader_max_neighbours=0); the fits then start from generic.json")
+    ap.add_argument("--start-from", default="generic", choices=["generic", "disordered"],
+                    help="the baseline every fit starts from (default: the generic all-0.5 set, "
+                         "as a bare fit does)")
     ap.add_argument("--tag", default="", help="suffix of this run's files")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
@@ -114,16 +118,17 @@ def main():
         half = frames // 2
         rc = res["clips"][c] = {"frames": frames, "fits": {}}
         t = a.tag
-        # The baselines from a parameter file of this clip (a one-epoch fit on 3 frames).
+        # The baselines from a parameter file of this clip (a one-epoch fit on 5 frames).
         tmpl = f"{w}/{c}{t}-template.json"
-        run([h, "fit", clip, "--frames", "0..3", "--epochs", "1", "--eval-seeds", "1", "--out",
+        run([h, "fit", clip, "--frames", "0..5", "--epochs", "1", "--eval-seeds", "1", "--out",
              tmpl])
         baselines(w, tmpl, a.constants)
         for b in ("generic", "disordered"):
             os.replace(f"{w}/{b}.json", f"{w}/{c}{t}-{b}.json")
         rc["baselines"] = {b: validate(h, clip, f"{w}/{c}{t}-{b}.json", f"{w}/{c}{t}-val-{b}")
                            for b in ("generic", "disordered")}
-        start = ["--start", f"{w}/{c}{t}-generic.json"] if a.constants else []
+        start = (["--start", f"{w}/{c}{t}-{a.start_from}.json"]
+                 if a.constants or a.start_from != "generic" else [])
         for name in a.settings.split(","):
             out = f"{w}/{c}{t}-{name}.json"
             wall = run([h, "fit", clip, "--frames", f"0..{half}", "--eval-seeds", "1", "--out",

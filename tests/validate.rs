@@ -113,6 +113,110 @@ fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers(
     assert!(printed.contains("| measure |"));
 }
 
+/// The per-seed differences of a report's first set against its second, measure `m` (6: the sum
+/// of the four emergent measures), recomputed from `seed_errors`.
+fn seed_differences(r: &serde_json::Value, m: usize) -> Vec<f64> {
+    let seeds = |k: usize| r["sets"][k]["seed_errors"].as_array().unwrap().clone();
+    let e = |row: &serde_json::Value, i: usize| row[i].as_f64().unwrap();
+    let value = |row: &serde_json::Value| match m {
+        6 => (2..6).map(|i| e(row, i)).sum::<f64>(),
+        _ => e(row, m),
+    };
+    let (a, b) = (seeds(0), seeds(1));
+    a.iter().zip(&b).map(|(x, y)| value(x) - value(y)).collect()
+}
+
+#[test]
+fn the_report_says_whether_a_difference_is_beyond_the_seeds_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = synth_clip(d, "200", "60", "12x8", "7");
+    let bad = d.join("bad.json");
+    disordered_start(&clip, &bad);
+    let truth = clip.join("truth.json");
+    let validate = |params: &std::path::Path, out: &str| {
+        let out = d.join(out);
+        let printed = ok(&[
+            "validate",
+            s(&clip),
+            "--params",
+            s(&truth),
+            "--baseline",
+            s(params),
+            "--seeds",
+            "6",
+            "--no-video",
+            "--out",
+            s(&out),
+        ]);
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        (r, printed)
+    };
+    // A set against itself: every per-seed difference is exactly 0.
+    let (same, _) = validate(&truth, "same");
+    let rows = same["paired"][0]["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 7);
+    for row in rows {
+        assert_eq!(row["difference"].as_f64(), Some(0.0), "{row}");
+        assert_eq!(row["verdict"], "same", "{row}");
+    }
+    // The truth against the disordered set: six seeds each, the rows recomputed from the
+    // per-seed errors, and the verdicts from the t-interval (t 2.571 at 5 degrees of freedom).
+    let (r, printed) = validate(&bad, "bad");
+    assert_eq!(r["paired"][0]["set"], "fitted");
+    assert_eq!(r["paired"][0]["against"], "baseline");
+    assert_eq!(r["paired"][0]["seeds"], 6);
+    assert_eq!(r["sets"][0]["seed_errors"].as_array().unwrap().len(), 6);
+    for m in 0..7 {
+        let row = &r["paired"][0]["rows"][m];
+        let d = seed_differences(&r, m);
+        let mean = d.iter().sum::<f64>() / 6.0;
+        let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 5.0).sqrt();
+        let se = sd / 6f64.sqrt();
+        assert!(
+            (row["difference"].as_f64().unwrap() - mean).abs() < 1e-12,
+            "{row}"
+        );
+        assert!(
+            (row["standard_error"].as_f64().unwrap() - se).abs() < 1e-12,
+            "{row}"
+        );
+        let verdict = if mean + 2.571 * se < 0.0 {
+            "better"
+        } else if mean - 2.571 * se > 0.0 {
+            "worse"
+        } else {
+            "within noise"
+        };
+        assert_eq!(row["verdict"], verdict, "{row}");
+        if m < 6 {
+            // The per-seed means average to the row's error (every frame's value is finite here).
+            let rows = &r["sets"][0]["rows"][m]["error"]["mean"];
+            let seeds = r["sets"][0]["seed_errors"].as_array().unwrap();
+            let avg = seeds.iter().map(|e| e[m].as_f64().unwrap()).sum::<f64>() / 6.0;
+            assert!((avg - rows.as_f64().unwrap()).abs() < 1e-9, "measure {m}");
+        }
+    }
+    // The truth keeps the herd's density and momentum far better than the disordered set does,
+    // beyond the seeds' noise.
+    for m in 0..2 {
+        assert_eq!(
+            r["paired"][0]["rows"][m]["verdict"], "better",
+            "measure {m}"
+        );
+    }
+    assert!(printed.contains("## fitted against baseline, seed by seed"));
+    let density = &r["paired"][0]["rows"][0];
+    let line = format!(
+        "| density_error | {:+.4} | {:.4} | better |",
+        density["difference"].as_f64().unwrap(),
+        density["standard_error"].as_f64().unwrap()
+    );
+    assert!(printed.contains(&line), "{line} not printed");
+}
+
 #[test]
 fn bad_validation_input_fails_cleanly() {
     let dir = tempfile::tempdir().unwrap();

@@ -17,6 +17,7 @@ use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocit
 use crate::measure::rasterise;
 use serde::Serialize;
 
+pub mod paired;
 mod report;
 pub mod zone_report;
 pub mod zones;
@@ -132,6 +133,11 @@ pub struct SetReport {
     /// The set's identifiability estimate from its fit (issue #15 item 2), when it has one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<crate::herd::fit::identify::Uncertainty>,
+    /// Per seed, the mean over the held-out frames of each measure's error (the order of
+    /// [`MEASURES`]); empty for the seeds' mean prediction. The row errors' means are their
+    /// average when every frame's value is finite.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub seed_errors: Vec<[f64; 6]>,
 }
 
 impl SetReport {
@@ -182,6 +188,10 @@ pub struct Report {
     /// aspect ratio].
     pub video_per_frame: Vec<[f64; 4]>,
     pub sets: Vec<SetReport>,
+    /// The first set against each other set, seed by seed ([`paired`]); empty with one set or
+    /// for the seeds' mean prediction.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub paired: Vec<paired::Paired>,
 }
 
 /// Settings of a validation.
@@ -372,6 +382,11 @@ pub fn validate(
             per_frame,
             error_map: map,
             uncertainty: params.uncertainty.clone(),
+            seed_errors: if cfg.ensemble_mean {
+                Vec::new()
+            } else {
+                paired::seed_means(&errs, seeds, nf - start)
+            },
         });
         runs_all.push(runs);
     }
@@ -387,6 +402,7 @@ pub fn validate(
             },
             ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),
+            paired: paired::comparisons(&reports),
             sets: reports,
         },
         runs_all,

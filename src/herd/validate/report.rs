@@ -60,6 +60,7 @@ pub fn markdown(r: &Report) -> String {
         s.push('\n');
     }
     s.push_str("\nThe simulation's velocities are averaged over the same window of frames as the clip's (the extraction's smoothing) before they are compared. Density and velocity errors are relative (Σ|n' − n| / Σn and Σn‖V' − V‖ / Σn‖V‖ over coarse cells); the other errors are |simulation − video| per frame. Measures come from the fields of the video and of the rasterised simulation (paper §7.1.2).\n\n");
+    s.push_str(&super::paired::markdown(&r.paired));
     s.push_str("| parameter |");
     for set in &r.sets {
         s.push_str(&format!(" {} |", set.name));
