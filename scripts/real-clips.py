@@ -4,10 +4,12 @@
 Each clip is fitted on its first half (from the generic all-0.5 start, as a bare `herdfit fit`
 does) with one setting changed at a time, then every fitted set, the generic start and a
 disordered start (no cohesion, no alignment, the strongest avoidance) are validated on the second
-half (`herdfit validate --split 0.5 --seeds 3`). Printed: one Markdown table row per clip ×
+half (`herdfit validate --split 0.5 --seeds 16`). Printed: one Markdown table row per clip ×
 setting with the held-out density and velocity errors, the sum of the four emergent-measure
 errors, and the polarization / angular momentum (centroid) of the simulation vs the clip's own
-mean ± STD; then each setting's mean ratio to the generic start over the clips (lower is better).
+mean ± STD, whether the fitted set beats each baseline seed by seed beyond the noise
+(`validate --baseline`: the paired difference and the 95 % t-interval over the common-random-number
+seeds); then each setting's mean ratio to the generic start over the clips (lower is better).
 
 Clips (made first, see --make): fish = the trajectorytools 15-fish school through import-tracks,
 students = ETH/UCY students003 through import-tracks, testA = idtracker.ai's test_A.avi through
@@ -75,10 +77,12 @@ def baselines(w, template, constants=""):
     json.dump(d, open(f"{w}/disordered.json", "w"), indent=1)
 
 
-def validate(h, clip, params, out):
-    run([h, "validate", clip, "--params", params, "--split", "0.5", "--seeds", "3", "--no-video",
-         "--out", out])
-    rows = {r["measure"]: r for r in json.load(open(f"{out}/report.json"))["sets"][0]["rows"]}
+def validate(h, clip, params, out, seeds, baseline=None):
+    cmd = [h, "validate", clip, "--params", params, "--split", "0.5", "--seeds", str(seeds),
+           "--no-video", "--out", out]
+    run(cmd + (["--baseline", baseline] if baseline else []))
+    report = json.load(open(f"{out}/report.json"))
+    rows = {r["measure"]: r for r in report["sets"][0]["rows"]}
     e = lambda m: rows[m]["error"]["mean"]
     res = {"density": e("density_error"), "velocity": e("velocity_error"),
            "measures": sum(e(m) for m in MEASURES)}
@@ -86,6 +90,13 @@ def validate(h, clip, params, out):
         v, s = rows[m]["video"], rows[m]["simulation"]
         res[m] = {"sim": s["mean"], "clip": v["mean"], "clip_std": v["std"],
                   "within": abs(s["mean"] - v["mean"]) <= v["std"]}
+    if baseline:
+        # herdfit validate's paired comparison: fitted − baseline per seed (common random
+        # numbers), its standard error and the verdict of the 95 % t-interval.
+        paired = {r["measure"]: r for r in report["paired"][0]["rows"]}
+        res["paired"] = {k: paired[m] for k, m in (("density", "density_error"),
+                                                    ("velocity", "velocity_error"),
+                                                    ("measures", "sum_of_four_measures"))}
     return res
 
 
@@ -103,6 +114,8 @@ def main():
     ap.add_argument("--start-from", default="generic", choices=["generic", "disordered"],
                     help="the baseline every fit starts from (default: the generic all-0.5 set, "
                          "as a bare fit does)")
+    ap.add_argument("--seeds", type=int, default=16,
+                    help="validation seeds (the paired verdicts need several)")
     ap.add_argument("--tag", default="", help="suffix of this run's files")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
@@ -125,7 +138,8 @@ def main():
         baselines(w, tmpl, a.constants)
         for b in ("generic", "disordered"):
             os.replace(f"{w}/{b}.json", f"{w}/{c}{t}-{b}.json")
-        rc["baselines"] = {b: validate(h, clip, f"{w}/{c}{t}-{b}.json", f"{w}/{c}{t}-val-{b}")
+        rc["baselines"] = {b: validate(h, clip, f"{w}/{c}{t}-{b}.json", f"{w}/{c}{t}-val-{b}",
+                                       a.seeds)
                            for b in ("generic", "disordered")}
         start = (["--start", f"{w}/{c}{t}-{a.start_from}.json"]
                  if a.constants or a.start_from != "generic" else [])
@@ -133,7 +147,10 @@ def main():
             out = f"{w}/{c}{t}-{name}.json"
             wall = run([h, "fit", clip, "--frames", f"0..{half}", "--eval-seeds", "1", "--out",
                         out] + start + SETTINGS[name] + a.extra.split())
-            v = validate(h, clip, out, f"{w}/{c}{t}-val-{name}")
+            v = validate(h, clip, out, f"{w}/{c}{t}-val-{name}", a.seeds)
+            v["versus"] = {b: validate(h, clip, out, f"{w}/{c}{t}-val-{name}-vs-{b}", a.seeds,
+                                       f"{w}/{c}{t}-{b}.json")["paired"]
+                           for b in ("generic", "disordered")}
             fitted = json.load(open(out))
             v["wall_s"] = wall
             v["theta_at_bounds"] = sum(
@@ -147,14 +164,20 @@ def main():
 
 def report(res):
     print("| clip | set | density err | velocity err | Σ 4 measure errors | polarization sim (clip ± STD) "
-          "| ang. momentum sim (clip ± STD) | beats generic & disordered (d/v/Σ) | fit wall s |")
-    print("|---|---|---:|---:|---:|---:|---:|---|---:|")
+          "| ang. momentum sim (clip ± STD) | beats generic & disordered (d/v/Σ) "
+          "| vs generic, paired (d/v/Σ) | vs disordered, paired (d/v/Σ) | fit wall s |")
+    print("|---|---|---:|---:|---:|---:|---:|---|---|---|---:|")
+    mark = {"better": "B", "worse": "W", "within noise": "=", "same": "S"}
     ratios = {}
     for c, rc in res["clips"].items():
         g, dis = rc["baselines"]["generic"], rc["baselines"]["disordered"]
         for name, v in list(rc["baselines"].items()) + list(rc["fits"].items()):
             p, m = v["polarization"], v["angular_momentum_centroid"]
-            beats = ""
+            beats, vs = "", {"generic": "", "disordered": ""}
+            if "versus" in v:
+                vs = {b: "/".join(mark[v["versus"][b][k]["verdict"]]
+                                  for k in ("density", "velocity", "measures"))
+                      for b in vs}
             if name in rc["fits"]:
                 beats = "/".join("yes" if v[k] < g[k] and v[k] < dis[k] else "no"
                                  for k in ("density", "velocity", "measures"))
@@ -163,7 +186,10 @@ def report(res):
             print(f"| {c} | {name} | {v['density']:.4f} | {v['velocity']:.4f} | {v['measures']:.4f} | "
                   f"{p['sim']:.3f} ({p['clip']:.3f} ± {p['clip_std']:.3f}){'' if p['within'] else ' ✗'} | "
                   f"{m['sim']:.3f} ({m['clip']:.3f} ± {m['clip_std']:.3f}){'' if m['within'] else ' ✗'} | "
-                  f"{beats} | {v.get('wall_s', 0):.0f} |")
+                  f"{beats} | {vs['generic']} | {vs['disordered']} | {v.get('wall_s', 0):.0f} |")
+    print()
+    print("Paired: fitted − baseline seed by seed (`herdfit validate --baseline`); B better, W worse, "
+          "= within the seeds' noise (95 % t-interval holds 0).")
     print()
     print("| setting | mean over clips of (d, v, Σ) ratios to the generic start |")
     print("|---|---:|")

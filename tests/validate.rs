@@ -326,8 +326,16 @@ fn demo_runs_the_whole_chain() {
             fit < start,
             "held-out measure {k}: fitted {fit} vs start {start}"
         );
-        // The printed line carries these numbers.
+        // The printed line carries these numbers, and the report's seed-by-seed verdict.
+        let row = &r["paired"][0]["rows"][[0, 1, 6][k]];
+        let seedwise = format!(
+            "; seed by seed {:+.3} ± {:.3}: {}",
+            row["difference"].as_f64().unwrap(),
+            row["standard_error"].as_f64().unwrap(),
+            row["verdict"].as_str().unwrap()
+        );
         assert!(text.contains(&format!("{start:.3} → {fit:.3}")), "{text}");
+        assert!(text.contains(&seedwise), "{seedwise} not in {text}");
     }
     assert!(
         text.contains("held-out frames 60..120, start → fitted"),

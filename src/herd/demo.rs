@@ -272,10 +272,19 @@ impl std::fmt::Display for DemoSummary {
             self.report.run.frames[0], self.report.run.frames[1]
         )?;
         let names = ["density error", "velocity error", "Σ 4 measure errors"];
-        for (n, (fit, start)) in names.iter().zip(held_out(&self.report)) {
+        // The paired rows of the same three numbers: density, velocity, the sum of four.
+        let paired = self.report.paired.first().map(|p| &p.rows);
+        for (k, (n, (fit, start))) in names.iter().zip(held_out(&self.report)).enumerate() {
+            let seedwise =
+                paired
+                    .and_then(|rows| rows.get([0, 1, 6][k]))
+                    .map_or(String::new(), |r| {
+                        let se = r.standard_error.map_or("—".into(), |x| format!("{x:.3}"));
+                        format!("; seed by seed {:+.3} ± {se}: {}", r.difference, r.verdict)
+                    });
             writeln!(
                 f,
-                "  {n:<20} {start:.3} → {fit:.3} ({:+.0} %)",
+                "  {n:<20} {start:.3} → {fit:.3} ({:+.0} %{seedwise})",
                 100.0 * (fit - start) / start
             )?;
         }
