@@ -19,7 +19,8 @@ error, the velocity error and the sum of the four emergent-measure errors (Σ 4)
 Prints one Markdown table; --out writes every number as JSON. Needs numpy for --train only.
 
     python3 scripts/real-clip-noise.py --work /tmp/rc [--clips fish,students,testA] [--sets 30]
-        [--seeds 16] [--constants fish:leader_max_neighbours=0] [--train] [--out noise.json]
+        [--seeds 16] [--constants fish:leader_max_neighbours=0] [--train]
+        [--validate-extra "--horizon 8" --tag=-h8] [--out noise.json]
 """
 import argparse
 import json
@@ -39,10 +40,10 @@ def run(cmd):
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 
-def per_seed(h, clip, params, out, seeds):
+def per_seed(h, clip, params, out, seeds, extra=()):
     """The per-seed [density, velocity, Σ 4] errors of one set on the clip's held-out half."""
     run([h, "validate", clip, "--params", params, "--split", "0.5", "--seeds", str(seeds),
-         "--no-video", "--out", out])
+         "--no-video", "--out", out] + list(extra))
     rows = json.load(open(f"{out}/report.json"))["sets"][0]["seed_errors"]
     return [[sum(r[i] for i in idx) for idx in GROUPS.values()] for r in rows]
 
@@ -82,6 +83,9 @@ def main():
     ap.add_argument("--constants", default="",
                     help="clip:k=v,… model constants of every set of a clip, ';' between clips")
     ap.add_argument("--train", action="store_true")
+    ap.add_argument("--validate-extra", default="",
+                    help="flags added to every validate, e.g. '--horizon 8'")
+    ap.add_argument("--tag", default="", help="suffix of the working folders")
     ap.add_argument("--rng", type=int, default=7)
     ap.add_argument("--out", default="")
     a = ap.parse_args()
@@ -92,9 +96,11 @@ def main():
     for part in filter(None, a.constants.split(";")):
         c, kvs = part.split(":", 1)
         consts[c] = dict(kv.split("=") for kv in kvs.split(","))
-    res = {"sets": a.sets, "seeds": a.seeds, "constants": consts, "clips": {}}
+    res = {"sets": a.sets, "seeds": a.seeds, "constants": consts,
+           "validate_extra": a.validate_extra, "clips": {}}
     for c in a.clips.split(","):
-        clip, wd = f"{w}/{c}", f"{w}/noise-{c}"
+        clip, wd = f"{w}/{c}", f"{w}/noise-{c}{a.tag}"
+        extra = a.validate_extra.split()
         os.makedirs(wd, exist_ok=True)
         run([h, "fit", clip, "--frames", "0..5", "--epochs", "1", "--eval-seeds", "1",
              "--no-uncertainty", "--out", f"{wd}/template.json"])
@@ -118,11 +124,11 @@ def main():
                 p["forces"][g][key] = x
             path = f"{wd}/{name}.json"
             json.dump(p, open(path, "w"), indent=1)
-            seeds = per_seed(h, clip, path, f"{wd}/val-{name}", a.seeds)
+            seeds = per_seed(h, clip, path, f"{wd}/val-{name}", a.seeds, extra)
             r = {"A": [statistics.fmean(s[j] for s in seeds[:k]) for j in range(3)],
                  "B": [statistics.fmean(s[j] for s in seeds[k:]) for j in range(3)]}
             if a.train:
-                t = per_seed(h, f"{wd}/train", path, f"{wd}/train-{name}", k)
+                t = per_seed(h, f"{wd}/train", path, f"{wd}/train-{name}", k, extra)
                 r["train"] = [statistics.fmean(s[j] for s in t) for j in range(3)]
             rows[name] = r
         summary = {}

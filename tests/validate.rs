@@ -218,6 +218,68 @@ fn the_report_says_whether_a_difference_is_beyond_the_seeds_noise() {
 }
 
 #[test]
+fn a_horizon_draws_the_herd_afresh_from_the_clip() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = synth_clip(d, "200", "60", "12x8", "7");
+    let truth = clip.join("truth.json");
+    let report = |horizon: &str| {
+        let out = d.join(format!("h{horizon}"));
+        let printed = ok(&[
+            "validate",
+            s(&clip),
+            "--params",
+            s(&truth),
+            "--seeds",
+            "2",
+            "--horizon",
+            horizon,
+            "--no-video",
+            "--out",
+            s(&out),
+        ]);
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        (r, printed)
+    };
+    let (one_run, _) = report("0");
+    // A horizon as long as the held-out part (frames 30..60) is one run: the same numbers.
+    let (whole, _) = report("30");
+    assert_eq!(one_run["sets"], whole["sets"]);
+    assert_eq!(whole["horizon"], 30);
+    assert!(one_run.get("horizon").is_none());
+    // Drawn afresh every 5 frames, the herd stays closer to the clip than one run does.
+    let (short, printed) = report("5");
+    let err = |r: &serde_json::Value, m: usize| {
+        r["sets"][0]["rows"][m]["error"]["mean"].as_f64().unwrap()
+    };
+    for m in 0..2 {
+        assert!(
+            err(&short, m) < err(&one_run, m),
+            "measure {m}: every 5 frames {} vs one run {}",
+            err(&short, m),
+            err(&one_run, m)
+        );
+    }
+    assert_eq!(short["frames"], serde_json::json!([30, 60]));
+    assert!(printed.contains("the herd drawn afresh from the clip every 5 frames"));
+    // One frame holds no motion.
+    let e = common::fails(&[
+        "validate",
+        s(&clip),
+        "--params",
+        s(&truth),
+        "--horizon",
+        "1",
+        "--out",
+        s(&d.join("h1")),
+    ]);
+    assert!(e.contains("--horizon"), "{e}");
+    assert!(!d.join("h1").exists());
+}
+
+#[test]
 fn bad_validation_input_fails_cleanly() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

@@ -142,6 +142,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
                 warmup: 0,
                 guidance_scale: GUIDANCE_SCALE,
                 ensemble_mean: false,
+                horizon: 0,
             },
         },
         progress,

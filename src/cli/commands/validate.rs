@@ -36,6 +36,11 @@ pub struct ValidateArgs {
     /// through them unrecorded (0: start from the fields of the first held-out frame).
     #[arg(long, value_name = "F", default_value_t = 0)]
     pub warmup: usize,
+    /// Draw the herd afresh from the clip's fields every F frames of the held-out part (0: one
+    /// run through it, the paper's protocol): scores short-term prediction from where the
+    /// animals are.
+    #[arg(long, value_name = "F", default_value_t = 0)]
+    pub horizon: usize,
     /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
     /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
     #[arg(long, value_name = "S", default_value_t = GUIDANCE_SCALE, allow_hyphen_values = true)]
@@ -67,6 +72,7 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             warmup: a.warmup,
             guidance_scale: a.guidance_scale,
             ensemble_mean: a.ensemble_mean,
+            horizon: a.horizon,
         },
     };
     // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.

@@ -56,6 +56,51 @@ pub fn simulate_clip(
     guidance: &[crate::herd::sim::Guidance],
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
+    let mut frames = Vec::with_capacity(range.len());
+    // With a horizon, the herd is drawn afresh from the clip every `horizon` frames (each piece
+    // with its own seed derived from `seed`, the same for every parameter set).
+    let step = if cfg.horizon == 0 {
+        range.len()
+    } else {
+        cfg.horizon
+    };
+    let mut a = range.start;
+    while a < range.end {
+        let b = (a + step).min(range.end);
+        let piece_seed = seed + (((a - range.start) / step) as u64) * 1_000_003;
+        frames.extend(simulate_piece(
+            clip,
+            params,
+            a..b,
+            piece_seed,
+            cfg,
+            guidance,
+            device,
+        )?);
+        a = b;
+    }
+    let mut fields = rasterise(
+        &frames,
+        clip.grid(),
+        clip.meta.fps,
+        clip.obstacles.clone(),
+        serde_json::json!({"source": "validate simulation", "seed": seed}),
+    )?;
+    smooth_velocity(&mut fields, clip.meta.velocity_window());
+    Ok(SimRun { frames, fields })
+}
+
+/// The agents of every frame of `range`, the herd started from the fields of frame
+/// `range.start − warmup` and run through the warm-up unrecorded.
+fn simulate_piece(
+    clip: &ClipFields,
+    params: &Params,
+    range: std::ops::Range<usize>,
+    seed: u64,
+    cfg: &ValidateConfig,
+    guidance: &[crate::herd::sim::Guidance],
+    device: &burn::tensor::Device,
+) -> Result<Vec<Vec<AgentRow>>> {
     let first = range.start - cfg.warmup.min(range.start);
     let mut frames = Vec::with_capacity(range.len());
     let last = range.end.saturating_sub(1);
@@ -77,15 +122,7 @@ pub fn simulate_clip(
     if first == range.start {
         frames.insert(0, rows);
     }
-    let mut fields = rasterise(
-        &frames,
-        clip.grid(),
-        clip.meta.fps,
-        clip.obstacles.clone(),
-        serde_json::json!({"source": "validate simulation", "seed": seed}),
-    )?;
-    smooth_velocity(&mut fields, clip.meta.velocity_window());
-    Ok(SimRun { frames, fields })
+    Ok(frames)
 }
 
 /// Mean and standard deviation.
@@ -165,13 +202,24 @@ pub struct HeldOut {
     /// The coarse grid of the errors ([`ValidateConfig::coarse_grid`]).
     pub grid: usize,
     pub seeds: usize,
+    /// [`ValidateConfig::horizon`], when the herd was drawn afresh every so many frames.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub horizon: usize,
+}
+
+fn is_zero(x: &usize) -> bool {
+    *x == 0
 }
 
 impl HeldOut {
     /// "Clip `C`, held-out frames a..b (split s), k seed(s), errors on a g×g coarse grid".
     pub fn summary(&self) -> String {
+        let horizon = match self.horizon {
+            0 => String::new(),
+            h => format!(", the herd drawn afresh from the clip every {h} frames"),
+        };
         format!(
-            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid",
+            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid{horizon}",
             self.clip, self.frames[0], self.frames[1], self.split, self.seeds, self.grid, self.grid
         )
     }
@@ -217,6 +265,11 @@ pub struct ValidateConfig {
     /// stochastic herd's best prediction is its expectation; per-seed errors also charge it for
     /// its own run-to-run spread, which favours sets that make the herd less variable.
     pub ensemble_mean: bool,
+    /// Frames after which the herd is drawn afresh from the clip's fields (0: never, the paper's
+    /// §7.1.2 protocol of one run through the whole held-out part). A short horizon scores how
+    /// the set predicts the next frames from where the animals are, which a free run over a
+    /// sparse clip stops doing once its herd no longer overlaps the clip's (RESULTS.md §6).
+    pub horizon: usize,
 }
 
 impl Default for ValidateConfig {
@@ -229,6 +282,7 @@ impl Default for ValidateConfig {
             warmup: 0,
             guidance_scale: crate::herd::guidance::GUIDANCE_SCALE,
             ensemble_mean: false,
+            horizon: 0,
         }
     }
 }
@@ -249,6 +303,12 @@ impl ValidateConfig {
         }
         crate::error::check_counts(&[("coarse_grid", self.coarse_grid), ("seeds", self.seeds)])?;
         crate::herd::guidance::check_guidance_scale(self.guidance_scale)?;
+        if self.horizon == 1 {
+            return Err(Error::config(
+                "horizon",
+                "1 frame holds no motion: 0 (one run) or at least 2",
+            ));
+        }
         self.settle.check()
     }
 }
@@ -399,6 +459,7 @@ pub fn validate(
                 split,
                 grid,
                 seeds,
+                horizon: cfg.horizon,
             },
             ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),

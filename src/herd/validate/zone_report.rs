@@ -99,6 +99,7 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
             split: job.config.split,
             grid: job.config.coarse_grid,
             seeds: job.config.seeds,
+            horizon: 0,
         },
         zones: z
             .specs

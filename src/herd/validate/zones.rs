@@ -86,6 +86,15 @@ pub fn validate_zones(
     mut progress: impl FnMut(),
 ) -> Result<Vec<ZoneSetReport>> {
     cfg.check()?;
+    if cfg.horizon != 0 {
+        return Err(Error::config(
+            "horizon",
+            format!(
+                "{}: a zone bundle is validated in one run through the held-out part; leave it 0",
+                cfg.horizon
+            ),
+        ));
+    }
     let nf = clip.frames();
     let start = cfg.held_out_start(nf);
     if nf - start < 2 || cfg.warmup > start {
