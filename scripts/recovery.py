@@ -5,6 +5,7 @@ errors before/after, and wall time. Uses only the herdfit CLI and the Python sta
 
     python3 scripts/recovery.py [--herdfit target/release/herdfit] [--starts 5] [--windows 1,4,16]
         [--epochs 8] [--scenario crossing|drift|corridor] [--jobs 2] [--extra "--loss ensemble --replicas 4"]
+        [--generic-start]
         [--out results.json]
 """
 import argparse, json, os, random, subprocess, sys, tempfile, time
@@ -47,6 +48,9 @@ def main():
     ap.add_argument("--jobs", type=int, default=1, help="fits run in parallel")
     ap.add_argument("--clips", type=int, default=1,
                     help="clip realisations (seeds 11, 12, …) fitted jointly")
+    ap.add_argument("--generic-start", action="store_true",
+                    help="every run starts from the generic set (all 0.5), as a bare fit does; "
+                         "the runs differ by their --seed")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
     if a.frames == 0:
@@ -73,6 +77,8 @@ def main():
     t = vec(truth)
     rng = random.Random(2026)
     starts = [[round(rng.uniform(0.05, 0.95), 4) for _ in NAMES] for _ in range(a.starts)]
+    if a.generic_start:
+        starts = [[0.5] * len(NAMES) for _ in range(a.starts)]
     for k, s in enumerate(starts):
         with open(os.path.join(tmp, f"init{k}.json"), "w") as f:
             json.dump(with_vec(truth, s), f)

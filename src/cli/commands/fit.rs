@@ -3,7 +3,7 @@
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::Bars;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
@@ -74,9 +74,10 @@ pub struct FitArgs {
     /// E_mean on each cell's mean direction instead of every follower's (spread left to E_var).
     #[arg(long)]
     pub cell_mean: bool,
-    /// Objective: the paper's losses, or matching the density and momentum fields.
-    #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Paper)]
-    pub loss: LossKind,
+    /// Objective: matching the density and momentum fields, or the paper's losses [default:
+    /// fields; paper for a still image, which is fitted by its density and E_var]
+    #[arg(long, value_parser = choice::<LossKind>(LOSSES))]
+    pub loss: Option<LossKind>,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
@@ -152,7 +153,34 @@ pub struct FitArgs {
     pub uncertainty_step: f64,
 }
 
+/// Whether any of the clips is a still (its clip.json says one frame); unreadable clips are
+/// left to the fit's own loading to report.
+fn any_still(clips: &[std::path::PathBuf]) -> bool {
+    clips.iter().any(|c| {
+        std::fs::read_to_string(c.join("clip.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["frames"].as_u64())
+            == Some(1)
+    })
+}
+
 pub fn exec(a: FitArgs) -> Result<()> {
+    let still = any_still(&a.clips);
+    let loss = match a.loss {
+        Some(LossKind::Fields | LossKind::Ensemble) if still => {
+            return Err(with_flags(
+                Error::config(
+                    "loss",
+                    "a still image has no velocity: it is fitted by its density and E_var, not by the field objectives",
+                ),
+                &[],
+            ))
+        }
+        Some(l) => l,
+        None if still => LossKind::Paper,
+        None => LossKind::Fields,
+    };
     let job = FitJob {
         clips: a.clips,
         start: a.start,
@@ -165,7 +193,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             precision: a.precision,
             split_gradients: !a.joint_gradients,
             cell_mean: a.cell_mean,
-            loss: a.loss,
+            loss,
             checkpointing: a.checkpointing,
             settle: Settle::with_iterations(a.settle),
             replicas: a.replicas,

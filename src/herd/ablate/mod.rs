@@ -102,7 +102,11 @@ pub struct AblateConfig {
 impl Default for AblateConfig {
     fn default() -> Self {
         AblateConfig {
-            fit: FitConfig::default(),
+            // The paper's switches are ablated on the paper's objective (as `herdfit ablate`).
+            fit: FitConfig {
+                loss: LossKind::Paper,
+                ..FitConfig::default()
+            },
             validate: ValidateConfig::default(),
             switches: SWITCHES.to_vec(),
         }
