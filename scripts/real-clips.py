@@ -28,6 +28,7 @@ import time
 
 SETTINGS = {
     "default": [],
+    "paper": ["--loss", "paper"],
     "fields": ["--loss", "fields"],
     "ensemble": ["--loss", "ensemble", "--replicas", "2"],
     "w1": ["--window", "1"],
