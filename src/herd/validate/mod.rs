@@ -313,6 +313,24 @@ impl ValidateConfig {
     }
 }
 
+/// One row per measure of [`MEASURES`]: the video's and the simulation's values (emergent
+/// measures only) and the errors, each as mean ± STD over frames and seeds.
+fn measure_rows(video: &[Emergent], sims: &[Vec<f64>], errs: &[Vec<f64>]) -> Vec<MeasureRow> {
+    MEASURES
+        .iter()
+        .enumerate()
+        .map(|(m, name)| MeasureRow {
+            measure: name.to_string(),
+            video: (m >= 2).then(|| {
+                let v: Vec<f64> = video.iter().map(|e| e.values()[m - 2]).collect();
+                stat(&v)
+            }),
+            simulation: (m >= 2).then(|| stat(&sims[m])),
+            error: stat(&errs[m]),
+        })
+        .collect()
+}
+
 /// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
 pub fn validate(
     clip: &ClipFields,
@@ -422,19 +440,7 @@ pub fn validate(
                 record(k, [de, ve, v[0], v[1], v[2], v[3]], &mean_cells[k], 1.0);
             }
         }
-        let rows = MEASURES
-            .iter()
-            .enumerate()
-            .map(|(m, name)| MeasureRow {
-                measure: name.to_string(),
-                video: (m >= 2).then(|| {
-                    let v: Vec<f64> = video.iter().map(|e| e.values()[m - 2]).collect();
-                    stat(&v)
-                }),
-                simulation: (m >= 2).then(|| stat(&sims[m])),
-                error: stat(&errs[m]),
-            })
-            .collect();
+        let rows = measure_rows(&video, &sims, &errs);
         reports.push(SetReport {
             name: name.clone(),
             params: params.to_vec(),
