@@ -113,6 +113,21 @@ fn true_parameters_beat_a_disordered_baseline_and_the_report_prints_its_numbers(
     assert!(printed.contains("| measure |"));
 }
 
+/// `herdfit validate CLIP --params P [args…] --no-video --out OUT`: report.json and the printed text.
+fn validate_json(
+    clip: &std::path::Path,
+    params: &std::path::Path,
+    args: &[&str],
+    out: &std::path::Path,
+) -> (serde_json::Value, String) {
+    let mut all = vec!["validate", s(clip), "--params", s(params)];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--no-video", "--out", s(out)]);
+    let printed = ok(&all);
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    (serde_json::from_str(&text).unwrap(), printed)
+}
+
 /// The per-seed differences of a report's first set against its second, measure `m` (6: the sum
 /// of the four emergent measures), recomputed from `seed_errors`.
 fn seed_differences(r: &serde_json::Value, m: usize) -> Vec<f64> {
@@ -135,24 +150,8 @@ fn the_report_says_whether_a_difference_is_beyond_the_seeds_noise() {
     disordered_start(&clip, &bad);
     let truth = clip.join("truth.json");
     let validate = |params: &std::path::Path, out: &str| {
-        let out = d.join(out);
-        let printed = ok(&[
-            "validate",
-            s(&clip),
-            "--params",
-            s(&truth),
-            "--baseline",
-            s(params),
-            "--seeds",
-            "6",
-            "--no-video",
-            "--out",
-            s(&out),
-        ]);
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
-                .unwrap();
-        (r, printed)
+        let args = ["--baseline", s(params), "--seeds", "6"];
+        validate_json(&clip, &truth, &args, &d.join(out))
     };
     // A set against itself: every per-seed difference is exactly 0.
     let (same, _) = validate(&truth, "same");
@@ -225,23 +224,7 @@ fn a_horizon_draws_the_herd_afresh_from_the_clip() {
     let truth = clip.join("truth.json");
     let report = |horizon: &str| {
         let out = d.join(format!("h{horizon}"));
-        let printed = ok(&[
-            "validate",
-            s(&clip),
-            "--params",
-            s(&truth),
-            "--seeds",
-            "2",
-            "--horizon",
-            horizon,
-            "--no-video",
-            "--out",
-            s(&out),
-        ]);
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
-                .unwrap();
-        (r, printed)
+        validate_json(&clip, &truth, &["--seeds", "2", "--horizon", horizon], &out)
     };
     let (one_run, _) = report("0");
     // A horizon as long as the held-out part (frames 30..60) is one run: the same numbers.

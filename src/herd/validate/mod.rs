@@ -56,6 +56,32 @@ pub fn simulate_clip(
     guidance: &[crate::herd::sim::Guidance],
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
+    // The agents of every frame of `piece`, the herd started from the fields of frame
+    // `piece.start − warmup` and run through the warm-up unrecorded.
+    let run_piece = |piece: std::ops::Range<usize>, seed: u64| -> Result<Vec<Vec<AgentRow>>> {
+        let first = piece.start - cfg.warmup.min(piece.start);
+        let mut frames = Vec::with_capacity(piece.len());
+        let last = piece.end.saturating_sub(1);
+        let rows = run_from_fields(
+            clip,
+            params,
+            (first, last),
+            seed,
+            &cfg.settle,
+            guidance,
+            device,
+            |f, state, ids| {
+                if f >= piece.start {
+                    frames.push(state.rows(ids)?);
+                }
+                Ok(())
+            },
+        )?;
+        if first == piece.start {
+            frames.insert(0, rows);
+        }
+        Ok(frames)
+    };
     let mut frames = Vec::with_capacity(range.len());
     // With a horizon, the herd is drawn afresh from the clip every `horizon` frames (each piece
     // with its own seed derived from `seed`, the same for every parameter set).
@@ -68,15 +94,7 @@ pub fn simulate_clip(
     while a < range.end {
         let b = (a + step).min(range.end);
         let piece_seed = seed + (((a - range.start) / step) as u64) * 1_000_003;
-        frames.extend(simulate_piece(
-            clip,
-            params,
-            a..b,
-            piece_seed,
-            cfg,
-            guidance,
-            device,
-        )?);
+        frames.extend(run_piece(a..b, piece_seed)?);
         a = b;
     }
     let mut fields = rasterise(
@@ -88,41 +106,6 @@ pub fn simulate_clip(
     )?;
     smooth_velocity(&mut fields, clip.meta.velocity_window());
     Ok(SimRun { frames, fields })
-}
-
-/// The agents of every frame of `range`, the herd started from the fields of frame
-/// `range.start − warmup` and run through the warm-up unrecorded.
-fn simulate_piece(
-    clip: &ClipFields,
-    params: &Params,
-    range: std::ops::Range<usize>,
-    seed: u64,
-    cfg: &ValidateConfig,
-    guidance: &[crate::herd::sim::Guidance],
-    device: &burn::tensor::Device,
-) -> Result<Vec<Vec<AgentRow>>> {
-    let first = range.start - cfg.warmup.min(range.start);
-    let mut frames = Vec::with_capacity(range.len());
-    let last = range.end.saturating_sub(1);
-    let rows = run_from_fields(
-        clip,
-        params,
-        (first, last),
-        seed,
-        &cfg.settle,
-        guidance,
-        device,
-        |f, state, ids| {
-            if f >= range.start {
-                frames.push(state.rows(ids)?);
-            }
-            Ok(())
-        },
-    )?;
-    if first == range.start {
-        frames.insert(0, rows);
-    }
-    Ok(frames)
 }
 
 /// Mean and standard deviation.
