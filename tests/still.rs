@@ -182,6 +182,9 @@ fn fit_still(clip: &Path, out: &Path, dense: bool) -> serde_json::Value {
     assert!(line.contains("still, start → fitted"), "{line}");
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
+    // A bare fit of a still takes the paper's density term and E_var (field matching is the
+    // default of clips with motion only).
+    assert_eq!(json["provenance"]["settings"]["loss"], "paper");
     let st = json["provenance"]["evaluation"]["still"].clone();
     let m = |set: &str, key: &str| st[set][key].as_f64().unwrap();
     assert!(

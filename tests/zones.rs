@@ -154,6 +154,20 @@ fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
     assert!(vec(0).iter().any(|v| (v - 0.5).abs() > 1e-6));
     assert!(vec(1).iter().any(|v| (v - 0.5).abs() > 1e-6));
     assert_ne!(vec(0), vec(1));
+    // A bundle is validated in one run through the held-out part: a horizon is refused.
+    let report = dir.path().join("report");
+    let e = fails(&[
+        "validate",
+        s(&clip),
+        "--params",
+        s(&out),
+        "--horizon",
+        "5",
+        "--out",
+        s(&report),
+    ]);
+    assert!(e.contains("--horizon") && e.contains("zone bundle"), "{e}");
+    assert!(!report.exists());
     // An author scene's region names a set of the bundle.
     let scene = dir.path().join("scene.json");
     let v = serde_json::json!({
