@@ -23,11 +23,11 @@ Prints one Markdown table; --out writes every number as JSON. Needs numpy for --
         [--validate-extra "--horizon 8" --tag=-h8] [--out noise.json]
 """
 import argparse
+import importlib.util
 import json
 import os
 import random
 import statistics
-import subprocess
 import sys
 
 GROUPS = {"density": [0], "velocity": [1], "sum4": [2, 3, 4, 5]}
@@ -35,9 +35,17 @@ NAMES = [f"{g}.{k}" for g in ("cohesion", "avoidance", "alignment", "obstacle")
          for k in ("weight", "radial", "angular")]
 
 
-def run(cmd):
-    print("$ " + " ".join(cmd), file=sys.stderr, flush=True)
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+def _real_clips():
+    """scripts/real-clips.py as a module: its command runner and its baseline sets."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "real-clips.py")
+    spec = importlib.util.spec_from_file_location("real_clips", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+RC = _real_clips()
+run = RC.run
 
 
 def per_seed(h, clip, params, out, seeds, extra=()):
@@ -95,7 +103,7 @@ def main():
     consts = {}
     for part in filter(None, a.constants.split(";")):
         c, kvs = part.split(":", 1)
-        consts[c] = dict(kv.split("=") for kv in kvs.split(","))
+        consts[c] = kvs
     res = {"sets": a.sets, "seeds": a.seeds, "constants": consts,
            "validate_extra": a.validate_extra, "clips": {}}
     for c in a.clips.split(","):
@@ -104,14 +112,13 @@ def main():
         os.makedirs(wd, exist_ok=True)
         run([h, "fit", clip, "--frames", "0..5", "--epochs", "1", "--eval-seeds", "1",
              "--no-uncertainty", "--out", f"{wd}/template.json"])
-        tmpl = json.load(open(f"{wd}/template.json"))
-        for key in ("provenance", "physical", "uncertainty"):
-            tmpl.pop(key, None)
-        for key, v in consts.get(c, {}).items():
-            tmpl["constants"][key] = json.loads(v)
+        # The generic and disordered sets of real-clips.py, with this clip's constants.
+        RC.baselines(wd, f"{wd}/template.json", consts.get(c, ""))
+        base = {b: json.load(open(f"{wd}/{b}.json")) for b in ("generic", "disordered")}
+        tmpl = base["generic"]
         rng = random.Random(a.rng)
-        sets = {"generic": [0.5] * 12,
-                "disordered": [0.0, .5, .5, 1.0, .5, .5, 0.0, .5, .5, .5, .5, .5]}
+        sets = {b: [p["forces"][n.split(".")[0]][n.split(".")[1]] for n in NAMES]
+                for b, p in base.items()}
         for i in range(a.sets):
             sets[f"random{i}"] = [rng.uniform(0.05, 0.95) for _ in range(12)]
         if a.train:

@@ -63,7 +63,7 @@ def baselines(w, template, constants=""):
     """generic.json (every force 0.5) and disordered.json from a fitted set's file, with the
     model constants `constants` (k=v,…) set."""
     d = json.load(open(template))
-    for k in ("provenance", "physical"):
+    for k in ("provenance", "physical", "uncertainty"):
         d.pop(k, None)
     for kv in filter(None, constants.split(",")):
         k, v = kv.split("=")
@@ -134,8 +134,8 @@ def main():
         t = a.tag
         # The baselines from a parameter file of this clip (a one-epoch fit on 5 frames).
         tmpl = f"{w}/{c}{t}-template.json"
-        run([h, "fit", clip, "--frames", "0..5", "--epochs", "1", "--eval-seeds", "1", "--out",
-             tmpl])
+        run([h, "fit", clip, "--frames", "0..5", "--epochs", "1", "--eval-seeds", "1",
+             "--no-uncertainty", "--out", tmpl])
         baselines(w, tmpl, a.constants)
         for b in ("generic", "disordered"):
             os.replace(f"{w}/{b}.json", f"{w}/{c}{t}-{b}.json")

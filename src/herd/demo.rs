@@ -272,17 +272,23 @@ impl std::fmt::Display for DemoSummary {
             "held-out frames {}..{}, start → fitted (change):",
             self.report.run.frames[0], self.report.run.frames[1]
         )?;
-        let names = ["density error", "velocity error", "Σ 4 measure errors"];
-        // The paired rows of the same three numbers: density, velocity, the sum of four.
+        // Each printed number with its paired row (fitted against the start, seed by seed).
+        let names = [
+            ("density error", "density_error"),
+            ("velocity error", "velocity_error"),
+            (
+                "Σ 4 measure errors",
+                crate::herd::validate::paired::SUM_OF_FOUR,
+            ),
+        ];
         let paired = self.report.paired.first().map(|p| &p.rows);
-        for (k, (n, (fit, start))) in names.iter().zip(held_out(&self.report)).enumerate() {
-            let seedwise =
-                paired
-                    .and_then(|rows| rows.get([0, 1, 6][k]))
-                    .map_or(String::new(), |r| {
-                        let se = r.standard_error.map_or("—".into(), |x| format!("{x:.3}"));
-                        format!("; seed by seed {:+.3} ± {se}: {}", r.difference, r.verdict)
-                    });
+        for ((n, row), (fit, start)) in names.iter().zip(held_out(&self.report)) {
+            let seedwise = paired
+                .and_then(|rows| rows.iter().find(|r| r.measure == *row))
+                .map_or(String::new(), |r| {
+                    let se = r.standard_error.map_or("—".into(), |x| format!("{x:.3}"));
+                    format!("; seed by seed {:+.3} ± {se}: {}", r.difference, r.verdict)
+                });
             writeln!(
                 f,
                 "  {n:<20} {start:.3} → {fit:.3} ({:+.0} %{seedwise})",
