@@ -1,7 +1,7 @@
 //! Fits from a single image (issue #17 item 2, paper §7.2.4) through the binary: `synth` writes a
 //! still of randomly aligned agents and its image, `extract` turns the image into a one-frame clip
 //! with the user's direction variance, `fit` fits a still as a stationary target; and the still's
-//! bad input (no animals, no direction variance, a still among video clips, field objectives).
+//! bad input (no animals, no direction variance, a still among video clips, the ensemble objective).
 
 mod common;
 #[path = "common/score.rs"]
@@ -119,7 +119,7 @@ fn extract_turns_a_still_image_into_a_one_frame_clip() {
 fn a_still_fit_keeps_the_density_without_aligning_the_herd() {
     let dir = tempfile::tempdir().unwrap();
     let (clip, _) = still(dir.path(), 1.0);
-    let st = fit_still(&clip, &dir.path().join("p.json"), true);
+    let st = fit_still(&clip, &dir.path().join("p.json"), true, None);
     // The herd as drawn from the image reproduces it exactly (cell counts).
     assert!(
         st["drawn"]["density_error"].as_f64().unwrap() < 1e-6,
@@ -144,7 +144,7 @@ fn a_still_fit_from_the_extracted_image_keeps_the_density_too() {
         "--dir-variance",
         "3.29",
     ]);
-    fit_still(&clip, &dir.path().join("p.json"), true);
+    fit_still(&clip, &dir.path().join("p.json"), true, None);
 }
 
 /// At 0.2 agents/BL² (about two animals a cell) the simulated herd fills cells differently from
@@ -162,15 +162,35 @@ fn a_still_fit_at_low_density_keeps_the_density_without_aligning_the_herd() {
     let c = ClipFields::load(&clip).unwrap();
     let uniform = std::f64::consts::PI.powi(2) / 3.0;
     assert_eq!(c.meta.dir_spread, Some(uniform));
-    fit_still(&clip, &dir.path().join("p.json"), false);
+    fit_still(&clip, &dir.path().join("p.json"), false, None);
 }
 
-/// Fits the still `clip` into `out` (16 epochs) and checks the must-show: the fitted herd matches
+/// The paper's own objective for a still (§6.1: β = 1, "match on the density field alone"):
+/// E_mean steers each follower down the density difference, U = N(D) (eq. 10–11, the still has
+/// no velocity), and E_var keeps the headings random. It keeps the image's density in the fit's
+/// smoothed measure and the herd disordered, as the default density term does, by a different
+/// route: its fitted set is not the default's.
+#[test]
+fn the_paper_objective_fits_a_still_down_the_density_difference() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clip, _) = still(dir.path(), 1.0);
+    let (fields, paper) = (dir.path().join("f.json"), dir.path().join("p.json"));
+    fit_still(&clip, &fields, true, None);
+    fit_still(&clip, &paper, false, Some("paper"));
+    let forces = |p: &Path| {
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        j["forces"].clone()
+    };
+    assert_ne!(forces(&fields), forces(&paper));
+}
+
+/// Fits the still `clip` into `out` (16 epochs, `--loss loss` when given) and checks the must-show: the fitted herd matches
 /// the image's density better than the generic start by ≥ 30 % (the fit's own smoothed measure
 /// and, when `dense`, the raw cell counts), keeps the density around an average animal within
 /// 10 % of the image's (when `dense`), and stays disordered. Returns the fit's still evaluation.
-fn fit_still(clip: &Path, out: &Path, dense: bool) -> serde_json::Value {
-    let line = ok(&[
+fn fit_still(clip: &Path, out: &Path, dense: bool, loss: Option<&str>) -> serde_json::Value {
+    let mut args = vec![
         "fit",
         s(clip),
         "--out",
@@ -178,13 +198,19 @@ fn fit_still(clip: &Path, out: &Path, dense: bool) -> serde_json::Value {
         "--epochs",
         "16",
         "--no-uncertainty",
-    ]);
+    ];
+    if let Some(l) = loss {
+        args.extend(["--loss", l]);
+    }
+    let line = ok(&args);
     assert!(line.contains("still, start → fitted"), "{line}");
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
-    // A bare fit of a still takes the paper's density term and E_var (field matching is the
-    // default of clips with motion only).
-    assert_eq!(json["provenance"]["settings"]["loss"], "paper");
+    // A bare fit of a still takes the field objective's density term and E_var.
+    assert_eq!(
+        json["provenance"]["settings"]["loss"],
+        loss.unwrap_or("fields")
+    );
     let st = json["provenance"]["evaluation"]["still"].clone();
     let m = |set: &str, key: &str| st[set][key].as_f64().unwrap();
     assert!(
@@ -242,14 +268,14 @@ fn a_still_without_animals_or_direction_variance_is_refused() {
 }
 
 #[test]
-fn a_still_among_video_clips_and_field_objectives_are_refused() {
+fn a_still_among_video_clips_and_the_ensemble_objective_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let (clip, _) = still(dir.path(), 0.5);
     let video = small_clip(dir.path(), 40, 8, 1);
     let p = dir.path().join("p.json");
     let e = fails(&["fit", s(&clip), s(&video), "--out", s(&p)]);
     assert!(e.contains(s(&video)) && e.contains("one frame"), "{e}");
-    let e = fails(&["fit", s(&clip), "--loss", "fields", "--out", s(&p)]);
+    let e = fails(&["fit", s(&clip), "--loss", "ensemble", "--out", s(&p)]);
     assert!(e.contains("--loss") && e.contains("still"), "{e}");
     let e = fails(&["fit", s(&clip), "--still-average", "0", "--out", s(&p)]);
     assert!(e.contains("--still-average"), "{e}");

@@ -7,6 +7,7 @@ use crate::error::{Error, Result};
 use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
+    STILL_ENSEMBLE,
 };
 use clap::Args;
 use std::path::PathBuf;
@@ -74,10 +75,12 @@ pub struct FitArgs {
     /// E_mean on each cell's mean direction instead of every follower's (spread left to E_var).
     #[arg(long)]
     pub cell_mean: bool,
-    /// Objective: matching the density and momentum fields, or the paper's losses [default:
-    /// fields; paper for a still image, which is fitted by its density and E_var]
-    #[arg(long, value_parser = choice::<LossKind>(LOSSES))]
-    pub loss: Option<LossKind>,
+    /// Objective: matching the density and momentum fields, or the paper's losses. A still
+    /// image (one frame) has no velocity: `fields` matches its density, `paper` steers each
+    /// agent down the density difference (E_mean towards U = N(D), eq. 10–11); both add λ_var
+    /// E_var
+    #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Fields)]
+    pub loss: LossKind,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
@@ -166,21 +169,10 @@ fn any_still(clips: &[std::path::PathBuf]) -> bool {
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
-    let still = any_still(&a.clips);
-    let loss = match a.loss {
-        Some(LossKind::Fields | LossKind::Ensemble) if still => {
-            return Err(with_flags(
-                Error::config(
-                    "loss",
-                    "a still image has no velocity: it is fitted by its density and E_var, not by the field objectives",
-                ),
-                &[],
-            ))
-        }
-        Some(l) => l,
-        None if still => LossKind::Paper,
-        None => LossKind::Fields,
-    };
+    let loss = a.loss;
+    if loss == LossKind::Ensemble && any_still(&a.clips) {
+        return Err(with_flags(Error::config("loss", STILL_ENSEMBLE), &[]));
+    }
     let job = FitJob {
         clips: a.clips,
         start: a.start,

@@ -145,7 +145,8 @@ fn one_replica() -> usize {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LossKind {
-    /// E_mean (eq. 7) + λ_var E_var (eq. 8) against the target field U (eq. 10–11).
+    /// E_mean (eq. 7) + λ_var E_var (eq. 8) against the target field U (eq. 10–11); on a still
+    /// (no velocity) U = N(D), the paper's β = 1 "match on the density field alone" (§6.1).
     Paper,
     /// Field matching: after every step, the simulated density and momentum fields (bilinear
     /// splatting of the agents and of their velocities) against the clip's,
@@ -153,7 +154,8 @@ pub enum LossKind {
     /// clip's box-binned fields as splatting blurs points ([`crate::herd::fit::target::blur_like_splat`]).
     /// The default: on synthetic clips it moves the fit towards the truth's behaviour where the
     /// paper's E_mean moves it away, and no objective does measurably better on the real clips
-    /// (RESULTS.md §6, session 41).
+    /// (RESULTS.md §6, session 41). On a still (no velocity) only the density term, plus λ_var
+    /// E_var.
     #[default]
     Fields,
     /// Field matching of the *expected* simulated fields: the replicas' mean fields against the
@@ -163,6 +165,10 @@ pub enum LossKind {
 }
 
 enum_names!(LossKind { Paper = "paper", Fields = "fields", Ensemble = "ensemble" });
+
+/// Why a still (one-frame clip) refuses the ensemble objective.
+pub const STILL_ENSEMBLE: &str = "a still image has no velocity: fit it by its density term \
+     (fields) or by the paper's E_mean towards the density gradient (paper), not by the ensemble";
 
 pub use crate::herd::params::ALIGNMENT;
 
@@ -244,13 +250,10 @@ impl FitConfig {
         self.frozen_indices()?;
         if let Some(s) = &self.still {
             s.check()?;
-            // A still is fitted by its density term and E_var whatever `loss` names (the field
-            // objective's density term is the same one); the ensemble needs velocities.
+            // A still is fitted by its density term (fields) or by E_mean towards the density
+            // gradient (paper), with E_var; the ensemble needs velocities.
             if self.loss == LossKind::Ensemble {
-                return Err(Error::config(
-                    "loss",
-                    "a still image has no velocity: it is fitted by its density and E_var, not by the ensemble objective",
-                ));
+                return Err(Error::config("loss", STILL_ENSEMBLE));
             }
         }
         self.settle.check()

@@ -372,8 +372,11 @@ impl<'a> FitRun<'a> {
         let (guidance, stencil) = &self.per_clip[ci];
         // Weights of (E_mean, E_var) in the back-propagated loss: the paper's split takes
         // E_var's gradient in a second pass; field matching replaces E_mean.
+        let still_fields = cfg.still.is_some() && cfg.loss != LossKind::Paper;
         let weights = match (cfg.loss, cfg.split_gradients) {
-            _ if cfg.still.is_some() => (0.0, (!cfg.split_gradients) as u8 as f64 * cfg.var_weight),
+            // A still's field objective is its density term (below) and E_var; its paper
+            // objective E_mean against U = N(D) (eq. 10–11, no velocity) and E_var, as a video's.
+            _ if still_fields => (0.0, (!cfg.split_gradients) as u8 as f64 * cfg.var_weight),
             (LossKind::Fields | LossKind::Ensemble, _) => (0.0, cfg.var_weight),
             (LossKind::Paper, true) => (1.0, 0.0),
             (LossKind::Paper, false) => (1.0, cfg.var_weight),
@@ -414,7 +417,7 @@ impl<'a> FitRun<'a> {
                 em += e_m / (w as f64 * kr);
                 ev += e_v / (w as f64 * kr);
                 let loss = match cfg.loss {
-                    _ if cfg.still.is_some() => {
+                    _ if still_fields => {
                         let dl = density_loss(clip, &state, f + s + 1)?;
                         ef += read_vec(&dl.clone().detach())?[0] / (w as f64 * kr);
                         loss + dl.mul_scalar(cfg.density_weight)
@@ -426,6 +429,12 @@ impl<'a> FitRun<'a> {
                     }
                     LossKind::Ensemble => {
                         slot.push(state.clone());
+                        loss
+                    }
+                    LossKind::Paper if cfg.still.is_some() => {
+                        // Logged only: the still's density term, off the autodiff graph.
+                        let dl = density_loss(clip, &state.clone().detach(), f + s + 1)?;
+                        ef += read_vec(&dl)?[0] / (w as f64 * kr);
                         loss
                     }
                     LossKind::Paper => {
