@@ -137,6 +137,23 @@ fn hand_made_tracks_give_known_density_velocity_and_gaps() {
         "{:?}",
         clip.meta.speed
     );
+    // The animals in the clip's own frames and body lengths, for `fit --tracks`: every tracked
+    // row, the walker at 2 BL/s along +x, the stander still.
+    let t = Tracks::load(&out.join("tracks.csv")).unwrap();
+    assert_eq!(t.meta.units, Units::BodyLengths);
+    assert_eq!(t.meta.fps, 10.0);
+    assert_eq!(t.rows.len(), 9);
+    for r in &t.rows {
+        let v = r.vel.unwrap();
+        match r.id {
+            0 => {
+                assert!((r.pos[0] - (0.5 + 0.2 * r.frame as f64)).abs() < 1e-12);
+                assert!((v[0] - 2.0).abs() < 1e-9 && v[1].abs() < 1e-12, "{r:?}");
+            }
+            _ => assert_eq!((r.pos[0], r.pos[1], v[0], v[1]), (3.5, 3.5, 0.0, 0.0)),
+        }
+    }
+    assert!(!t.rows.iter().any(|r| r.id == 1 && r.frame == 2));
 }
 
 #[test]

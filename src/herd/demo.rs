@@ -143,6 +143,8 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
                 guidance_scale: GUIDANCE_SCALE,
                 ensemble_mean: false,
                 horizon: 0,
+                tracks: None,
+                anchors: None,
             },
         },
         progress,

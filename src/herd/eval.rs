@@ -60,6 +60,26 @@ pub fn run_from_fields_zoned(
     clip: &ClipFields,
     params: &Params,
     zones: Option<&crate::herd::zoned::ZoneSets>,
+    range: (usize, usize),
+    seed: u64,
+    settle: &Settle,
+    guidance: &[Guidance],
+    device: &Device,
+    observe: impl FnMut(usize, &HerdState, &[u64]) -> Result<()>,
+) -> Result<Vec<AgentRow>> {
+    run_from(
+        clip, params, zones, None, range, seed, settle, guidance, device, observe,
+    )
+}
+
+/// [`run_from_fields_zoned`], started from the animals `tracked` in frame `first` when given
+/// (`validate --tracks`) instead of a herd drawn from that frame's fields.
+#[allow(clippy::too_many_arguments)]
+pub fn run_from(
+    clip: &ClipFields,
+    params: &Params,
+    zones: Option<&crate::herd::zoned::ZoneSets>,
+    tracked: Option<&[AgentRow]>,
     (first, last): (usize, usize),
     seed: u64,
     settle: &Settle,
@@ -74,7 +94,10 @@ pub fn run_from_fields_zoned(
         model.world.fixed_speed = z.zones.speed_map(&z.grid);
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let rows = start_herd(&model, clip, first, settle, &mut rng, device)?;
+    let rows = match tracked {
+        Some(t) => t.to_vec(),
+        None => start_herd(&model, clip, first, settle, &mut rng, device)?,
+    };
     if rows.is_empty() {
         return Err(Error::invalid(format!(
             "frame {first} of the clip holds no agents: nothing to start from"

@@ -8,7 +8,8 @@
 //! one-sided next to a gap or an end, then averaged over `smooth` frames like the extraction's
 //! velocities (§6.1); a position with no tracked neighbour frame gets velocity 0. An animal lost for some frames keeps its other frames. The fields are the
 //! same rasterisation as synthetic clips ([`crate::measure::rasterise`]): density (agents/BL²),
-//! mean velocity (BL/s), direction variance, speed model.
+//! mean velocity (BL/s), direction variance, speed model. The clip folder also gets the animals
+//! in its own coordinates and frames, `tracks.csv`, for `fit --tracks`.
 
 use crate::data::agents::AgentRow;
 use crate::data::clip::{ClipFields, Grid};
@@ -392,7 +393,10 @@ pub fn import_tracks(job: &ImportTracksJob) -> Result<ImportSummary> {
     });
     let mut clip: ClipFields = rasterise(&frames, grid, fps, obstacles, provenance)?;
     clip.meta.body_length_px = bl_px;
-    clip.save(&job.out, &[])?;
+    clip.save(
+        &job.out,
+        &[("tracks.csv", clip_tracks_csv(&frames, fps).into_bytes())],
+    )?;
     let animals = s
         .values()
         .filter(|t| t.range(a..b).next().is_some())
@@ -410,6 +414,31 @@ pub fn import_tracks(job: &ImportTracksJob) -> Result<ImportSummary> {
         speed: [clip.meta.speed.mean, clip.meta.speed.std],
         obstacle_cells: clip.obstacles.iter().filter(|&&o| o != 0).count(),
     })
+}
+
+/// The imported animals in the clip's coordinates and frames (`herdfit.tracks/1`, body lengths,
+/// y up, frame 0 = the clip's first, velocities as rasterised): the clip folder's `tracks.csv`,
+/// which `fit --tracks` starts its windows from.
+fn clip_tracks_csv(frames: &[Vec<AgentRow>], fps: f64) -> String {
+    use std::fmt::Write;
+    let mut s = String::from("frame,time,id,x,y,vx,vy\n");
+    for (f, rows) in frames.iter().enumerate() {
+        let mut rows: Vec<&AgentRow> = rows.iter().collect();
+        rows.sort_by_key(|r| r.id);
+        for r in rows {
+            let _ = writeln!(
+                s,
+                "{f},{},{},{},{},{},{}",
+                f as f64 / fps,
+                r.id,
+                r.x,
+                r.y,
+                r.vx,
+                r.vy
+            );
+        }
+    }
+    s
 }
 
 fn arena_mask(

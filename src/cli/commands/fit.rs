@@ -81,6 +81,12 @@ pub struct FitArgs {
     /// E_var
     #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Fields)]
     pub loss: LossKind,
+    /// Tracked animals of the clip (a herdfit.tracks/1 CSV in the clip's body lengths and frames:
+    /// synth's trajectories.csv, import-tracks' tracks.csv), once per clip in clip order: every
+    /// window then starts from the animals tracked at its first frame instead of the herd drawn
+    /// from the fields, so the objective scores the model's steps from where the animals were
+    #[arg(long, value_name = "TRACKS.csv")]
+    pub tracks: Vec<PathBuf>,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
@@ -197,6 +203,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             },
             frozen: a.freeze,
             density_weight: a.density_weight,
+            tracks: a.tracks,
             ..FitConfig::default()
         }),
         eval_seeds: a.eval_seeds,

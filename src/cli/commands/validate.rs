@@ -49,6 +49,11 @@ pub struct ValidateArgs {
     /// averaged over the seeds frame by frame) instead of averaging each seed's own errors.
     #[arg(long)]
     pub ensemble_mean: bool,
+    /// Tracked animals of the clip (a herdfit.tracks/1 CSV in its body lengths and frames, as for
+    /// `fit --tracks`): each run (each piece, with --horizon) starts from the animals tracked at
+    /// its first frame instead of a herd drawn from the fields.
+    #[arg(long, value_name = "TRACKS.csv")]
+    pub tracks: Option<PathBuf>,
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
@@ -73,6 +78,8 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             guidance_scale: a.guidance_scale,
             ensemble_mean: a.ensemble_mean,
             horizon: a.horizon,
+            tracks: a.tracks,
+            anchors: None,
         },
     };
     // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.

@@ -78,6 +78,11 @@ pub struct FitConfig {
     /// E_var over the steps after `settle`. Not written when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub still: Option<super::still::StillConfig>,
+    /// Tracked animals, one `herdfit.tracks/1` file per clip in clip order (`fit --tracks`,
+    /// [`crate::herd::fit::anchor`]): every window starts from the animals tracked at its first
+    /// frame. Empty: windows carry the herd drawn from the fields. Not written when empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tracks: Vec<std::path::PathBuf>,
 }
 
 fn unit_weight() -> f64 {
@@ -198,6 +203,7 @@ impl Default for FitConfig {
             frozen: Vec::new(),
             density_weight: 1.0,
             still: None,
+            tracks: Vec::new(),
         }
     }
 }
@@ -254,6 +260,12 @@ impl FitConfig {
             // gradient (paper), with E_var; the ensemble needs velocities.
             if self.loss == LossKind::Ensemble {
                 return Err(Error::config("loss", STILL_ENSEMBLE));
+            }
+            if !self.tracks.is_empty() {
+                return Err(Error::config(
+                    "tracks",
+                    "a still image is one frame: there are no windows for tracks to start",
+                ));
             }
         }
         self.settle.check()

@@ -63,6 +63,15 @@ pub(super) fn grad_of(loss: Tensor<1>, theta: &Tensor<1>) -> Result<Vec<f64>> {
 }
 
 impl Herds {
+    /// Every replica starts the next window from the tracked animals `rows` (`fit --tracks`).
+    pub(super) fn start_from(&mut self, rows: &[AgentRow]) {
+        let next = rows.iter().map(|a| a.id + 1).max().unwrap_or(0);
+        for (r, n) in self.rows.iter_mut().zip(self.next_ids.iter_mut()) {
+            *r = rows.to_vec();
+            *n = next;
+        }
+    }
+
     /// A replica that lost every agent is restarted from the fields of frame `f`.
     pub(super) fn refill_empty(
         &mut self,

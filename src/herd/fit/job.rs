@@ -187,6 +187,8 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     for (c, p) in clips.iter().zip(&job.clips) {
         cfg.check_clip(c).map_err(|e| e.in_file(p))?;
     }
+    // Bad tracks are reported before anything is written.
+    super::anchor::load_all(&cfg, &clips)?;
     let (log_path, plot_path) = (job.log_path(), job.plot_path());
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;

@@ -10,6 +10,7 @@
 //! are removed and, when the density error exceeds a threshold or the clip has more agents than
 //! the simulation, the population is rebalanced from the fields.
 
+pub mod anchor;
 pub mod checkpoint;
 pub mod config;
 pub mod global;

@@ -1,6 +1,7 @@
 //! The fit loop (paper §6.1): epochs × clips × windows of planned, then evaluated, steps; the
 //! gradient of each window's loss, the optimiser step, population control between windows.
 
+use super::anchor::Anchors;
 use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt, ZoneStarts};
 use super::config::{FitConfig, LossKind};
 use super::herds::{check_finite_step, grad_of, Herds};
@@ -154,6 +155,8 @@ struct FitRun<'a> {
     probe: bool,
     /// A zone fit's zones: each agent uses its cell's zone's parameter set ([`fit_zones`]).
     zones: Option<&'a Zones>,
+    /// Each clip's tracked animals, which start every window when given (`cfg.tracks`).
+    anchors: Vec<Option<Anchors>>,
 }
 
 /// The forward pass over one window besides its loss: the logged loss values, and each live
@@ -233,6 +236,7 @@ impl<'a> FitRun<'a> {
                 (guidance, Stencil::new(clip))
             })
             .collect();
+        let anchors = super::anchor::load_all(cfg, clips)?;
         Ok(FitRun {
             clips,
             init,
@@ -244,6 +248,7 @@ impl<'a> FitRun<'a> {
             learn,
             probe: false,
             zones: None,
+            anchors,
         })
     }
 
@@ -271,6 +276,9 @@ impl<'a> FitRun<'a> {
         while f + 1 < b {
             let w = cfg.window.min(b - 1 - f);
             let t0 = std::time::Instant::now();
+            if let Some(rows) = self.anchors[ci].as_ref().and_then(|a| a.at(f)) {
+                herds.start_from(rows);
+            }
             herds.refill_empty(clip, f, &model, rng);
             if herds.rows.iter().all(|h| h.is_empty()) {
                 f += w;

@@ -57,6 +57,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
     cfg.check_clip(&clip)
         .map_err(|e| e.in_file(&job.clips[0]))?;
     zones.check_agents(&clip, frames.clone())?;
+    super::anchor::load_all(&cfg, &[&clip])?;
     let (log_path, plot_path) = (job.log_path(), job.plot_path());
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;

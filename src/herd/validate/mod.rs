@@ -9,7 +9,7 @@ use crate::backend::{cpu_device, Precision};
 use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::eval::run_from_fields;
+use crate::herd::eval::run_from;
 use crate::herd::guidance::guidance_fields;
 use crate::herd::params::Params;
 use crate::herd::start::Settle;
@@ -62,9 +62,11 @@ pub fn simulate_clip(
         let first = piece.start - cfg.warmup.min(piece.start);
         let mut frames = Vec::with_capacity(piece.len());
         let last = piece.end.saturating_sub(1);
-        let rows = run_from_fields(
+        let rows = run_from(
             clip,
             params,
+            None,
+            cfg.tracked(first),
             (first, last),
             seed,
             &cfg.settle,
@@ -188,6 +190,9 @@ pub struct HeldOut {
     /// [`ValidateConfig::horizon`], when the herd was drawn afresh every so many frames.
     #[serde(skip_serializing_if = "is_zero")]
     pub horizon: usize,
+    /// [`ValidateConfig::tracks`], when every run started from the tracked animals.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tracks: Option<String>,
 }
 
 fn is_zero(x: &usize) -> bool {
@@ -201,8 +206,13 @@ impl HeldOut {
             0 => String::new(),
             h => format!(", the herd drawn afresh from the clip every {h} frames"),
         };
+        let tracks = match (&self.tracks, self.horizon) {
+            (None, _) => String::new(),
+            (Some(t), 0) => format!(", the herd started from the animals tracked in `{t}`"),
+            (Some(t), _) => format!(" (each time from the animals tracked in `{t}`)"),
+        };
         format!(
-            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid{horizon}",
+            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid{horizon}{tracks}",
             self.clip, self.frames[0], self.frames[1], self.split, self.seeds, self.grid, self.grid
         )
     }
@@ -253,6 +263,14 @@ pub struct ValidateConfig {
     /// the set predicts the next frames from where the animals are, which a free run over a
     /// sparse clip stops doing once its herd no longer overlaps the clip's (RESULTS.md §6).
     pub horizon: usize,
+    /// Tracked animals of the clip (`validate --tracks`, as `fit --tracks`): every run (every
+    /// piece, with a horizon) starts from the animals tracked at its first frame. Not written
+    /// when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracks: Option<std::path::PathBuf>,
+    /// The loaded [`Self::tracks`] ([`Self::load_tracks`]).
+    #[serde(skip)]
+    pub anchors: Option<std::sync::Arc<crate::herd::fit::anchor::Anchors>>,
 }
 
 impl Default for ValidateConfig {
@@ -266,11 +284,29 @@ impl Default for ValidateConfig {
             guidance_scale: crate::herd::guidance::GUIDANCE_SCALE,
             ensemble_mean: false,
             horizon: 0,
+            tracks: None,
+            anchors: None,
         }
     }
 }
 
 impl ValidateConfig {
+    /// Loads [`Self::tracks`] for `clip` (once; errors name the tracks file).
+    pub fn load_tracks(&mut self, clip: &ClipFields) -> Result<()> {
+        if let (Some(p), None) = (&self.tracks, &self.anchors) {
+            let held = self.held_out_start(clip.frames());
+            let first = held - self.warmup.min(held);
+            let a = crate::herd::fit::anchor::Anchors::load(p, clip, first..clip.frames())?;
+            self.anchors = Some(std::sync::Arc::new(a));
+        }
+        Ok(())
+    }
+
+    /// The animals tracked in frame `f`, when the validation starts from tracks.
+    pub fn tracked(&self, f: usize) -> Option<&[AgentRow]> {
+        self.anchors.as_deref().and_then(|a| a.at(f))
+    }
+
     /// The first held-out frame of a clip of `frames` frames: ⌊frames · split⌋.
     pub fn held_out_start(&self, frames: usize) -> usize {
         ((frames as f64) * self.split).floor() as usize
@@ -346,6 +382,9 @@ pub fn validate(
             ),
         ));
     }
+    let mut cfg = cfg.clone();
+    cfg.load_tracks(clip)?;
+    let cfg = &cfg;
     let device = cpu_device(Precision::F32)?;
     // The leaders' guidance of every frame, the same for every set and seed.
     let guidance = guidance_fields(clip, cfg.guidance_scale);
@@ -449,6 +488,7 @@ pub fn validate(
                 grid,
                 seeds,
                 horizon: cfg.horizon,
+                tracks: cfg.tracks.as_ref().map(|t| t.display().to_string()),
             },
             ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),

@@ -100,6 +100,7 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
             grid: job.config.coarse_grid,
             seeds: job.config.seeds,
             horizon: 0,
+            tracks: job.config.tracks.as_ref().map(|t| t.display().to_string()),
         },
         zones: z
             .specs

@@ -8,7 +8,7 @@ use super::{stat, Stat, ValidateConfig};
 use crate::backend::{cpu_device, Precision};
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::eval::run_from_fields_zoned;
+use crate::herd::eval::run_from;
 use crate::herd::guidance::guidance_fields;
 use crate::herd::zoned::ZoneSets;
 use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocity};
@@ -86,6 +86,9 @@ pub fn validate_zones(
     mut progress: impl FnMut(),
 ) -> Result<Vec<ZoneSetReport>> {
     cfg.check()?;
+    let mut cfg = cfg.clone();
+    cfg.load_tracks(clip)?;
+    let cfg = &cfg;
     if cfg.horizon != 0 {
         return Err(Error::config(
             "horizon",
@@ -116,10 +119,11 @@ pub fn validate_zones(
         let mut per_zone: Vec<[Vec<f64>; 4]> = vec![Default::default(); nz];
         for seed in 0..cfg.seeds {
             let mut frames = Vec::new();
-            let rows = run_from_fields_zoned(
+            let rows = run_from(
                 clip,
                 &zs.sets[0],
                 Some(zs),
+                cfg.tracked(first),
                 (first, nf - 1),
                 seed as u64,
                 &cfg.settle,
