@@ -235,6 +235,14 @@ fn main() -> herdfit::Result<()> {
     write(&out.join("zones-validation.json"), &reports)?;
     println!("fit wall: zone {zone_secs:.1} s, single {single_secs:.1} s ({epochs} epochs)");
     table(&reports);
+    // The emergent measures of the seeds' mean prediction (`validate --ensemble-mean`): per-seed
+    // errors also charge each set for its own run-to-run spread.
+    let mean_cfg = ValidateConfig {
+        ensemble_mean: true,
+        ..vcfg.clone()
+    };
+    println!("With the seeds' mean prediction of the emergent measures (--ensemble-mean):");
+    table(&validate_zones(&clip, &sets, &mean_cfg, || {})?);
     let dist = |a: &ParamSets| -> Vec<f64> {
         a.sets
             .iter()

@@ -168,6 +168,34 @@ fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
     ]);
     assert!(e.contains("--horizon") && e.contains("zone bundle"), "{e}");
     assert!(!report.exists());
+    // --ensemble-mean compares the seeds' mean emergent measures: with one seed that is the
+    // seed's own; with three the emergent rows change and the density rows do not.
+    let zone_rows = |seeds: &str, mean: bool| {
+        let r = dir.path().join(format!("r{seeds}{mean}"));
+        let mut args = vec![
+            "validate",
+            s(&clip),
+            "--params",
+            s(&out),
+            "--seeds",
+            seeds,
+            "--no-video",
+            "--out",
+            s(&r),
+        ];
+        if mean {
+            args.push("--ensemble-mean");
+        }
+        ok(&args);
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(r.join("report.json")).unwrap()).unwrap();
+        assert_eq!(j["ensemble_mean"].as_bool().unwrap_or(false), mean);
+        j["sets"][0]["zones"].clone()
+    };
+    assert_eq!(zone_rows("1", true), zone_rows("1", false));
+    let (a, b) = (zone_rows("3", true), zone_rows("3", false));
+    assert_eq!(a[0]["density_error"], b[0]["density_error"]);
+    assert_ne!(a[0]["polarization_error"], b[0]["polarization_error"]);
     // An author scene's region names a set of the bundle.
     let scene = dir.path().join("scene.json");
     let v = serde_json::json!({

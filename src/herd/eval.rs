@@ -121,10 +121,13 @@ pub fn run_from(
 }
 
 /// The mean density and velocity errors ([`field_errors`]) over the frames after the first of a
-/// [`run_from_fields`] through the frames `range` of the clip.
+/// [`run_from`] through the frames `range` of the clip, started from the animals `tracked` in its
+/// first frame when given.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     clip: &ClipFields,
     params: &Params,
+    tracked: Option<&[AgentRow]>,
     range: Range<usize>,
     seed: u64,
     precision: Precision,
@@ -134,9 +137,11 @@ pub fn evaluate(
     let device = cpu_device(precision)?;
     let (mut de, mut ve, mut n): (f64, f64, f64) = (0.0, 0.0, 0.0);
     let last = range.end.saturating_sub(1);
-    run_from_fields(
+    run_from(
         clip,
         params,
+        None,
+        tracked,
         (range.start, last),
         seed,
         settle,

@@ -335,15 +335,18 @@ fn evaluation(
         .iter()
         .map(|c| guidance_fields(c, cfg.guidance_scale))
         .collect();
+    // With tracks, the runs start from the tracked animals, as the fit's windows did.
+    let anchors = super::anchor::load_all(cfg, clips)?;
     let errors = |p: &Params| -> Result<(f64, f64)> {
         let (mut d, mut v) = (0.0, 0.0);
-        for (c, guidance) in clips.iter().zip(&guidance) {
+        for ((c, guidance), a) in clips.iter().zip(&guidance).zip(&anchors) {
             let mut q = p.clone();
             q.speed = SpeedModel::of_clip(c, base);
             for k in 0..job.eval_seeds {
                 let (x, y) = evaluate(
                     c,
                     &q,
+                    a.as_ref().and_then(|a| a.at(cfg.frames.start)),
                     cfg.frames.clone(),
                     cfg.seed.wrapping_add(k as u64),
                     cfg.precision,

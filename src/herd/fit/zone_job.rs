@@ -10,7 +10,7 @@ use crate::backend::cpu_device;
 use crate::data::atomic::check_writable;
 use crate::data::ClipFields;
 use crate::error::Result;
-use crate::herd::eval::run_from_fields_zoned;
+use crate::herd::eval::run_from;
 use crate::herd::guidance::guidance_fields;
 use crate::herd::params::{param_names, Params, SpeedModel};
 use crate::herd::zoned::ZoneSets;
@@ -143,12 +143,20 @@ fn errors_of(
 ) -> Result<(f64, f64)> {
     let device = cpu_device(job.config.precision)?;
     let guidance = guidance_fields(clip, job.config.guidance_scale);
+    // With tracks, the runs start from the tracked animals, as the fit's windows did.
+    let cfg = super::config::FitConfig {
+        frames: frames.clone(),
+        ..job.config.clone()
+    };
+    let anchors = super::anchor::load_all(&cfg, &[clip])?;
+    let tracked = anchors[0].as_ref().and_then(|a| a.at(frames.start));
     let (mut d, mut v, mut n) = (0.0, 0.0, 0.0);
     for k in 0..job.eval_seeds {
-        run_from_fields_zoned(
+        run_from(
             clip,
             &sets.sets[0],
             Some(sets),
+            tracked,
             (frames.start, frames.end - 1),
             job.config.seed.wrapping_add(k as u64),
             &job.config.settle,

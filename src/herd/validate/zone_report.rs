@@ -25,6 +25,10 @@ pub const ZONE_VALIDATION_SCHEMA: &str = "herdfit.zone-validation/1";
 pub struct ZoneReport {
     #[serde(flatten)]
     pub run: HeldOut,
+    /// The zones' emergent measures are those of the seeds' mean prediction
+    /// ([`super::ValidateConfig::ensemble_mean`]). Not written when false.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub ensemble_mean: bool,
     /// Per zone: its name, its cells and its fixed speed (BL/s), if any.
     pub zones: Vec<ZoneInfo>,
     pub sets: Vec<ZoneSetReport>,
@@ -53,12 +57,6 @@ pub fn is_bundle(path: &Path) -> bool {
 /// Runs the zone validation of `job.params` (a bundle) and writes the report folder.
 pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(ZoneReport, String)> {
     job.check()?;
-    if job.config.ensemble_mean {
-        return Err(Error::config(
-            "ensemble_mean",
-            "a zone bundle is validated per seed (the ensemble mean is for one set)",
-        ));
-    }
     let clip = ClipFields::load(&job.clip)?;
     let grid = clip.grid();
     let of = |path: &Path| -> Result<ZoneSets> {
@@ -102,6 +100,7 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
             horizon: 0,
             tracks: job.config.tracks.as_ref().map(|t| t.display().to_string()),
         },
+        ensemble_mean: job.config.ensemble_mean,
         zones: z
             .specs
             .iter()

@@ -78,7 +78,9 @@ fn zone_density_error(
 }
 
 /// Validates each named choice of per-zone sets on the held-out part `[split·F, F)` of `clip`
-/// (`cfg.seeds` runs each, errors averaged over the runs' frames).
+/// (`cfg.seeds` runs each, errors averaged over the runs' frames; with `cfg.ensemble_mean` the
+/// zones' emergent measures are averaged over the runs frame by frame before they are compared,
+/// the density errors stay per run).
 pub fn validate_zones(
     clip: &ClipFields,
     sets: &[(String, ZoneSets)],
@@ -117,6 +119,9 @@ pub fn validate_zones(
             .collect();
         let (mut de, mut ve) = (Vec::new(), Vec::new());
         let mut per_zone: Vec<[Vec<f64>; 4]> = vec![Default::default(); nz];
+        // With `ensemble_mean`, each zone's emergent measures averaged over the seeds frame by
+        // frame (the ensemble's prediction), compared with the clip after the last seed.
+        let mut means = vec![vec![[0.0f64; 3]; nz]; nf - start];
         for seed in 0..cfg.seeds {
             let mut frames = Vec::new();
             let rows = run_from(
@@ -148,22 +153,33 @@ pub fn validate_zones(
                 prov,
             )?;
             smooth_velocity(&mut sim, clip.meta.velocity_window());
-            for k in 0..nf - start {
+            for (k, mean_k) in means.iter_mut().enumerate() {
                 let f = start + k;
                 let c = coarse_cells(clip, f, cfg.coarse_grid);
                 let (d, v) = cell_errors(&c, &coarse_cells(&sim, k, cfg.coarse_grid));
                 de.push(d);
                 ve.push(v);
                 for (z, acc) in per_zone.iter_mut().enumerate() {
-                    let vid = emergent(&inside(clip, f, &cells[z]), 0).values();
                     let own = emergent(&inside(&sim, k, &cells[z]), 0).values();
+                    let own = [own[0], own[1], own[3]];
                     acc[0].push(zone_density_error(clip, f, &sim, k, &cells[z]));
-                    acc[1].push((own[0] - vid[0]).abs());
-                    acc[2].push((own[1] - vid[1]).abs());
-                    acc[3].push((own[3] - vid[3]).abs());
+                    if cfg.ensemble_mean {
+                        for (m, o) in mean_k[z].iter_mut().zip(own) {
+                            *m += o / cfg.seeds as f64;
+                        }
+                    } else {
+                        push_errors(acc, own, &video_values(clip, f, &cells[z]));
+                    }
                 }
             }
             progress();
+        }
+        if cfg.ensemble_mean {
+            for (k, mean_k) in means.iter().enumerate() {
+                for (z, acc) in per_zone.iter_mut().enumerate() {
+                    push_errors(acc, mean_k[z], &video_values(clip, start + k, &cells[z]));
+                }
+            }
         }
         out.push(ZoneSetReport {
             name: name.clone(),
@@ -183,4 +199,19 @@ pub fn validate_zones(
         });
     }
     Ok(out)
+}
+
+/// The clip's polarization, angular momentum (about the centroid) and aspect ratio inside the
+/// cells `cells` of frame `f`.
+fn video_values(clip: &ClipFields, f: usize, cells: &[bool]) -> [f64; 3] {
+    let v = emergent(&inside(clip, f, cells), 0).values();
+    [v[0], v[1], v[3]]
+}
+
+/// Appends the absolute errors of the simulated measures `own` against the clip's `video` to the
+/// polarization, angular-momentum and aspect-ratio lists of `acc`.
+fn push_errors(acc: &mut [Vec<f64>; 4], own: [f64; 3], video: &[f64; 3]) {
+    for (i, (o, v)) in own.iter().zip(video).enumerate() {
+        acc[i + 1].push((o - v).abs());
+    }
 }
