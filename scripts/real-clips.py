@@ -17,7 +17,11 @@ extract. Uses only the herdfit CLI and the Python standard library; every comman
 
     python3 scripts/real-clips.py --herdfit target/release/herdfit --work /tmp/rc [--make]
         [--clips fish,students,testA] [--settings default,fields,...] [--out rc.json]
-        [--constants leader_max_neighbours=0] [--start-from disordered]
+        [--constants leader_max_neighbours=0] [--start-from disordered] [--validate-tracks H]
+
+The `tracks` setting fits from the clip's tracked animals (`fit --tracks CLIP/tracks.csv`, which
+import-tracks writes); `--validate-tracks H` validates every set from them too (`validate --tracks`,
+restarted every H frames), on the clips that have tracks.
 """
 import argparse
 import json
@@ -36,6 +40,8 @@ SETTINGS = {
     "normalized": ["--optimizer", "normalized"],
     "averaged": ["--optimizer", "averaged"],
     "starts4": ["--starts", "4"],
+    # Every window from the tracked animals (fit --tracks; import-tracks' tracks.csv).
+    "tracks": ["--tracks", "{clip}/tracks.csv"],
 }
 MEASURES = ["polarization", "angular_momentum_centroid", "angular_momentum_frame_centre",
             "aspect_ratio"]
@@ -78,9 +84,9 @@ def baselines(w, template, constants=""):
     json.dump(d, open(f"{w}/disordered.json", "w"), indent=1)
 
 
-def validate(h, clip, params, out, seeds, baseline=None):
+def validate(h, clip, params, out, seeds, baseline=None, extra=()):
     cmd = [h, "validate", clip, "--params", params, "--split", "0.5", "--seeds", str(seeds),
-           "--no-video", "--out", out]
+           "--no-video", "--out", out] + list(extra)
     run(cmd + (["--baseline", baseline] if baseline else []))
     report = json.load(open(f"{out}/report.json"))
     rows = {r["measure"]: r for r in report["sets"][0]["rows"]}
@@ -117,6 +123,9 @@ def main():
                          "as a bare fit does)")
     ap.add_argument("--seeds", type=int, default=16,
                     help="validation seeds (the paired verdicts need several)")
+    ap.add_argument("--validate-tracks", type=int, default=None, metavar="H",
+                    help="validate from the clip's tracks.csv (validate --tracks) where it has "
+                         "one, the herd restarted from them every H frames (0: one run)")
     ap.add_argument("--tag", default="", help="suffix of this run's files")
     ap.add_argument("--out", default="")
     a = ap.parse_args()
@@ -132,6 +141,10 @@ def main():
         half = frames // 2
         rc = res["clips"][c] = {"frames": frames, "fits": {}}
         t = a.tag
+        ve = []
+        if a.validate_tracks is not None and os.path.exists(f"{clip}/tracks.csv"):
+            ve = ["--tracks", f"{clip}/tracks.csv"]
+            ve += ["--horizon", str(a.validate_tracks)] if a.validate_tracks else []
         # The baselines from a parameter file of this clip (a one-epoch fit on 5 frames).
         tmpl = f"{w}/{c}{t}-template.json"
         run([h, "fit", clip, "--frames", "0..5", "--epochs", "1", "--eval-seeds", "1",
@@ -140,17 +153,18 @@ def main():
         for b in ("generic", "disordered"):
             os.replace(f"{w}/{b}.json", f"{w}/{c}{t}-{b}.json")
         rc["baselines"] = {b: validate(h, clip, f"{w}/{c}{t}-{b}.json", f"{w}/{c}{t}-val-{b}",
-                                       a.seeds)
+                                       a.seeds, extra=ve)
                            for b in ("generic", "disordered")}
         start = (["--start", f"{w}/{c}{t}-{a.start_from}.json"]
                  if a.constants or a.start_from != "generic" else [])
         for name in a.settings.split(","):
             out = f"{w}/{c}{t}-{name}.json"
             wall = run([h, "fit", clip, "--frames", f"0..{half}", "--eval-seeds", "1", "--out",
-                        out] + start + SETTINGS[name] + a.extra.split())
-            v = validate(h, clip, out, f"{w}/{c}{t}-val-{name}", a.seeds)
+                        out] + start + [x.format(clip=clip) for x in SETTINGS[name]]
+                       + a.extra.split())
+            v = validate(h, clip, out, f"{w}/{c}{t}-val-{name}", a.seeds, extra=ve)
             v["versus"] = {b: validate(h, clip, out, f"{w}/{c}{t}-val-{name}-vs-{b}", a.seeds,
-                                       f"{w}/{c}{t}-{b}.json")["paired"]
+                                       f"{w}/{c}{t}-{b}.json", extra=ve)["paired"]
                            for b in ("generic", "disordered")}
             fitted = json.load(open(out))
             v["wall_s"] = wall
