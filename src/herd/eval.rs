@@ -48,32 +48,15 @@ pub fn run_from_fields(
     device: &Device,
     observe: impl FnMut(usize, &HerdState, &[u64]) -> Result<()>,
 ) -> Result<Vec<AgentRow>> {
-    run_from_fields_zoned(
-        clip, params, None, range, seed, settle, guidance, device, observe,
+    run_from(
+        clip, params, None, None, range, seed, settle, guidance, device, observe,
     )
 }
 
 /// [`run_from_fields`], with each agent's forces from its zone's set when `zones` is given
-/// (`params` still gives the speed model and the constants).
-#[allow(clippy::too_many_arguments)]
-pub fn run_from_fields_zoned(
-    clip: &ClipFields,
-    params: &Params,
-    zones: Option<&crate::herd::zoned::ZoneSets>,
-    range: (usize, usize),
-    seed: u64,
-    settle: &Settle,
-    guidance: &[Guidance],
-    device: &Device,
-    observe: impl FnMut(usize, &HerdState, &[u64]) -> Result<()>,
-) -> Result<Vec<AgentRow>> {
-    run_from(
-        clip, params, zones, None, range, seed, settle, guidance, device, observe,
-    )
-}
-
-/// [`run_from_fields_zoned`], started from the animals `tracked` in frame `first` when given
-/// (`validate --tracks`) instead of a herd drawn from that frame's fields.
+/// (`params` still gives the speed model and the constants), and started from the animals
+/// `tracked` in frame `first` when given (`fit`/`validate --tracks`) instead of a herd drawn from
+/// that frame's fields.
 #[allow(clippy::too_many_arguments)]
 pub fn run_from(
     clip: &ClipFields,
