@@ -74,8 +74,9 @@ pub struct FitConfig {
     #[serde(default = "unit_weight", skip_serializing_if = "is_unit_weight")]
     pub density_weight: f64,
     /// A fit from a single image (paper §7.2.4, [`crate::herd::fit::still`]): the clip is a
-    /// one-frame clip repeated as a stationary target; the loss is the density match plus λ_var
-    /// E_var over the steps after `settle`. Not written when absent.
+    /// one-frame clip repeated as a stationary target; the loss is the density match (`loss`
+    /// fields) or E_mean towards the density gradient (`loss` paper), plus λ_var E_var, over the
+    /// steps after `settle`. Not written when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub still: Option<super::still::StillConfig>,
     /// Tracked animals, one `herdfit.tracks/1` file per clip in clip order (`fit --tracks`,

@@ -5,11 +5,12 @@
 //! ordinary loop ([`super::run`]) with [`super::FitConfig::still`] set: each epoch starts the herd
 //! from the image's density with random headings (the velocity is zero), simulates `settle` steps
 //! without learning, then unrolls the `average` steps in windows whose loss is the time average of
-//! the density match Σ(ρ' − Kρ)² / Σ(Kρ)² ([`super::loss::density_loss`]) and λ_var E_var (eq. 8)
-//! against the image's direction variance S. With the paper's split (§6.1) the alignment
-//! parameters follow ∇E_var and the others the density term. No leaders (a still shows no
-//! direction to follow) and no rebalancing between windows (agents that leave the grid are
-//! replaced). A still measures no speeds: the start set's speed model is used, as the paper sets
+//! the density match Σ(ρ' − Kρ)² / Σ(Kρ)² ([`super::loss::density_loss`], `--loss fields`, the
+//! default) or of E_mean (eq. 7) towards U = N(D) (eq. 10–11 with no velocity, the paper's β = 1;
+//! `--loss paper`), and λ_var E_var (eq. 8) against the image's direction variance S. With the
+//! paper's split (§6.1) the alignment parameters follow ∇E_var and the others the density term
+//! (or E_mean). No leaders (a still shows no direction to follow) and no rebalancing between
+//! windows (agents that leave the grid are replaced). A still measures no speeds: the start set's speed model is used, as the paper sets
 //! the seals' speeds from their known behaviour.
 
 use super::loss::density_loss;
