@@ -11,7 +11,8 @@
 //! frames for every choice against the generating sets' (paired over fit seeds).
 //!
 //! `cargo run --release --example zones -- [EPOCHS] [OUT] [SPEEDS] [SEEDS] [STARTS] [LOSS]
-//! [WINDOWS] [CLIP_SEED]`, by default 6, `out/zones/`, `-`, 4, 1, `fields`, `fields`, 5:
+//! [WINDOWS] [CLIP_SEED] [GUIDANCE]`, by default 6, `out/zones/`, `-`, 4, 1, `fields`, `fields`,
+//! 5, 0:
 //! - `SPEEDS` = `A,B` gives the zones fixed speeds A and B BL/s (paper §7.2.4, the seals' water
 //!   and land): the clip is generated with them, the zone fit is told them, and a second zone fit
 //!   without them is validated beside it; `-` for none;
@@ -19,7 +20,10 @@
 //! - `LOSS` = `paper` or `ensemble` (4 replicas) fits by that objective instead;
 //! - `WINDOWS` = `tracks` starts every window from the clip's `trajectories.csv` (`fit
 //!   --tracks`), as do the objective table and the validation (`validate --tracks`);
-//! - `CLIP_SEED`: the seed the scene's clip is synthesised with.
+//! - `CLIP_SEED`: the seed the scene's clip is synthesised with;
+//! - `GUIDANCE`: σ (cells) of the leaders' guidance in the fits and the validation
+//!   (`--guidance-scale`; `inf`, the herd's mean direction everywhere, is what the scene's
+//!   leaders followed: `synth`'s uniform guidance).
 
 use herdfit::herd::fit::global::objective;
 use herdfit::herd::fit::job::{run, FitJob};
@@ -66,6 +70,10 @@ fn main() -> herdfit::Result<()> {
         Some(x) => panic!("START is fields or tracks, not {x}"),
     };
     let clip_seed: u64 = args.get(8).and_then(|s| s.parse().ok()).unwrap_or(5);
+    let guidance_scale: f64 = args
+        .get(9)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(herdfit::herd::guidance::GUIDANCE_SCALE);
     std::fs::create_dir_all(&out).map_err(|e| herdfit::Error::file(&out, e.to_string()))?;
     // 16 × 8 cells of 3 BL; the zones meet at x = 21 BL (between cell columns 6 and 7).
     let zones = vec![
@@ -138,6 +146,7 @@ fn main() -> herdfit::Result<()> {
         loss,
         // The ensemble objective compares the mean of 4 replicas' fields.
         replicas: if loss == LossKind::Ensemble { 4 } else { 1 },
+        guidance_scale,
         // `fit --tracks`: every window starts from the generating run's animals.
         tracks: match anchored {
             true => vec![clip_dir.join("trajectories.csv")],
@@ -229,6 +238,7 @@ fn main() -> herdfit::Result<()> {
         seeds,
         // `validate --tracks`: the held-out run starts from the generating run's animals.
         tracks: anchored.then(|| clip_dir.join("trajectories.csv")),
+        guidance_scale,
         ..ValidateConfig::default()
     };
     let reports = validate_zones(&clip, &sets, &vcfg, || {})?;
