@@ -3,11 +3,10 @@
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::Bars;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
-    STILL_ENSEMBLE,
 };
 use clap::Args;
 use std::path::PathBuf;
@@ -162,23 +161,7 @@ pub struct FitArgs {
     pub uncertainty_step: f64,
 }
 
-/// Whether any of the clips is a still (its clip.json says one frame); unreadable clips are
-/// left to the fit's own loading to report.
-fn any_still(clips: &[std::path::PathBuf]) -> bool {
-    clips.iter().any(|c| {
-        std::fs::read_to_string(c.join("clip.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["frames"].as_u64())
-            == Some(1)
-    })
-}
-
 pub fn exec(a: FitArgs) -> Result<()> {
-    let loss = a.loss;
-    if loss == LossKind::Ensemble && any_still(&a.clips) {
-        return Err(with_flags(Error::config("loss", STILL_ENSEMBLE), &[]));
-    }
     let job = FitJob {
         clips: a.clips,
         start: a.start,
@@ -191,7 +174,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             precision: a.precision,
             split_gradients: !a.joint_gradients,
             cell_mean: a.cell_mean,
-            loss,
+            loss: a.loss,
             checkpointing: a.checkpointing,
             settle: Settle::with_iterations(a.settle),
             replicas: a.replicas,

@@ -20,12 +20,17 @@ use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use std::collections::BTreeMap;
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::SystemTime;
 
-/// The tracked animals of one clip, frame by frame (clip frame → rows ordered by id).
+/// Tracked animals by clip frame (rows ordered by id).
+type ByFrame = BTreeMap<usize, Vec<AgentRow>>;
+
+/// The tracked animals of one clip, frame by frame.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Anchors {
-    frames: BTreeMap<usize, Vec<AgentRow>>,
+    frames: Arc<ByFrame>,
 }
 
 impl Anchors {
@@ -33,46 +38,26 @@ impl Anchors {
     /// other than body lengths, no velocity columns, a frame past the clip's last, or no tracked
     /// animal in the fitted frames.
     pub fn load(path: &Path, clip: &ClipFields, frames: Range<usize>) -> Result<Anchors> {
-        let t = Tracks::load(path)?;
-        let bad = |what: String| Error::file(path, what);
-        if t.meta.units != Units::BodyLengths {
-            return Err(bad(format!(
-                "the tracks are in {}: a fit's tracks are in the clip's body lengths (as synth \
-                 and import-tracks write them)",
-                t.meta.units.as_str()
-            )));
-        }
-        if t.meta.dimension != 2 {
-            return Err(bad("the tracks are 3D: a fit's tracks are 2D".into()));
-        }
+        let by_frame = parsed(path)?;
         let n = clip.frames();
-        let mut out = Anchors::default();
-        for r in &t.rows {
-            let f = r.frame as usize;
-            if f >= n {
-                return Err(bad(format!(
-                    "frame {} is past the clip's {n} frames (the tracks' frames are the clip's)",
-                    r.frame
-                )));
-            }
-            let v = r.vel.ok_or_else(|| {
-                bad("no vx, vy columns: the tracked velocities start each window".into())
-            })?;
-            out.frames.entry(f).or_default().push(AgentRow {
-                id: r.id,
-                x: r.pos[0],
-                y: r.pos[1],
-                vx: v[0],
-                vy: v[1],
-            });
+        if let Some((&last, _)) = by_frame.last_key_value().filter(|(&f, _)| f >= n) {
+            return Err(Error::file(
+                path,
+                format!(
+                    "frame {last} is past the clip's {n} frames (the tracks' frames are the clip's)"
+                ),
+            ));
         }
-        if out.frames.range(frames.clone()).next().is_none() {
-            return Err(bad(format!(
-                "no tracked animal in the fitted frames {}..{}",
-                frames.start, frames.end
-            )));
+        if by_frame.range(frames.clone()).next().is_none() {
+            return Err(Error::file(
+                path,
+                format!(
+                    "no tracked animal in the fitted frames {}..{}",
+                    frames.start, frames.end
+                ),
+            ));
         }
-        Ok(out)
+        Ok(Anchors { frames: by_frame })
     }
 
     /// The animals tracked in clip frame `f`, if any.
@@ -105,4 +90,60 @@ pub fn load_all(cfg: &FitConfig, clips: &[&ClipFields]) -> Result<Vec<Option<Anc
         .zip(&cfg.tracks)
         .map(|(c, p)| Anchors::load(p, c, cfg.frames.clone()).map(Some))
         .collect()
+}
+
+/// The rows of a tracks file by frame, parsed once per process for each version of the file (its
+/// path, modification time and length): a fit makes many runs over the same clip — the start's
+/// and the fitted set's losses, the identifiability probes, the global phase's candidates, the
+/// evaluation — and each would otherwise read the whole file again.
+fn parsed(path: &Path) -> Result<Arc<ByFrame>> {
+    type Key = (PathBuf, Option<SystemTime>, u64);
+    static PARSED: Mutex<Vec<(Key, Arc<ByFrame>)>> = Mutex::new(Vec::new());
+    let meta = std::fs::metadata(path).ok();
+    let key: Key = (
+        path.to_path_buf(),
+        meta.as_ref().and_then(|m| m.modified().ok()),
+        meta.as_ref().map_or(0, |m| m.len()),
+    );
+    if let Some((_, m)) = PARSED
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .find(|(k, _)| *k == key)
+    {
+        return Ok(m.clone());
+    }
+    let t = Tracks::load(path)?;
+    let bad = |what: String| Error::file(path, what);
+    if t.meta.units != Units::BodyLengths {
+        return Err(bad(format!(
+            "the tracks are in {}: a fit's tracks are in the clip's body lengths (as synth and \
+             import-tracks write them)",
+            t.meta.units.as_str()
+        )));
+    }
+    if t.meta.dimension != 2 {
+        return Err(bad("the tracks are 3D: a fit's tracks are 2D".into()));
+    }
+    let mut by_frame = ByFrame::new();
+    for r in &t.rows {
+        let v = r.vel.ok_or_else(|| {
+            bad("no vx, vy columns: the tracked velocities start each window".into())
+        })?;
+        by_frame
+            .entry(r.frame as usize)
+            .or_default()
+            .push(AgentRow {
+                id: r.id,
+                x: r.pos[0],
+                y: r.pos[1],
+                vx: v[0],
+                vy: v[1],
+            });
+    }
+    let by_frame = Arc::new(by_frame);
+    let mut cache = PARSED.lock().unwrap_or_else(|e| e.into_inner());
+    cache.retain(|(k, _)| k.0 != key.0);
+    cache.push((key, by_frame.clone()));
+    Ok(by_frame)
 }

@@ -173,7 +173,7 @@ pub enum LossKind {
 enum_names!(LossKind { Paper = "paper", Fields = "fields", Ensemble = "ensemble" });
 
 /// Why a still (one-frame clip) refuses the ensemble objective.
-pub const STILL_ENSEMBLE: &str = "a still image has no velocity: fit it by its density term \
+const STILL_ENSEMBLE: &str = "a still image has no velocity: fit it by its density term \
      (fields) or by the paper's E_mean towards the density gradient (paper), not by the ensemble";
 
 pub use crate::herd::params::ALIGNMENT;
@@ -222,6 +222,20 @@ impl FitConfig {
                 ),
             ));
         }
+        if self.still.is_some() {
+            // A still is fitted by its density term (fields) or by E_mean towards the density
+            // gradient (paper), with E_var: the ensemble needs velocities (checked before its
+            // replicas, so that the error names what is wrong with it).
+            if self.loss == LossKind::Ensemble {
+                return Err(Error::config("loss", STILL_ENSEMBLE));
+            }
+            if !self.tracks.is_empty() {
+                return Err(Error::config(
+                    "tracks",
+                    "a still image is one frame: there are no windows for tracks to start",
+                ));
+            }
+        }
         if self.loss == LossKind::Ensemble && self.replicas < 2 {
             return Err(Error::config(
                 "replicas",
@@ -257,17 +271,6 @@ impl FitConfig {
         self.frozen_indices()?;
         if let Some(s) = &self.still {
             s.check()?;
-            // A still is fitted by its density term (fields) or by E_mean towards the density
-            // gradient (paper), with E_var; the ensemble needs velocities.
-            if self.loss == LossKind::Ensemble {
-                return Err(Error::config("loss", STILL_ENSEMBLE));
-            }
-            if !self.tracks.is_empty() {
-                return Err(Error::config(
-                    "tracks",
-                    "a still image is one frame: there are no windows for tracks to start",
-                ));
-            }
         }
         self.settle.check()
     }

@@ -2,6 +2,7 @@
 //! from files, the fit, its evaluation (losses and field errors of the start and the fitted set),
 //! the provenance recorded in the parameter file, the training log and the loss curve.
 
+use super::anchor::Anchors;
 use super::checkpoint::CheckpointDir;
 use super::config::FitConfig;
 use super::global::{fit_global, split_frames, GlobalReport};
@@ -188,7 +189,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         cfg.check_clip(c).map_err(|e| e.in_file(p))?;
     }
     // Bad tracks are reported before anything is written.
-    super::anchor::load_all(&cfg, &clips)?;
+    let anchors = super::anchor::load_all(&cfg, &clips)?;
     let (log_path, plot_path) = (job.log_path(), job.plot_path());
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
@@ -217,6 +218,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         &[&start_params, &res.params],
         job,
         &cfg,
+        &anchors,
     )?;
     let still_eval = still_evaluation(clips[0], &cfg, job, &start_params, &res.params)?;
     let names: Vec<String> = job.clips.iter().map(|p| p.display().to_string()).collect();
@@ -323,23 +325,23 @@ fn stills(
 }
 
 /// Density and velocity errors of each parameter set in `sets`, averaged over the clips (each
-/// simulated with its own speeds, from `base`) and `job.eval_seeds` seeds.
+/// simulated with its own speeds, from `base`) and `job.eval_seeds` seeds; a clip with tracked
+/// animals (`anchors`) is run from them, as the fit's windows were.
 fn evaluation(
     clips: &[&ClipFields],
     base: &SpeedModel,
     sets: &[&Params; 2],
     job: &FitJob,
     cfg: &FitConfig,
+    anchors: &[Option<Anchors>],
 ) -> Result<[(f64, f64); 2]> {
     let guidance: Vec<Vec<Guidance>> = clips
         .iter()
         .map(|c| guidance_fields(c, cfg.guidance_scale))
         .collect();
-    // With tracks, the runs start from the tracked animals, as the fit's windows did.
-    let anchors = super::anchor::load_all(cfg, clips)?;
     let errors = |p: &Params| -> Result<(f64, f64)> {
         let (mut d, mut v) = (0.0, 0.0);
-        for ((c, guidance), a) in clips.iter().zip(&guidance).zip(&anchors) {
+        for ((c, guidance), a) in clips.iter().zip(&guidance).zip(anchors) {
             let mut q = p.clone();
             q.speed = SpeedModel::of_clip(c, base);
             for k in 0..job.eval_seeds {

@@ -34,7 +34,7 @@ pub use crate::herd::guidance::{
 pub use crate::herd::start::{init_herd, population_control, settle, start_herd, Settle};
 pub use crate::optim::{OptState, Optimizer};
 pub use checkpoint::{Checkpoint, CheckpointDir};
-pub use config::{FitConfig, GlobalPhase, LossKind, ALIGNMENT, STILL_ENSEMBLE};
+pub use config::{FitConfig, GlobalPhase, LossKind, ALIGNMENT};
 pub use global::{fit_global, GlobalReport};
 pub use identify::{identify, Uncertainty, UncertaintyConfig};
 pub use job::{FitJob, FitSummary};

@@ -7,6 +7,7 @@ use super::job::{loss_plot, FitJob};
 use super::log::write_log;
 use super::zones::Zones;
 use crate::backend::cpu_device;
+use crate::data::agents::AgentRow;
 use crate::data::atomic::check_writable;
 use crate::data::ClipFields;
 use crate::error::Result;
@@ -57,7 +58,9 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
     cfg.check_clip(&clip)
         .map_err(|e| e.in_file(&job.clips[0]))?;
     zones.check_agents(&clip, frames.clone())?;
-    super::anchor::load_all(&cfg, &[&clip])?;
+    let anchors = super::anchor::load_all(&cfg, &[&clip])?;
+    // With tracks, the evaluation runs start from the tracked animals, as the fit's windows did.
+    let tracked = anchors[0].as_ref().and_then(|a| a.at(frames.start));
     let (log_path, plot_path) = (job.log_path(), job.plot_path());
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
@@ -93,8 +96,8 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         grid,
     };
     let errors = [
-        errors_of(&clip, &unfitted, &frames, job)?,
-        errors_of(&clip, &fitted, &frames, job)?,
+        errors_of(&clip, &unfitted, &frames, job, tracked)?,
+        errors_of(&clip, &fitted, &frames, job, tracked)?,
     ];
     let names: Vec<String> = zones.specs.iter().map(|z| z.name.clone()).collect();
     let mut prov = serde_json::json!({
@@ -134,22 +137,17 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
     })
 }
 
-/// Mean density and velocity errors of runs with `sets` through `frames`, over the job's seeds.
+/// Mean density and velocity errors of runs with `sets` through `frames`, over the job's seeds,
+/// started from the animals `tracked` in the first frame when given.
 fn errors_of(
     clip: &ClipFields,
     sets: &ZoneSets,
     frames: &Range<usize>,
     job: &FitJob,
+    tracked: Option<&[AgentRow]>,
 ) -> Result<(f64, f64)> {
     let device = cpu_device(job.config.precision)?;
     let guidance = guidance_fields(clip, job.config.guidance_scale);
-    // With tracks, the runs start from the tracked animals, as the fit's windows did.
-    let cfg = super::config::FitConfig {
-        frames: frames.clone(),
-        ..job.config.clone()
-    };
-    let anchors = super::anchor::load_all(&cfg, &[clip])?;
-    let tracked = anchors[0].as_ref().and_then(|a| a.at(frames.start));
     let (mut d, mut v, mut n) = (0.0, 0.0, 0.0);
     for k in 0..job.eval_seeds {
         run_from(
