@@ -83,6 +83,28 @@ fn fit_and_validate_record_the_tracks_they_started_from() {
         "{}",
         json["provenance"]["settings"]
     );
+    // The fit's own evaluation runs from the tracked animals too: the same start scores
+    // differently from a herd drawn from the fields.
+    let ev = &json["provenance"]["evaluation"];
+    assert!(
+        ev["what"].as_str().unwrap().contains("animals tracked"),
+        "{ev}"
+    );
+    let q = dir.path().join("q.json");
+    ok(&[
+        "fit",
+        s(&clip),
+        "--epochs",
+        "1",
+        "--no-uncertainty",
+        "--out",
+        s(&q),
+    ]);
+    let drawn: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&q).unwrap()).unwrap();
+    let dev = &drawn["provenance"]["evaluation"];
+    assert!(dev["what"].as_str().unwrap().contains("fields"), "{dev}");
+    assert_ne!(ev["start"], dev["start"]);
     let report = |tracked: bool, out: &Path| {
         let mut args = vec![
             "validate",

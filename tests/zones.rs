@@ -193,6 +193,25 @@ fn a_zone_fit_writes_a_bundle_that_an_author_scene_names_sets_of() {
         j["sets"][0]["zones"].clone()
     };
     assert_eq!(zone_rows("1", true), zone_rows("1", false));
+    // From the tracked animals: the report names them, and the runs start elsewhere.
+    let tracked = dir.path().join("rt");
+    let tracks = clip.join("trajectories.csv");
+    ok(&[
+        "validate",
+        s(&clip),
+        "--params",
+        s(&out),
+        "--tracks",
+        s(&tracks),
+        "--no-video",
+        "--out",
+        s(&tracked),
+    ]);
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tracked.join("report.json")).unwrap())
+            .unwrap();
+    assert_eq!(j["tracks"], s(&tracks));
+    assert_ne!(j["sets"][0]["zones"], zone_rows("3", false));
     let (a, b) = (zone_rows("3", true), zone_rows("3", false));
     assert_eq!(a[0]["density_error"], b[0]["density_error"]);
     assert_ne!(a[0]["polarization_error"], b[0]["polarization_error"]);

@@ -69,6 +69,14 @@ impl Anchors {
     }
 }
 
+/// Where the evaluation's runs of a fit with `cfg` start, as its provenance says it.
+pub fn runs_start_from(cfg: &FitConfig) -> &'static str {
+    match cfg.tracks.is_empty() {
+        true => "the first frame's fields",
+        false => "the animals tracked in the first frame",
+    }
+}
+
 /// The anchors of every clip of a fit from `cfg.tracks` (none when it is empty; otherwise one
 /// file per clip, in clip order, or an error naming `tracks`).
 pub fn load_all(cfg: &FitConfig, clips: &[&ClipFields]) -> Result<Vec<Option<Anchors>>> {

@@ -402,7 +402,7 @@ fn provenance(
             "fitted": {"e_mean": la.0, "e_var": la.1, "e_fields": la.2},
         },
         "evaluation": {
-            "what": "mean per-frame errors of runs from the first frame's fields (no population control), averaged over the seeds",
+            "what": format!("mean per-frame errors of runs from {} (no population control), averaged over the seeds", super::anchor::runs_start_from(cfg)),
             "seeds": eval_seeds,
             "start": {"density_error": before.0, "velocity_error": before.1},
             "fitted": {"density_error": after.0, "velocity_error": after.1},

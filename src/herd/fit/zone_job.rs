@@ -108,7 +108,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         "settings": cfg,
         "start": start.to_vec(),
         "evaluation": {
-            "what": "mean per-frame errors of runs from the first frame's fields (each agent with its zone's set), averaged over the seeds",
+            "what": format!("mean per-frame errors of runs from {} (each agent with its zone's set), averaged over the seeds", super::anchor::runs_start_from(&cfg)),
             "seeds": job.eval_seeds,
             "start": {"density_error": errors[0].0, "velocity_error": errors[0].1},
             "fitted": {"density_error": errors[1].0, "velocity_error": errors[1].1},
