@@ -144,7 +144,6 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
                 ensemble_mean: false,
                 horizon: 0,
                 tracks: None,
-                anchors: None,
             },
         },
         progress,

@@ -79,7 +79,6 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             ensemble_mean: a.ensemble_mean,
             horizon: a.horizon,
             tracks: a.tracks,
-            anchors: None,
         },
     };
     // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.

@@ -10,6 +10,7 @@ use crate::data::agents::AgentRow;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::eval::run_from;
+use crate::herd::fit::anchor::Anchors;
 use crate::herd::guidance::guidance_fields;
 use crate::herd::params::Params;
 use crate::herd::start::Settle;
@@ -43,21 +44,25 @@ pub struct SimRun {
 
 /// Simulates `range` of the clip with `params` and seed `seed` (leaders follow `guidance`, the
 /// clip's velocity field of every frame; no population control). The herd starts from the fields
-/// of frame `range.start − warmup` (settled by `settle`) and runs through the `warmup` frames before
+/// of frame `range.start − warmup` (settled by `settle`), or from the animals `tracked` in it
+/// (`validate --tracks`; each horizon piece likewise), and runs through the `warmup` frames before
 /// `range` unrecorded, so that it reaches `range.start` in an arrangement of its own making rather
 /// than the one sampled from fields (RESULTS.md §1, held-out validation); the returned frames and
 /// fields start at `range.start`.
+#[allow(clippy::too_many_arguments)]
 pub fn simulate_clip(
     clip: &ClipFields,
     params: &Params,
     range: std::ops::Range<usize>,
     seed: u64,
     cfg: &ValidateConfig,
+    tracked: Option<&Anchors>,
     guidance: &[crate::herd::sim::Guidance],
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
     // The agents of every frame of `piece`, the herd started from the fields of frame
-    // `piece.start − warmup` and run through the warm-up unrecorded.
+    // `piece.start − warmup` (or from the animals `tracked` in it) and run through the warm-up
+    // unrecorded.
     let run_piece = |piece: std::ops::Range<usize>, seed: u64| -> Result<Vec<Vec<AgentRow>>> {
         let first = piece.start - cfg.warmup.min(piece.start);
         let mut frames = Vec::with_capacity(piece.len());
@@ -66,7 +71,7 @@ pub fn simulate_clip(
             clip,
             params,
             None,
-            cfg.tracked(first),
+            tracked.and_then(|a| a.at(first)),
             (first, last),
             seed,
             &cfg.settle,
@@ -268,9 +273,6 @@ pub struct ValidateConfig {
     /// when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracks: Option<std::path::PathBuf>,
-    /// The loaded [`Self::tracks`] ([`Self::load_tracks`]).
-    #[serde(skip)]
-    pub anchors: Option<std::sync::Arc<crate::herd::fit::anchor::Anchors>>,
 }
 
 impl Default for ValidateConfig {
@@ -285,26 +287,20 @@ impl Default for ValidateConfig {
             ensemble_mean: false,
             horizon: 0,
             tracks: None,
-            anchors: None,
         }
     }
 }
 
 impl ValidateConfig {
-    /// Loads [`Self::tracks`] for `clip` (once; errors name the tracks file).
-    pub fn load_tracks(&mut self, clip: &ClipFields) -> Result<()> {
-        if let (Some(p), None) = (&self.tracks, &self.anchors) {
-            let held = self.held_out_start(clip.frames());
-            let first = held - self.warmup.min(held);
-            let a = crate::herd::fit::anchor::Anchors::load(p, clip, first..clip.frames())?;
-            self.anchors = Some(std::sync::Arc::new(a));
-        }
-        Ok(())
-    }
-
-    /// The animals tracked in frame `f`, when the validation starts from tracks.
-    pub fn tracked(&self, f: usize) -> Option<&[AgentRow]> {
-        self.anchors.as_deref().and_then(|a| a.at(f))
+    /// The animals tracked in `clip` ([`Self::tracks`]) from the first frame a run starts at,
+    /// when the validation starts from tracks; errors name the tracks file.
+    pub fn anchors(&self, clip: &ClipFields) -> Result<Option<Anchors>> {
+        let held = self.held_out_start(clip.frames());
+        let first = held - self.warmup.min(held);
+        self.tracks
+            .as_ref()
+            .map(|p| Anchors::load(p, clip, first..clip.frames()))
+            .transpose()
     }
 
     /// The first held-out frame of a clip of `frames` frames: ⌊frames · split⌋.
@@ -382,9 +378,7 @@ pub fn validate(
             ),
         ));
     }
-    let mut cfg = cfg.clone();
-    cfg.load_tracks(clip)?;
-    let cfg = &cfg;
+    let anchors = cfg.anchors(clip)?;
     let device = cpu_device(Precision::F32)?;
     // The leaders' guidance of every frame, the same for every set and seed.
     let guidance = guidance_fields(clip, cfg.guidance_scale);
@@ -431,6 +425,7 @@ pub fn validate(
                 start..nf,
                 seed as u64,
                 cfg,
+                anchors.as_ref(),
                 &guidance,
                 &device,
             )?;

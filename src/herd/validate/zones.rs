@@ -88,9 +88,7 @@ pub fn validate_zones(
     mut progress: impl FnMut(),
 ) -> Result<Vec<ZoneSetReport>> {
     cfg.check()?;
-    let mut cfg = cfg.clone();
-    cfg.load_tracks(clip)?;
-    let cfg = &cfg;
+    let anchors = cfg.anchors(clip)?;
     if cfg.horizon != 0 {
         return Err(Error::config(
             "horizon",
@@ -128,7 +126,7 @@ pub fn validate_zones(
                 clip,
                 &zs.sets[0],
                 Some(zs),
-                cfg.tracked(first),
+                anchors.as_ref().and_then(|a| a.at(first)),
                 (first, nf - 1),
                 seed as u64,
                 &cfg.settle,
