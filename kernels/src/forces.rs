@@ -74,6 +74,12 @@ struct Pair {
 
 #[inline]
 fn pair(dx: f64, dy: f64, hx: f64, hy: f64, branch: u8) -> Pair {
+    pair_at(dx, dy, hx, hy, branch, None)
+}
+
+/// [`pair`], with the bearing φ taken from `phi` when the forward pass kept it.
+#[inline]
+fn pair_at(dx: f64, dy: f64, hx: f64, hy: f64, branch: u8, phi: Option<f64>) -> Pair {
     let side = if branch & BRANCH_RIGHT != 0 {
         -1.0
     } else {
@@ -94,39 +100,81 @@ fn pair(dx: f64, dy: f64, hx: f64, hy: f64, branch: u8) -> Pair {
         b,
         side,
         behind,
-        phi: libm::atan2(a, b) * behind + offset,
+        phi: phi.unwrap_or_else(|| libm::atan2(a, b) * behind + offset),
     }
 }
 
 #[inline]
 fn weight(c: &[f64], g: usize, d2: f64, phi2: f64) -> (f64, f64) {
-    let e = libm::exp(c[4 + g] * d2 + c[8 + g] * phi2);
+    let e = crate::fastmath::exp(c[4 + g] * d2 + c[8 + g] * phi2);
     (e, c[g] * e)
 }
 
+/// The pair terms a forward pass keeps for its backward pass: for each agent–neighbour pair
+/// `[φ, e_C, e_V, e_A]` and for each obstacle point `[φ, e_O]`, with `e_F = exp(α_F d² + γ_F φ²)`
+/// (eq. 4), in pair-list order. With them the backward pass evaluates no `exp` or `atan2`; the
+/// values are those it would recompute, so the gradients have the same bytes.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PairTerms {
+    pub nb: Vec<[f64; 4]>,
+    pub ob: Vec<[f64; 2]>,
+}
+
+/// Where [`force_on`] writes one agent's pair terms (`None`: keep nothing).
+type Keep<'a> = Option<(&'a mut [[f64; 4]], &'a mut [[f64; 2]])>;
+
 /// The force on agent `i` (eq. 3), in list order.
 #[inline]
-fn force_on(i: usize, lists: &PairLists, s: AgentsRef<'_>, coef: Coefficients<'_>) -> P2 {
+fn force_on(
+    i: usize,
+    lists: &PairLists,
+    s: AgentsRef<'_>,
+    coef: Coefficients<'_>,
+    mut keep: Keep<'_>,
+) -> P2 {
     let c = coef.of(i);
     let (xi, yi, hxi, hyi) = (s.x[i], s.y[i], s.hx[i], s.hy[i]);
     let (mut fx, mut fy) = (0.0, 0.0);
-    for e in lists.neighbours(i) {
+    for (k, e) in lists.neighbours(i).enumerate() {
         let j = lists.nb[e] as usize;
         let p = pair(s.x[j] - xi, s.y[j] - yi, hxi, hyi, lists.nb_branch[e]);
         let phi2 = p.phi * p.phi;
-        let cp = weight(c, 0, p.d2, phi2).1 - weight(c, 1, p.d2, phi2).1;
-        let ca = weight(c, 2, p.d2, phi2).1;
+        let (w0, w1, w2) = (
+            weight(c, 0, p.d2, phi2),
+            weight(c, 1, p.d2, phi2),
+            weight(c, 2, p.d2, phi2),
+        );
+        if let Some((nb, _)) = keep.as_mut() {
+            nb[k] = [p.phi, w0.0, w1.0, w2.0];
+        }
+        let cp = w0.1 - w1.1;
+        let ca = w2.1;
         fx += cp * p.dx + ca * s.hx[j];
         fy += cp * p.dy + ca * s.hy[j];
     }
-    for e in lists.obstacles(i) {
+    for (k, e) in lists.obstacles(i).enumerate() {
         let q = lists.ob_point[e];
         let p = pair(q[0] - xi, q[1] - yi, hxi, hyi, lists.ob_branch[e]);
-        let co = weight(c, 3, p.d2, p.phi * p.phi).1;
+        let (e3, co) = weight(c, 3, p.d2, p.phi * p.phi);
+        if let Some((_, ob)) = keep.as_mut() {
+            ob[k] = [p.phi, e3];
+        }
         fx -= co * p.dx;
         fy -= co * p.dy;
     }
     [fx, fy]
+}
+
+/// Splits `v` (one entry per pair, in list order) at agent boundaries: agent i gets
+/// `start[i]..start[i + 1]`.
+fn per_agent<'a, T>(mut v: &'a mut [T], start: &[u32]) -> Vec<&'a mut [T]> {
+    let mut out = Vec::with_capacity(start.len().saturating_sub(1));
+    for w in start.windows(2) {
+        let (head, tail) = v.split_at_mut((w[1] - w[0]) as usize);
+        out.push(head);
+        v = tail;
+    }
+    out
 }
 
 /// Forward pass: the force of eq. 3 on every agent, written as `out[2i] = F_x`, `out[2i+1] = F_y`.
@@ -145,10 +193,42 @@ pub fn forces_forward(
         .with_min_len(MIN_AGENTS_PER_TASK)
         .enumerate()
         .for_each(|(i, f)| {
-            let v = force_on(i, lists, s, coef);
+            let v = force_on(i, lists, s, coef, None);
             f[0] = v[0];
             f[1] = v[1];
         });
+}
+
+/// [`forces_forward`], also returning the pair terms for [`forces_backward`] (the same forces,
+/// byte for byte).
+pub fn forces_forward_keep(
+    lists: &PairLists,
+    s: AgentsRef<'_>,
+    coef: Coefficients<'_>,
+    out: &mut [f64],
+) -> PairTerms {
+    assert_eq!(
+        out.len(),
+        2 * lists.n,
+        "forces_forward_keep: out must hold 2·n values"
+    );
+    let mut terms = PairTerms {
+        nb: vec![[0.0; 4]; lists.pairs()],
+        ob: vec![[0.0; 2]; lists.ob_point.len()],
+    };
+    let nb = per_agent(&mut terms.nb, &lists.nb_start);
+    let ob = per_agent(&mut terms.ob, &lists.ob_start);
+    out.par_chunks_mut(2)
+        .zip(nb)
+        .zip(ob)
+        .with_min_len(MIN_AGENTS_PER_TASK)
+        .enumerate()
+        .for_each(|(i, ((f, nb), ob))| {
+            let v = force_on(i, lists, s, coef, Some((nb, ob)));
+            f[0] = v[0];
+            f[1] = v[1];
+        });
+    terms
 }
 
 /// Gradients of a scalar loss with respect to every input of [`forces_forward`].
@@ -220,6 +300,18 @@ fn pair_backward(
     )
 }
 
+/// One agent's pair terms from the forward pass, when it kept them.
+type Kept<'a> = Option<(&'a [[f64; 4]], &'a [[f64; 2]])>;
+
+/// `e_F` from the kept term, or by eq. 4.
+#[inline]
+fn weight_at(c: &[f64], g: usize, d2: f64, phi2: f64, kept: Option<f64>) -> (f64, f64) {
+    match kept {
+        Some(e) => (e, c[g] * e),
+        None => weight(c, g, d2, phi2),
+    }
+}
+
 fn agent_backward(
     i: usize,
     lists: &PairLists,
@@ -227,19 +319,22 @@ fn agent_backward(
     coef: Coefficients<'_>,
     up: P2,
     to_nb: &mut [ToNeighbour],
+    kept: Kept<'_>,
 ) -> OwnGrads {
     let c = coef.of(i);
     let (xi, yi) = (s.x[i], s.y[i]);
     let hi = [s.hx[i], s.hy[i]];
     let mut own = OwnGrads::default();
     let first = lists.nb_start[i] as usize;
-    for e in lists.neighbours(i) {
+    for (k, e) in lists.neighbours(i).enumerate() {
         let j = lists.nb[e] as usize;
-        let p = pair(s.x[j] - xi, s.y[j] - yi, hi[0], hi[1], lists.nb_branch[e]);
+        let t = kept.map(|(nb, _)| nb[k]);
+        let (dx, dy) = (s.x[j] - xi, s.y[j] - yi);
+        let p = pair_at(dx, dy, hi[0], hi[1], lists.nb_branch[e], t.map(|t| t[0]));
         let phi2 = p.phi * p.phi;
-        let (e0, c0) = weight(c, 0, p.d2, phi2);
-        let (e1, c1) = weight(c, 1, p.d2, phi2);
-        let (e2, c2) = weight(c, 2, p.d2, phi2);
+        let (e0, c0) = weight_at(c, 0, p.d2, phi2, t.map(|t| t[1]));
+        let (e1, c1) = weight_at(c, 1, p.d2, phi2, t.map(|t| t[2]));
+        let (e2, c2) = weight_at(c, 2, p.d2, phi2, t.map(|t| t[3]));
         // F_i += (c_C − c_V)·u + c_A·d_j.
         let gu = up[0] * p.dx + up[1] * p.dy;
         let ga = up[0] * s.hx[j] + up[1] * s.hy[j];
@@ -260,10 +355,18 @@ fn agent_backward(
             hy: c2 * up[1],
         };
     }
-    for e in lists.obstacles(i) {
+    for (k, e) in lists.obstacles(i).enumerate() {
         let q = lists.ob_point[e];
-        let p = pair(q[0] - xi, q[1] - yi, hi[0], hi[1], lists.ob_branch[e]);
-        let (e3, c3) = weight(c, 3, p.d2, p.phi * p.phi);
+        let t = kept.map(|(_, ob)| ob[k]);
+        let p = pair_at(
+            q[0] - xi,
+            q[1] - yi,
+            hi[0],
+            hi[1],
+            lists.ob_branch[e],
+            t.map(|t| t[0]),
+        );
+        let (e3, c3) = weight_at(c, 3, p.d2, p.phi * p.phi, t.map(|t| t[1]));
         // F_i −= c_O·(q − p_i).
         let go = -(up[0] * p.dx + up[1] * p.dy);
         let (gdx, gdy) = pair_backward(&p, &[(3, go, e3, c3)], c, hi, &mut own);
@@ -274,12 +377,14 @@ fn agent_backward(
 }
 
 /// Backward pass: given `grad_out` (∂L/∂F, laid out like the output of [`forces_forward`]),
-/// the gradients of L with respect to positions, headings and coefficients.
+/// the gradients of L with respect to positions, headings and coefficients. With `kept` (from
+/// [`forces_forward_keep`] on the same inputs) the pair terms are read instead of recomputed.
 pub fn forces_backward(
     lists: &PairLists,
     s: AgentsRef<'_>,
     coef: Coefficients<'_>,
     grad_out: &[f64],
+    kept: Option<&PairTerms>,
 ) -> ForceGrads {
     let n = lists.n;
     assert_eq!(
@@ -287,25 +392,26 @@ pub fn forces_backward(
         2 * n,
         "forces_backward: grad_out must hold 2·n values"
     );
+    if let Some(t) = kept {
+        assert!(
+            t.nb.len() == lists.pairs() && t.ob.len() == lists.ob_point.len(),
+            "forces_backward: kept terms of other lists"
+        );
+    }
     let mut to_nb = vec![ToNeighbour::default(); lists.pairs()];
     // Split the per-pair buffer at agent boundaries so each agent writes its own slice.
-    let mut slices: Vec<&mut [ToNeighbour]> = Vec::with_capacity(n);
-    let mut rest = to_nb.as_mut_slice();
-    for i in 0..n {
-        let (head, tail) = rest.split_at_mut(lists.neighbours(i).len());
-        slices.push(head);
-        rest = tail;
-    }
+    let slices = per_agent(to_nb.as_mut_slice(), &lists.nb_start);
     let own: Vec<OwnGrads> = slices
         .into_par_iter()
         .with_min_len(MIN_AGENTS_PER_TASK)
         .enumerate()
         .map(|(i, buf)| {
             let up = [grad_out[2 * i], grad_out[2 * i + 1]];
+            let mine = kept.map(|t| (&t.nb[lists.neighbours(i)], &t.ob[lists.obstacles(i)]));
             if up == [0.0, 0.0] {
                 OwnGrads::default()
             } else {
-                agent_backward(i, lists, s, coef, up, buf)
+                agent_backward(i, lists, s, coef, up, buf, mine)
             }
         })
         .collect();
@@ -338,192 +444,4 @@ pub fn forces_backward(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::perception::{perceive, PerceptionConfig};
-    use crate::{Capsule, ObstacleMap};
-    use rand::{Rng, SeedableRng};
-
-    fn scene(seed: u64, n: usize) -> (Vec<P2>, Vec<P2>, ObstacleMap) {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let side = (2.0 * n as f64).sqrt();
-        let pos: Vec<P2> = (0..n)
-            .map(|_| [rng.gen_range(0.0..side), rng.gen_range(0.0..side)])
-            .collect();
-        let head: Vec<P2> = (0..n)
-            .map(|_| {
-                let a: f64 = rng.gen_range(-3.2..3.2);
-                [a.cos(), a.sin()]
-            })
-            .collect();
-        let mut map = ObstacleMap::empty([0.0, 0.0], 1.5, 14, 14);
-        for _ in 0..12 {
-            let c = rng.gen_range(0..map.blocked.len());
-            map.blocked[c] = true;
-        }
-        (pos, head, map)
-    }
-
-    fn setup(seed: u64, n: usize) -> (PairLists, [Vec<f64>; 4], Vec<f64>) {
-        let (pos, head, map) = scene(seed, n);
-        let cfg = PerceptionConfig {
-            radius: 4.0,
-            capsule: Capsule {
-                half_length: 0.3,
-                radius: 0.2,
-            },
-            occlusion: true,
-            max_neighbours: 12,
-            max_obstacles: 8,
-            front_cone: 1.0,
-        };
-        let p = perceive(&pos, &head, Some(&map), &cfg);
-        let lists = PairLists::from_perception(&p);
-        let s = [
-            pos.iter().map(|p| p[0]).collect(),
-            pos.iter().map(|p| p[1]).collect(),
-            head.iter().map(|h| h[0]).collect(),
-            head.iter().map(|h| h[1]).collect(),
-        ];
-        let mut coef = vec![0.0; N_COEF];
-        for g in 0..4 {
-            coef[g] = 1.0 + 0.7 * g as f64;
-            coef[4 + g] = -0.5 / (1.5 + 0.4 * g as f64).powi(2);
-            coef[8 + g] = -0.5 / (1.2 + 0.5 * g as f64).powi(2);
-        }
-        (lists, s, coef)
-    }
-
-    fn loss(lists: &PairLists, s: &[Vec<f64>; 4], coef: &[f64], w: &[f64]) -> f64 {
-        let mut out = vec![0.0; 2 * lists.n];
-        let a = AgentsRef {
-            x: &s[0],
-            y: &s[1],
-            hx: &s[2],
-            hy: &s[3],
-        };
-        forces_forward(lists, a, Coefficients(coef), &mut out);
-        out.iter().zip(w).map(|(f, w)| f * w).sum()
-    }
-
-    /// Every gradient of `L = Σ w·F` against 4-point central differences of the forward pass.
-    #[test]
-    fn backward_matches_central_differences() {
-        let (lists, s, coef) = setup(3, 120);
-        assert!(lists.pairs() > 200 && !lists.ob_point.is_empty());
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        let w: Vec<f64> = (0..2 * lists.n).map(|_| rng.gen_range(-1.0..1.0)).collect();
-        let a = AgentsRef {
-            x: &s[0],
-            y: &s[1],
-            hx: &s[2],
-            hy: &s[3],
-        };
-        let g = forces_backward(&lists, a, Coefficients(&coef), &w);
-        let h = 1e-5;
-        let fd = |f: &dyn Fn(f64) -> f64| {
-            (8.0 * (f(h) - f(-h)) - (f(2.0 * h) - f(-2.0 * h))) / (12.0 * h)
-        };
-        let mut worst = 0.0f64;
-        let mut check = |got: f64, want: f64| {
-            worst = worst.max((got - want).abs() / want.abs().max(1.0));
-        };
-        for c in 0..N_COEF {
-            let want = fd(&|d| {
-                let mut k = coef.clone();
-                k[c] += d;
-                loss(&lists, &s, &k, &w)
-            });
-            check(g.coef[c], want);
-        }
-        let grads = [&g.x, &g.y, &g.hx, &g.hy];
-        for (v, gv) in grads.iter().enumerate() {
-            for i in (0..lists.n).step_by(7) {
-                let want = fd(&|d| {
-                    let mut t = s.clone();
-                    t[v][i] += d;
-                    loss(&lists, &t, &coef, &w)
-                });
-                check(gv[i], want);
-            }
-        }
-        assert!(worst < 1e-7, "worst relative error {worst:e}");
-    }
-
-    #[test]
-    fn per_agent_coefficients_equal_shared_ones() {
-        let (lists, s, coef) = setup(4, 200);
-        let per: Vec<f64> = (0..lists.n).flat_map(|_| coef.clone()).collect();
-        let a = AgentsRef {
-            x: &s[0],
-            y: &s[1],
-            hx: &s[2],
-            hy: &s[3],
-        };
-        let (mut f1, mut f2) = (vec![0.0; 2 * lists.n], vec![0.0; 2 * lists.n]);
-        forces_forward(&lists, a, Coefficients(&coef), &mut f1);
-        forces_forward(&lists, a, Coefficients(&per), &mut f2);
-        assert_eq!(f1, f2);
-        let w = vec![0.5; 2 * lists.n];
-        let g1 = forces_backward(&lists, a, Coefficients(&coef), &w);
-        let g2 = forces_backward(&lists, a, Coefficients(&per), &w);
-        assert_eq!(g1.x, g2.x);
-        assert_eq!(g1.hy, g2.hy);
-        for c in 0..N_COEF {
-            let sum: f64 = (0..lists.n).map(|i| g2.coef[i * N_COEF + c]).sum();
-            assert!((sum - g1.coef[c]).abs() <= 1e-9 * (1.0 + g1.coef[c].abs()));
-        }
-    }
-
-    #[test]
-    fn thread_count_does_not_change_forces_or_gradients() {
-        let (lists, s, coef) = setup(5, 3000);
-        let a = AgentsRef {
-            x: &s[0],
-            y: &s[1],
-            hx: &s[2],
-            hy: &s[3],
-        };
-        let w: Vec<f64> = (0..2 * lists.n).map(|i| (i as f64 * 0.37).sin()).collect();
-        let run = |threads: usize| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| {
-                    let mut f = vec![0.0; 2 * lists.n];
-                    forces_forward(&lists, a, Coefficients(&coef), &mut f);
-                    (f, forces_backward(&lists, a, Coefficients(&coef), &w))
-                })
-        };
-        assert_eq!(run(1), run(3));
-    }
-
-    #[test]
-    fn compact_lists_keep_exactly_the_unmasked_entries() {
-        let (pos, head, map) = scene(6, 150);
-        let cfg = PerceptionConfig {
-            radius: 4.0,
-            capsule: Capsule {
-                half_length: 0.3,
-                radius: 0.2,
-            },
-            occlusion: true,
-            max_neighbours: 32,
-            max_obstacles: 16,
-            front_cone: 1.0,
-        };
-        let p = perceive(&pos, &head, Some(&map), &cfg);
-        let l = PairLists::from_perception(&p);
-        let real: usize = p.neighbour_mask.iter().map(|&m| m as usize).sum();
-        assert_eq!(l.pairs(), real);
-        assert!(p.k > 1 && real < p.n * p.k, "the scene must have padding");
-        for i in 0..p.n {
-            let want: Vec<u32> = (0..p.k)
-                .filter(|&s| p.neighbour_mask[i * p.k + s] == 1)
-                .map(|s| p.neighbours[i * p.k + s])
-                .collect();
-            assert_eq!(&l.nb[l.neighbours(i)], &want[..]);
-        }
-    }
-}
+mod tests;

@@ -5,6 +5,7 @@
 //! Plain Rust (rayon for parallel loops), no burn: the differentiable model consumes their output
 //! as constant data, and wraps the force kernel's forward/backward pair as one autodiff operation.
 
+mod fastmath;
 pub mod forces;
 pub mod geometry;
 pub mod grid;
@@ -14,7 +15,8 @@ pub mod pairs;
 pub mod perception;
 
 pub use forces::{
-    forces_backward, forces_forward, AgentsRef, Coefficients, ForceGrads, PairLists, N_COEF,
+    forces_backward, forces_forward, forces_forward_keep, AgentsRef, Coefficients, ForceGrads,
+    PairLists, PairTerms, N_COEF,
 };
 pub use geometry::{Capsule, P2};
 pub use obstacles::ObstacleMap;

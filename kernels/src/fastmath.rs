@@ -1,0 +1,94 @@
+//! `libm`'s `exp` with the same bytes, inlined: the force kernel evaluates three per pair
+//! (eq. 4), and inside the kernel loop the compiler can overlap them, which a call to the
+//! out-of-line `libm::exp` (with its special-case branches) cannot.
+
+// FreeBSD e_exp.c constants, as in libm 0.2.
+const LN2HI: f64 = 6.931_471_803_691_238_164_90e-1;
+const LN2LO: f64 = 1.908_214_929_270_587_700_02e-10;
+const INVLN2: f64 = 1.442_695_040_888_963_387_00;
+const P1: f64 = 1.666_666_666_666_660_190_37e-1;
+const P2: f64 = -2.777_777_777_701_559_338_42e-3;
+const P3: f64 = 6.613_756_321_437_934_361_17e-5;
+const P4: f64 = -1.653_390_220_546_525_153_90e-6;
+const P5: f64 = 4.138_136_797_057_238_460_39e-8;
+
+/// `e^x`, bit for bit `libm::exp(x)`. For 2⁻²⁸ < |x| < 512 (every weight of a herd at its
+/// parameters' scale) it runs libm's argument reduction and rational approximation inline, and
+/// the final `scalbn(y, k)` is one exact multiplication by 2^k (|k| ≤ 739 keeps y·2^k normal);
+/// elsewhere it calls `libm::exp`.
+#[inline(always)]
+pub fn exp(x: f64) -> f64 {
+    let hx = ((x.to_bits() >> 32) as u32) & 0x7fff_ffff;
+    if !(0x3e30_0001..0x4080_0000).contains(&hx) {
+        return libm::exp(x);
+    }
+    let (k, hi, lo) = if hx > 0x3fd6_2e42 {
+        let k = if hx >= 0x3ff0_a2b2 {
+            (INVLN2 * x + if x < 0.0 { -0.5 } else { 0.5 }) as i32
+        } else if x < 0.0 {
+            -1
+        } else {
+            1
+        };
+        (k, x - k as f64 * LN2HI, k as f64 * LN2LO)
+    } else {
+        (0, x, 0.0)
+    };
+    let r = hi - lo;
+    let rr = r * r;
+    let c = r - rr * (P1 + rr * (P2 + rr * (P3 + rr * (P4 + rr * P5))));
+    let y = 1.0 + (r * c / (2.0 - c) - lo + hi);
+    if k == 0 {
+        y
+    } else {
+        y * f64::from_bits(((0x3ff + k) as u64) << 52)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn exp_has_libms_bytes() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let mut check = |x: f64| {
+            assert_eq!(super::exp(x).to_bits(), libm::exp(x).to_bits(), "x = {x:e}");
+        };
+        for _ in 0..200_000 {
+            check(rng.gen_range(-60.0..2.0));
+            check(rng.gen_range(-800.0..800.0));
+            check(rng.gen_range(-1e-6..1e-6));
+        }
+        // The edges of every branch, and the special values.
+        for b in [
+            0x3e30_0000u64,
+            0x3e30_0001,
+            0x3fd6_2e42,
+            0x3fd6_2e43,
+            0x3ff0_a2b1,
+            0x3ff0_a2b2,
+            0x407f_ffff,
+            0x4080_0000,
+            0x4086_232b,
+        ] {
+            for low in [0u64, 1, 0xffff_ffff] {
+                let bits = b << 32 | low;
+                check(f64::from_bits(bits));
+                check(-f64::from_bits(bits));
+            }
+        }
+        for x in [
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -745.2,
+            709.8,
+            1e-320,
+        ] {
+            check(x);
+        }
+        assert!(super::exp(f64::NAN).is_nan());
+    }
+}
