@@ -2,11 +2,14 @@
 //! steps on the standard random herd, and the process's peak resident memory.
 
 use crate::backend::{cpu_device, Precision};
+use crate::data::agents::AgentRow;
 use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::Result;
+use crate::herd::params::N_PARAMS;
 use crate::herd::scenario::{bench_model, objective};
-use crate::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState};
+use crate::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Model, Recording};
 use crate::progress::Progress;
+use burn::tensor::Device;
 use rand::SeedableRng;
 use serde::Serialize;
 use std::path::Path;
@@ -23,7 +26,12 @@ pub struct BenchReport {
     pub agents: usize,
     pub steps: usize,
     pub sim_ms_per_step: f64,
+    /// Forward + backward with every step's decisions (perception with occlusion, roles, noise)
+    /// made live inside the timed pass.
     pub grad_ms_per_step: Option<f64>,
+    /// Forward + backward replaying decisions recorded by an untimed no-gradient run of the same
+    /// steps, as `fit` does after its plan (and as the JAX peer does with precomputed lists).
+    pub replay_grad_ms_per_step: Option<f64>,
     pub peak_rss_mb: f64,
     pub precision: Precision,
     pub occlusion: bool,
@@ -108,46 +116,37 @@ pub fn run_bench(
         },
     )?;
     let sim_ms_per_step = median(times);
-    let grad_ms_per_step = if sim_only {
-        None
-    } else {
-        let ad = if checkpointing {
-            device.clone().autodiff().gradient_checkpointing()
-        } else {
-            device.clone().autodiff()
+    let grad = |replay: bool| -> Result<Option<f64>> {
+        if sim_only {
+            return Ok(None);
+        }
+        let pass = GradPass {
+            model: &model,
+            theta: &theta_v,
+            init: &init,
+            steps,
+            checkpointing,
+            replay,
         };
         let mut per_step = Vec::with_capacity(repeats);
         for r in 0..repeats.max(1) {
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3 + r as u64);
-            let t0 = Instant::now();
-            let th = theta_tensor(&theta_v, &ad).require_grad();
-            let s = HerdState::from_rows(&init, &ad);
-            let end = model.rollout(
-                &th,
-                s,
-                steps,
-                Decide::Live {
-                    rng: &mut rng,
-                    record: None,
-                },
-                |_, _, _| Ok(()),
-            )?;
-            let grads = objective(&end, model.params.constants.perception_radius).backward();
-            let g = th.grad(&grads).map(|g| g.into_data());
-            if g.is_none() {
-                return Err(crate::Error::Internal("no gradient in benchmark".into()));
-            }
-            per_step.push(t0.elapsed().as_secs_f64() * 1e3 / steps as f64);
-            progress();
+            per_step.push(pass.time(3 + r as u64, &device)?);
         }
-        Some(median(per_step))
+        Ok(Some(median(per_step)))
     };
+    let grad_ms_per_step = grad(false)?;
+    let replay_grad_ms_per_step = grad(true)?;
+    if !sim_only {
+        progress();
+        progress();
+    }
     Ok(BenchReport {
         schema: BENCH_SCHEMA.into(),
         agents,
         steps,
         sim_ms_per_step,
         grad_ms_per_step,
+        replay_grad_ms_per_step,
         peak_rss_mb: peak_rss_mb(),
         precision: Precision::F32,
         occlusion: model.params.constants.occlusion,
@@ -156,6 +155,64 @@ pub fn run_bench(
         checkpointing,
         force_kernel,
     })
+}
+
+/// One timed forward + backward pass through `steps` unrolled steps from `init`.
+struct GradPass<'a> {
+    model: &'a Model,
+    theta: &'a [f64; N_PARAMS],
+    init: &'a [AgentRow],
+    steps: usize,
+    checkpointing: bool,
+    /// Replay decisions recorded (untimed) by a no-gradient run with the same seed.
+    replay: bool,
+}
+
+impl GradPass<'_> {
+    /// Milliseconds per step of one pass whose live decisions draw from `seed`.
+    fn time(&self, seed: u64, device: &Device) -> Result<f64> {
+        let m = self.model;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let recording = if self.replay {
+            let mut rec = Recording::new(self.init.len());
+            let s = HerdState::from_rows(self.init, device);
+            let th = theta_tensor(self.theta, device);
+            m.rollout(
+                &th,
+                s,
+                self.steps,
+                Decide::Live {
+                    rng: &mut rng,
+                    record: Some(&mut rec),
+                },
+                |_, _, _| Ok(()),
+            )?;
+            Some(rec)
+        } else {
+            None
+        };
+        let ad = if self.checkpointing {
+            device.clone().autodiff().gradient_checkpointing()
+        } else {
+            device.clone().autodiff()
+        };
+        let t0 = Instant::now();
+        let th = theta_tensor(self.theta, &ad).require_grad();
+        let s = HerdState::from_rows(self.init, &ad);
+        let decide = match &recording {
+            Some(rec) => Decide::Replay(rec),
+            None => Decide::Live {
+                rng: &mut rng,
+                record: None,
+            },
+        };
+        let end = m.rollout(&th, s, self.steps, decide, |_, _, _| Ok(()))?;
+        let grads = objective(&end, m.params.constants.perception_radius).backward();
+        if th.grad(&grads).map(|g| g.into_data()).is_none() {
+            return Err(crate::Error::Internal("no gradient in benchmark".into()));
+        }
+        Ok(t0.elapsed().as_secs_f64() * 1e3 / self.steps as f64)
+    }
 }
 
 /// Settings of a benchmark.
@@ -210,7 +267,7 @@ impl BenchConfig {
 pub fn run(cfg: &BenchConfig, json: &Path, progress: &mut dyn Progress) -> Result<BenchReport> {
     cfg.check()?;
     check_writable(json)?;
-    let total = cfg.steps + 1 + if cfg.sim_only { 0 } else { cfg.repeats.max(1) };
+    let total = cfg.steps + 1 + if cfg.sim_only { 0 } else { 2 };
     progress.start("bench", total as u64);
     let r = run_bench(
         cfg.agents,
@@ -233,12 +290,15 @@ impl std::fmt::Display for BenchReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "bench: {} agents, {} steps: simulation {:.3} ms/step{}, peak RSS {:.1} MB (K = {}, {:.1} visible neighbours/agent)",
+            "bench: {} agents, {} steps: simulation {:.3} ms/step{}{}, peak RSS {:.1} MB (K = {}, {:.1} visible neighbours/agent)",
             self.agents,
             self.steps,
             self.sim_ms_per_step,
             self.grad_ms_per_step
                 .map_or(String::new(), |g| format!(", forward+backward {g:.3} ms/step")),
+            self.replay_grad_ms_per_step.map_or(String::new(), |g| format!(
+                " (replaying recorded decisions {g:.3} ms/step)"
+            )),
             self.peak_rss_mb,
             self.k,
             self.mean_neighbours

@@ -32,7 +32,8 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, DispatchKindConversion, DispatchTensor, NdArray, TensorMetadata};
 use burn::tensor::{read_sync, DType, Tensor, TensorData};
 use herdfit_kernels::{
-    forces_backward, forces_forward, AgentsRef, Coefficients, PairLists, N_COEF, P2,
+    forces_backward, forces_forward, forces_forward_keep, AgentsRef, Coefficients, PairLists,
+    PairTerms, N_COEF, P2,
 };
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -126,6 +127,9 @@ struct Saved {
     coef: Vec<f64>,
     coef_rows: usize,
     dtype: DType,
+    /// The pair terms of the forward pass (φ and the weights' exponentials), so the backward pass
+    /// evaluates no `exp` or `atan2`; `None` until a forward pass keeps them.
+    kept: Option<PairTerms>,
 }
 
 impl Saved {
@@ -148,6 +152,19 @@ impl Saved {
         );
         out
     }
+
+    /// [`Saved::forward`], keeping the pair terms for the backward pass.
+    fn forward_keep(&mut self) -> Vec<f64> {
+        let mut out = vec![0.0; 2 * self.lists.n];
+        let kept = forces_forward_keep(
+            &self.lists,
+            self.agents(),
+            Coefficients(&self.coef),
+            &mut out,
+        );
+        self.kept = Some(kept);
+        out
+    }
 }
 
 /// The backward step of the fused op; parents: x, y, hx, hy (`[n]`) and the coefficients
@@ -161,7 +178,13 @@ impl Backward<NdArray, 5> for FusedForcesBackward {
     fn backward(self, ops: Ops<Self::State, 5>, grads: &mut Gradients, _: &mut Checkpointer) {
         let s = ops.state;
         let up = read(grads.consume::<NdArray>(&ops.node));
-        let g = forces_backward(&s.lists, s.agents(), Coefficients(&s.coef), &up);
+        let g = forces_backward(
+            &s.lists,
+            s.agents(),
+            Coefficients(&s.coef),
+            &up,
+            s.kept.as_ref(),
+        );
         let n = s.lists.n;
         let values = [g.x, g.y, g.hx, g.hy, g.coef];
         let shapes = [
@@ -190,6 +213,7 @@ fn saved(values: [Vec<f64>; 5], coef_rows: usize, dtype: DType, dec: &StepDecisi
         coef,
         coef_rows,
         dtype,
+        kept: None,
     }
 }
 
@@ -225,8 +249,8 @@ where
     let dtype = prims[0].primitive().dtype();
     let coef_rows = prims[4].primitive().shape()[0];
     let values = prims.each_ref().map(|p| read(p.primitive().clone()));
-    let state = saved(values, coef_rows, dtype, dec);
-    let out = upload(state.forward(), vec![state.lists.n, 2], dtype);
+    let mut state = saved(values, coef_rows, dtype, dec);
+    let out = upload(state.forward_keep(), vec![state.lists.n, 2], dtype);
     let nodes = prims.each_ref().map(|p| p.node());
     let out = match FusedForcesBackward
         .prepare::<C>(nodes)
