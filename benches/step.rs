@@ -1,7 +1,9 @@
 //! Criterion benchmarks of the hot paths on the standard random herd (one agent per 2 BL²,
 //! occlusion on, f32): the perception kernel, one simulation step, and forward + backward through
 //! T = 10 unrolled steps (reported per iteration; divide by 10 for per-step figures), each with
-//! the fused force op (`fused/N`) and the tensor-op reference (`reference/N`).
+//! the fused force op (`fused/N`) and the tensor-op reference (`reference/N`); and the same
+//! forward + backward replaying decisions recorded once outside the timed loop
+//! (`forward_backward_10_steps_replay`), as `fit` does after its plan and as the JAX peer does.
 //!
 //! `cargo bench --bench step` (set `HERDFIT_BENCH_LARGE=1` to add the 100,000-agent cases).
 
@@ -9,7 +11,7 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use herdfit::backend::{cpu_device, Precision};
 use herdfit::herd::gradcheck::objective;
 use herdfit::herd::scenario::bench_model;
-use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState};
+use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Recording};
 use herdfit_kernels::perceive;
 use rand::SeedableRng;
 use std::time::Duration;
@@ -116,7 +118,59 @@ fn grad_window(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, perception, sim_step, grad_window, fit_frames);
+/// Forward + backward through 10 steps replaying the decisions (perception with occlusion, roles,
+/// noise) of one no-gradient run recorded before timing.
+fn grad_window_replay(c: &mut Criterion) {
+    let device = cpu_device(Precision::F32).unwrap();
+    let ad = device.clone().autodiff();
+    let mut g = c.benchmark_group("forward_backward_10_steps_replay");
+    g.sample_size(10).measurement_time(Duration::from_secs(5));
+    for (kernel, n) in kernels(&[500, 1500, 5000]) {
+        let (mut model, init) = bench_model(n, 1).unwrap();
+        model.force_kernel = kernel;
+        let theta_v = model.params.to_vec();
+        let mut rec = Recording::new(n);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        model
+            .rollout(
+                &theta_tensor(&theta_v, &device),
+                HerdState::from_rows(&init, &device),
+                10,
+                Decide::Live {
+                    rng: &mut rng,
+                    record: Some(&mut rec),
+                },
+                |_, _, _| Ok(()),
+            )
+            .unwrap();
+        g.bench_with_input(BenchmarkId::new(name(kernel), n), &n, |b, _| {
+            b.iter(|| {
+                let th = theta_tensor(&theta_v, &ad).require_grad();
+                let end = model
+                    .rollout(
+                        &th,
+                        HerdState::from_rows(&init, &ad),
+                        10,
+                        Decide::<rand_chacha::ChaCha8Rng>::Replay(&rec),
+                        |_, _, _| Ok(()),
+                    )
+                    .unwrap();
+                let grads = objective(&end, 4.0).backward();
+                th.grad(&grads).unwrap().into_data()
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(
+    benches,
+    perception,
+    sim_step,
+    grad_window,
+    grad_window_replay,
+    fit_frames
+);
 criterion_main!(benches);
 
 /// One epoch of `fit` (W = 1, the paper's per-frame scheme, split gradients: two forward+backward

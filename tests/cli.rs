@@ -213,11 +213,28 @@ fn bench_reports_its_fields() {
         s(&out),
     ]);
     let b: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(b["agents"], 100);
     assert!(b["sim_ms_per_step"].as_f64().unwrap() > 0.0);
     assert!(b["grad_ms_per_step"].as_f64().unwrap() > 0.0);
+    assert!(b["replay_grad_ms_per_step"].as_f64().unwrap() > 0.0);
     assert!(b["peak_rss_mb"].as_f64().unwrap() > 1.0);
+    // Simulation only: no gradient figure of either kind.
+    ok(&[
+        "bench",
+        "--agents",
+        "50",
+        "--steps",
+        "2",
+        "--sim-only",
+        "--json",
+        s(&out),
+    ]);
+    let b: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(b["sim_ms_per_step"].as_f64().unwrap() > 0.0);
+    assert!(b["grad_ms_per_step"].is_null());
+    assert!(b["replay_grad_ms_per_step"].is_null());
 }
 
 #[test]

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """herdfit's model step against the JAX peer (`jax_step.py`), in one run, side by side.
 
-For each agent count: `herdfit bench` (fused forces, then `--reference-forces`), and the JAX
-peer's forward and forward+backward, all at T unrolled steps, f32; prints a Markdown table with
+For each agent count: `herdfit bench` (fused forces, then `--reference-forces`; forward+backward
+both with live decisions and replaying recorded ones), and the JAX peer's forward and
+forward+backward, all at T unrolled steps, f32; prints a Markdown table with
 the ratios (peer time / herdfit time: > 1 means herdfit is faster) and writes the raw figures as
 JSON (`herdfit.peer-compare/1`).
 
@@ -62,20 +63,25 @@ def main():
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
           f"T = {a.steps}, f32, median of {a.repeats}; jax {rows[0]['jax']['jax']}")
     print()
-    print("| agents | herdfit sim (fused) | herdfit fwd+bwd (fused) | herdfit fwd+bwd "
-          "(tensor ops) | JAX fwd | JAX fwd+bwd | JAX fwd+bwd / herdfit fwd+bwd | "
+    print("| agents | herdfit sim (fused) | herdfit fwd+bwd (fused) | herdfit fwd+bwd replay "
+          "(fused) | herdfit fwd+bwd (tensor ops) | JAX fwd | JAX fwd+bwd | "
+          "JAX fwd+bwd / herdfit fwd+bwd | JAX fwd+bwd / herdfit replay | "
           "JAX fwd / herdfit sim |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         h, t, j = r["herdfit"], r["herdfit_reference"], r["jax"]
+        jfb = j["forward_backward_ms_per_step"]
         print(f"| {r['agents']:,} | {h['sim_ms_per_step']:.3f} | {h['grad_ms_per_step']:.3f} | "
-              f"{t['grad_ms_per_step']:.3f} | {j['forward_ms_per_step']:.3f} | "
-              f"{j['forward_backward_ms_per_step']:.3f} | "
-              f"{j['forward_backward_ms_per_step'] / h['grad_ms_per_step']:.2f}× | "
+              f"{h['replay_grad_ms_per_step']:.3f} | "
+              f"{t['grad_ms_per_step']:.3f} | {j['forward_ms_per_step']:.3f} | {jfb:.3f} | "
+              f"{jfb / h['grad_ms_per_step']:.2f}× | "
+              f"{jfb / h['replay_grad_ms_per_step']:.2f}× | "
               f"{j['forward_ms_per_step'] / h['sim_ms_per_step']:.2f}× |")
     print()
-    print("ms per step. herdfit: perception with occlusion on every step, included; JAX: lists "
-          "without occlusion, precomputed outside the timed function.")
+    print("ms per step. herdfit fwd+bwd: perception with occlusion on every step, included; "
+          "herdfit replay: the same pass replaying decisions (occlusion-aware lists, roles, noise) "
+          "recorded by an untimed run, as `fit` does after its plan; JAX: lists without "
+          "occlusion, precomputed outside the timed function.")
     if a.out:
         with open(a.out + ".tmp", "w") as f:
             json.dump({"schema": "herdfit.peer-compare/1", "steps": a.steps,

@@ -67,8 +67,8 @@ pub fn peak_rss_mb() -> f64 {
 }
 
 /// Runs the benchmark: `steps` live simulation steps (median per step), then, unless `sim_only`,
-/// `repeats` forward + backward passes through `steps` unrolled steps (median per step), with
-/// the forces computed by `force_kernel`.
+/// `repeats` forward + backward passes through `steps` unrolled steps (median per step) with live
+/// decisions, and as many replaying recorded ones, with the forces computed by `force_kernel`.
 pub fn run_bench(
     agents: usize,
     steps: usize,
@@ -116,7 +116,7 @@ pub fn run_bench(
         },
     )?;
     let sim_ms_per_step = median(times);
-    let grad = |replay: bool| -> Result<Option<f64>> {
+    let mut grad = |replay: bool| -> Result<Option<f64>> {
         if sim_only {
             return Ok(None);
         }
@@ -131,15 +131,12 @@ pub fn run_bench(
         let mut per_step = Vec::with_capacity(repeats);
         for r in 0..repeats.max(1) {
             per_step.push(pass.time(3 + r as u64, &device)?);
+            progress();
         }
         Ok(Some(median(per_step)))
     };
     let grad_ms_per_step = grad(false)?;
     let replay_grad_ms_per_step = grad(true)?;
-    if !sim_only {
-        progress();
-        progress();
-    }
     Ok(BenchReport {
         schema: BENCH_SCHEMA.into(),
         agents,
@@ -267,7 +264,13 @@ impl BenchConfig {
 pub fn run(cfg: &BenchConfig, json: &Path, progress: &mut dyn Progress) -> Result<BenchReport> {
     cfg.check()?;
     check_writable(json)?;
-    let total = cfg.steps + 1 + if cfg.sim_only { 0 } else { 2 };
+    let total = cfg.steps
+        + 1
+        + if cfg.sim_only {
+            0
+        } else {
+            2 * cfg.repeats.max(1)
+        };
     progress.start("bench", total as u64);
     let r = run_bench(
         cfg.agents,

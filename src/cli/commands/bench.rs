@@ -17,7 +17,7 @@ pub struct BenchArgs {
     /// Skip the forward + backward measurement.
     #[arg(long)]
     pub sim_only: bool,
-    /// Forward + backward repetitions (median reported).
+    /// Forward + backward repetitions of each kind, live and replayed (median reported).
     #[arg(long, default_value_t = 3)]
     pub repeats: usize,
     /// Recompute memory-bound activations in the backward pass (burn's balanced gradient
