@@ -47,6 +47,43 @@ pub fn exp(x: f64) -> f64 {
     }
 }
 
+/// Three `e^x` at once, bit for bit `[libm::exp(x[0]), libm::exp(x[1]), libm::exp(x[2])]`: the
+/// force kernel's three neighbour weights (eq. 4). When all three lie in 2⁻²⁸ < |x| < 512 the
+/// argument reduction picks k by selects instead of branches (k = 0 for |x| ≤ ½ ln 2, where
+/// `x − 0·ln2hi` and `0·ln2lo` are exact, so the one formula is libm's both ways) and the three
+/// evaluations run as independent straight-line chains the CPU overlaps (two SIMD lanes where
+/// the compiler pairs them; every lane rounds as the scalar operation does).
+#[inline(always)]
+pub fn exp3(x: [f64; 3]) -> [f64; 3] {
+    let hx = x.map(|v| ((v.to_bits() >> 32) as u32) & 0x7fff_ffff);
+    if !hx.iter().all(|h| (0x3e30_0001..0x4080_0000).contains(h)) {
+        return x.map(exp);
+    }
+    let mut out = [0.0; 3];
+    for l in 0..3 {
+        let (v, h) = (x[l], hx[l]);
+        let half = if v < 0.0 { -0.5 } else { 0.5 };
+        let one = if v < 0.0 { -1 } else { 1 };
+        let far = (INVLN2 * v + half) as i32;
+        let k = if h >= 0x3ff0_a2b2 {
+            far
+        } else if h > 0x3fd6_2e42 {
+            one
+        } else {
+            0
+        };
+        let kf = k as f64;
+        let hi = v - kf * LN2HI;
+        let lo = kf * LN2LO;
+        let r = hi - lo;
+        let rr = r * r;
+        let c = r - rr * (P1 + rr * (P2 + rr * (P3 + rr * (P4 + rr * P5))));
+        let y = 1.0 + (r * c / (2.0 - c) - lo + hi);
+        out[l] = y * f64::from_bits(((0x3ff + k) as u64) << 52);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use rand::{Rng, SeedableRng};
@@ -92,5 +129,44 @@ mod tests {
             check(x);
         }
         assert!(super::exp(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn exp3_has_libms_bytes() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(18);
+        let check = |x: [f64; 3]| {
+            let got = super::exp3(x);
+            for l in 0..3 {
+                assert_eq!(got[l].to_bits(), libm::exp(x[l]).to_bits(), "x = {x:?}");
+            }
+        };
+        for _ in 0..200_000 {
+            // Every lane in range (the straight-line path), weights' typical arguments.
+            check([0; 3].map(|_| rng.gen_range(-60.0..2.0)));
+            check([0; 3].map(|_| rng.gen_range(-1.2..1.2)));
+            check([0; 3].map(|_| rng.gen_range(-511.0..511.0)));
+            // One lane out of range: every lane through `exp`.
+            check([rng.gen_range(-3.0..0.0), rng.gen_range(-1e-9..1e-9), -600.0]);
+        }
+        // The branch edges of the reduction, in each lane.
+        let edges: Vec<f64> = [
+            0x3e30_0001u64,
+            0x3fd6_2e42,
+            0x3fd6_2e43,
+            0x3ff0_a2b1,
+            0x3ff0_a2b2,
+            0x407f_ffff,
+        ]
+        .iter()
+        .flat_map(|&b| [0u64, 1, 0xffff_ffff].map(move |low| f64::from_bits(b << 32 | low)))
+        .flat_map(|v| [v, -v])
+        .collect();
+        for (i, &a) in edges.iter().enumerate() {
+            let b = edges[(i + 7) % edges.len()];
+            let c = edges[(i + 13) % edges.len()];
+            check([a, b, c]);
+        }
+        check([0.0, -1.0, 1.0]);
+        check([f64::NAN, -1.0, 1.0]);
     }
 }
