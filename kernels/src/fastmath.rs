@@ -55,9 +55,11 @@ pub fn exp(x: f64) -> f64 {
 /// the compiler pairs them; every lane rounds as the scalar operation does).
 #[inline(always)]
 pub fn exp3(x: [f64; 3]) -> [f64; 3] {
-    let hx = x.map(|v| ((v.to_bits() >> 32) as u32) & 0x7fff_ffff);
-    if !hx.iter().all(|h| (0x3e30_0001..0x4080_0000).contains(h)) {
-        return x.map(exp);
+    let high = |v: f64| ((v.to_bits() >> 32) as u32) & 0x7fff_ffff;
+    let hx = [high(x[0]), high(x[1]), high(x[2])];
+    let fast = |h: u32| (0x3e30_0001..0x4080_0000).contains(&h);
+    if !(fast(hx[0]) && fast(hx[1]) && fast(hx[2])) {
+        return [exp(x[0]), exp(x[1]), exp(x[2])];
     }
     let mut out = [0.0; 3];
     for l in 0..3 {

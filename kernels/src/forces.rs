@@ -114,7 +114,11 @@ fn weight(c: &[f64], g: usize, d2: f64, phi2: f64) -> (f64, f64) {
 /// three calls of [`weight`].
 #[inline]
 fn weights3(c: &[f64], d2: f64, phi2: f64) -> ((f64, f64), (f64, f64), (f64, f64)) {
-    let e = crate::fastmath::exp3([0, 1, 2].map(|g| c[4 + g] * d2 + c[8 + g] * phi2));
+    let e = crate::fastmath::exp3([
+        c[4] * d2 + c[8] * phi2,
+        c[5] * d2 + c[9] * phi2,
+        c[6] * d2 + c[10] * phi2,
+    ]);
     (
         (e[0], c[0] * e[0]),
         (e[1], c[1] * e[1]),
