@@ -11,8 +11,9 @@
 //! (side s = ±1, behind σ = ±1, see [`crate::branch_of`]):
 //! φ = \[σ < 0\]·π + σ·atan2(s·(d × u), σ·(d · u)), smooth in every input around the recorded
 //! state. The herd model's tensor-op path computes the same expression; this kernel is its fused
-//! form: one pass per agent and no intermediate `[N, K]` arrays, and a backward pass that
-//! recomputes the pair terms from the inputs instead of storing them.
+//! form: one pass per agent and no intermediate `[N, K]` arrays, and a backward pass that reads
+//! the forward's φ and weight exponentials ([`PairTerms`], from [`forces_forward_keep`]) and
+//! recomputes the rest of each pair's terms from the inputs (or all of them, given no terms).
 //!
 //! Determinism: sums run in list order per agent; contributions an agent makes to its
 //! neighbours' gradients and to shared coefficients are accumulated in index order after the
