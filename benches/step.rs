@@ -11,7 +11,7 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use herdfit::backend::{cpu_device, Precision};
 use herdfit::herd::gradcheck::objective;
 use herdfit::herd::scenario::bench_model;
-use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Recording};
+use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState};
 use herdfit_kernels::perceive;
 use rand::SeedableRng;
 use std::time::Duration;
@@ -86,75 +86,43 @@ fn sim_step(c: &mut Criterion) {
 }
 
 fn grad_window(c: &mut Criterion) {
-    let device = cpu_device(Precision::F32).unwrap();
-    let ad = device.clone().autodiff();
-    let mut g = c.benchmark_group("forward_backward_10_steps");
-    g.sample_size(10).measurement_time(Duration::from_secs(5));
-    for (kernel, n) in kernels(&[500, 1500, 5000]) {
-        let (mut model, init) = bench_model(n, 1).unwrap();
-        model.force_kernel = kernel;
-        let theta_v = model.params.to_vec();
-        g.bench_with_input(BenchmarkId::new(name(kernel), n), &n, |b, _| {
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-            b.iter(|| {
-                let th = theta_tensor(&theta_v, &ad).require_grad();
-                let end = model
-                    .rollout(
-                        &th,
-                        HerdState::from_rows(&init, &ad),
-                        10,
-                        Decide::Live {
-                            rng: &mut rng,
-                            record: None,
-                        },
-                        |_, _, _| Ok(()),
-                    )
-                    .unwrap();
-                let grads = objective(&end, 4.0).backward();
-                th.grad(&grads).unwrap().into_data()
-            })
-        });
-    }
-    g.finish();
+    grad_group(c, "forward_backward_10_steps", false);
 }
 
 /// Forward + backward through 10 steps replaying the decisions (perception with occlusion, roles,
 /// noise) of one no-gradient run recorded before timing.
 fn grad_window_replay(c: &mut Criterion) {
+    grad_group(c, "forward_backward_10_steps_replay", true);
+}
+
+/// Forward + backward through 10 unrolled steps for every kernel and size, with each step's
+/// decisions made live inside the timed pass or (`replay`) recorded once before timing.
+fn grad_group(c: &mut Criterion, group: &str, replay: bool) {
     let device = cpu_device(Precision::F32).unwrap();
     let ad = device.clone().autodiff();
-    let mut g = c.benchmark_group("forward_backward_10_steps_replay");
+    let mut g = c.benchmark_group(group);
     g.sample_size(10).measurement_time(Duration::from_secs(5));
     for (kernel, n) in kernels(&[500, 1500, 5000]) {
         let (mut model, init) = bench_model(n, 1).unwrap();
         model.force_kernel = kernel;
         let theta_v = model.params.to_vec();
-        let mut rec = Recording::new(n);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        model
-            .rollout(
-                &theta_tensor(&theta_v, &device),
-                HerdState::from_rows(&init, &device),
-                10,
-                Decide::Live {
-                    rng: &mut rng,
-                    record: Some(&mut rec),
-                },
-                |_, _, _| Ok(()),
-            )
-            .unwrap();
+        let rec = replay.then(|| {
+            let th = theta_tensor(&theta_v, &device);
+            model.record(&th, &init, 10, &mut rng).unwrap()
+        });
         g.bench_with_input(BenchmarkId::new(name(kernel), n), &n, |b, _| {
             b.iter(|| {
                 let th = theta_tensor(&theta_v, &ad).require_grad();
-                let end = model
-                    .rollout(
-                        &th,
-                        HerdState::from_rows(&init, &ad),
-                        10,
-                        Decide::<rand_chacha::ChaCha8Rng>::Replay(&rec),
-                        |_, _, _| Ok(()),
-                    )
-                    .unwrap();
+                let decide = match &rec {
+                    Some(rec) => Decide::Replay(rec),
+                    None => Decide::Live {
+                        rng: &mut rng,
+                        record: None,
+                    },
+                };
+                let s = HerdState::from_rows(&init, &ad);
+                let end = model.rollout(&th, s, 10, decide, |_, _, _| Ok(())).unwrap();
                 let grads = objective(&end, 4.0).backward();
                 th.grad(&grads).unwrap().into_data()
             })

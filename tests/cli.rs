@@ -201,37 +201,22 @@ fn gradcheck_f32_autodiff_matches_f64_within_1e2() {
 fn bench_reports_its_fields() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("b.json");
-    ok(&[
-        "bench",
-        "--agents",
-        "100",
-        "--steps",
-        "3",
-        "--repeats",
-        "1",
-        "--json",
-        s(&out),
-    ]);
-    let b: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let bench = |args: &[&str]| -> serde_json::Value {
+        let mut a = vec!["bench"];
+        a.extend_from_slice(args);
+        a.extend_from_slice(&["--json", s(&out)]);
+        ok(&a);
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap()
+    };
+    let b = bench(&["--agents", "100", "--steps", "3", "--repeats", "1"]);
     assert_eq!(b["agents"], 100);
     assert!(b["sim_ms_per_step"].as_f64().unwrap() > 0.0);
     assert!(b["grad_ms_per_step"].as_f64().unwrap() > 0.0);
     assert!(b["replay_grad_ms_per_step"].as_f64().unwrap() > 0.0);
     assert!(b["peak_rss_mb"].as_f64().unwrap() > 1.0);
     // Simulation only: no gradient figure of either kind.
-    ok(&[
-        "bench",
-        "--agents",
-        "50",
-        "--steps",
-        "2",
-        "--sim-only",
-        "--json",
-        s(&out),
-    ]);
-    let b: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let b = bench(&["--agents", "50", "--steps", "2", "--sim-only"]);
+    assert_eq!(b["agents"], 50);
     assert!(b["sim_ms_per_step"].as_f64().unwrap() > 0.0);
     assert!(b["grad_ms_per_step"].is_null());
     assert!(b["replay_grad_ms_per_step"].is_null());

@@ -366,7 +366,7 @@ fn view_of(i: usize, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) 
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
@@ -384,7 +384,9 @@ mod tests {
         }
     }
 
-    fn scene(seed: u64, n: usize) -> (Vec<P2>, Vec<P2>, ObstacleMap) {
+    /// A random herd at one agent per 2 BL², random headings, and 12 blocked cells of a 14 × 14
+    /// obstacle map (also the force kernel's test scene).
+    pub(crate) fn scene(seed: u64, n: usize) -> (Vec<P2>, Vec<P2>, ObstacleMap) {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let side = (2.0 * n as f64).sqrt();
         let pos: Vec<P2> = (0..n)

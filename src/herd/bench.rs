@@ -7,7 +7,7 @@ use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::Result;
 use crate::herd::params::N_PARAMS;
 use crate::herd::scenario::{bench_model, objective};
-use crate::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Model, Recording};
+use crate::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Model};
 use crate::progress::Progress;
 use burn::tensor::Device;
 use rand::SeedableRng;
@@ -171,20 +171,8 @@ impl GradPass<'_> {
         let m = self.model;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let recording = if self.replay {
-            let mut rec = Recording::new(self.init.len());
-            let s = HerdState::from_rows(self.init, device);
             let th = theta_tensor(self.theta, device);
-            m.rollout(
-                &th,
-                s,
-                self.steps,
-                Decide::Live {
-                    rng: &mut rng,
-                    record: Some(&mut rec),
-                },
-                |_, _, _| Ok(()),
-            )?;
-            Some(rec)
+            Some(m.record(&th, self.init, self.steps, &mut rng)?)
         } else {
             None
         };

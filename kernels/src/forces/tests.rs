@@ -1,43 +1,29 @@
 //! Tests of the force kernel: finite differences, kept terms, per-agent coefficients, threads.
 
 use super::*;
+use crate::perception::tests::scene;
 use crate::perception::{perceive, PerceptionConfig};
-use crate::{Capsule, ObstacleMap};
+use crate::Capsule;
 use rand::{Rng, SeedableRng};
 
-fn scene(seed: u64, n: usize) -> (Vec<P2>, Vec<P2>, ObstacleMap) {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let side = (2.0 * n as f64).sqrt();
-    let pos: Vec<P2> = (0..n)
-        .map(|_| [rng.gen_range(0.0..side), rng.gen_range(0.0..side)])
-        .collect();
-    let head: Vec<P2> = (0..n)
-        .map(|_| {
-            let a: f64 = rng.gen_range(-3.2..3.2);
-            [a.cos(), a.sin()]
-        })
-        .collect();
-    let mut map = ObstacleMap::empty([0.0, 0.0], 1.5, 14, 14);
-    for _ in 0..12 {
-        let c = rng.gen_range(0..map.blocked.len());
-        map.blocked[c] = true;
-    }
-    (pos, head, map)
-}
-
-fn setup(seed: u64, n: usize) -> (PairLists, [Vec<f64>; 4], Vec<f64>) {
-    let (pos, head, map) = scene(seed, n);
-    let cfg = PerceptionConfig {
+/// The perception settings of these tests, with the list caps given.
+fn config(max_neighbours: usize, max_obstacles: usize) -> PerceptionConfig {
+    PerceptionConfig {
         radius: 4.0,
         capsule: Capsule {
             half_length: 0.3,
             radius: 0.2,
         },
         occlusion: true,
-        max_neighbours: 12,
-        max_obstacles: 8,
+        max_neighbours,
+        max_obstacles,
         front_cone: 1.0,
-    };
+    }
+}
+
+fn setup(seed: u64, n: usize) -> (PairLists, [Vec<f64>; 4], Vec<f64>) {
+    let (pos, head, map) = scene(seed, n);
+    let cfg = config(12, 8);
     let p = perceive(&pos, &head, Some(&map), &cfg);
     let lists = PairLists::from_perception(&p);
     let s = [
@@ -199,17 +185,7 @@ fn thread_count_does_not_change_forces_or_gradients() {
 #[test]
 fn compact_lists_keep_exactly_the_unmasked_entries() {
     let (pos, head, map) = scene(6, 150);
-    let cfg = PerceptionConfig {
-        radius: 4.0,
-        capsule: Capsule {
-            half_length: 0.3,
-            radius: 0.2,
-        },
-        occlusion: true,
-        max_neighbours: 32,
-        max_obstacles: 16,
-        front_cone: 1.0,
-    };
+    let cfg = config(32, 16);
     let p = perceive(&pos, &head, Some(&map), &cfg);
     let l = PairLists::from_perception(&p);
     let real: usize = p.neighbour_mask.iter().map(|&m| m as usize).sum();

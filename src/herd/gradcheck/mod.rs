@@ -20,20 +20,8 @@ pub use loss::LossScenario;
 /// Records the decisions of `steps` live steps at the scenario's parameters.
 pub fn record(sc: &Scenario, steps: usize, seed: u64, device: &Device) -> Result<Recording> {
     let theta = theta_tensor(&sc.model.params.to_vec(), device);
-    let state = HerdState::from_rows(&sc.init, device);
-    let mut rec = Recording::new(sc.init.len());
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    sc.model.rollout(
-        &theta,
-        state,
-        steps,
-        Decide::Live {
-            rng: &mut rng,
-            record: Some(&mut rec),
-        },
-        |_, _, _| Ok(()),
-    )?;
-    Ok(rec)
+    sc.model.record(&theta, &sc.init, steps, &mut rng)
 }
 
 /// J(θ) with replayed decisions, no gradient.

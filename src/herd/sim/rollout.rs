@@ -106,6 +106,25 @@ impl Model {
         self.run(theta, state, steps, decide, hooks)
     }
 
+    /// The decisions of `steps` live steps from the herd `rows` with parameters `theta`, drawn
+    /// from `rng` and recorded for replay (no gradient is needed: run it on a plain device).
+    pub fn record<R: Rng>(
+        &self,
+        theta: &Tensor<1>,
+        rows: &[AgentRow],
+        steps: usize,
+        rng: &mut R,
+    ) -> Result<Recording> {
+        let mut rec = Recording::new(rows.len());
+        let state = HerdState::from_rows(rows, &theta.device());
+        let decide = Decide::Live {
+            rng,
+            record: Some(&mut rec),
+        };
+        self.rollout(theta, state, steps, decide, |_, _, _| Ok(()))?;
+        Ok(rec)
+    }
+
     /// [`Model::rollout`] with per-step [`StepHooks`]: step t decides (after
     /// `hooks.before_decide`, on a copy of this model), takes `hooks.forces` or those of θ and
     /// `hooks.extra`, steps, and `hooks.after` gives the state the next step starts from.
