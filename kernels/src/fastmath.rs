@@ -14,76 +14,71 @@ const P3: f64 = 6.613_756_321_437_934_361_17e-5;
 const P4: f64 = -1.653_390_220_546_525_153_90e-6;
 const P5: f64 = 4.138_136_797_057_238_460_39e-8;
 
-/// `e^x`, bit for bit `libm::exp(x)`. For 2⁻²⁸ < |x| < 512 (every weight of a herd at its
-/// parameters' scale) it runs libm's argument reduction and rational approximation inline, and
-/// the final `scalbn(y, k)` is one exact multiplication by 2^k (|k| ≤ 739 keeps y·2^k normal);
-/// elsewhere it calls `libm::exp`.
+/// The high word of |x|, which libm's `exp` branches on.
 #[inline(always)]
-pub fn exp(x: f64) -> f64 {
-    let hx = ((x.to_bits() >> 32) as u32) & 0x7fff_ffff;
-    if !(0x3e30_0001..0x4080_0000).contains(&hx) {
-        return libm::exp(x);
-    }
-    let (k, hi, lo) = if hx > 0x3fd6_2e42 {
-        let k = if hx >= 0x3ff0_a2b2 {
-            (INVLN2 * x + if x < 0.0 { -0.5 } else { 0.5 }) as i32
-        } else if x < 0.0 {
-            -1
-        } else {
-            1
-        };
-        (k, x - k as f64 * LN2HI, k as f64 * LN2LO)
+fn high(x: f64) -> u32 {
+    ((x.to_bits() >> 32) as u32) & 0x7fff_ffff
+}
+
+/// Whether |x| (high word `h`) lies in 2⁻²⁸ < |x| < 512, where [`exp_reduced`] is libm's `exp`.
+#[inline(always)]
+fn in_range(h: u32) -> bool {
+    (0x3e30_0001..0x4080_0000).contains(&h)
+}
+
+/// libm's argument reduction and rational approximation of `e^x` for x in [`in_range`] (high
+/// word `h`), with k chosen by selects instead of branches: k = 0 for |x| ≤ ½ ln 2, where
+/// `x − 0·ln2hi` and `0·ln2lo` are exact, so the one formula is libm's both ways; the final
+/// `scalbn(y, k)` is one exact multiplication by 2^k (|k| ≤ 739 keeps y·2^k normal).
+#[inline(always)]
+fn exp_reduced(x: f64, h: u32) -> f64 {
+    let half = if x < 0.0 { -0.5 } else { 0.5 };
+    let one = if x < 0.0 { -1 } else { 1 };
+    let far = (INVLN2 * x + half) as i32;
+    let k = if h >= 0x3ff0_a2b2 {
+        far
+    } else if h > 0x3fd6_2e42 {
+        one
     } else {
-        (0, x, 0.0)
+        0
     };
+    let kf = k as f64;
+    let hi = x - kf * LN2HI;
+    let lo = kf * LN2LO;
     let r = hi - lo;
     let rr = r * r;
     let c = r - rr * (P1 + rr * (P2 + rr * (P3 + rr * (P4 + rr * P5))));
     let y = 1.0 + (r * c / (2.0 - c) - lo + hi);
-    if k == 0 {
-        y
+    y * f64::from_bits(((0x3ff + k) as u64) << 52)
+}
+
+/// `e^x`, bit for bit `libm::exp(x)`: inline in 2⁻²⁸ < |x| < 512 (every weight of a herd at its
+/// parameters' scale), `libm::exp` elsewhere.
+#[inline(always)]
+pub fn exp(x: f64) -> f64 {
+    let h = high(x);
+    if in_range(h) {
+        exp_reduced(x, h)
     } else {
-        y * f64::from_bits(((0x3ff + k) as u64) << 52)
+        libm::exp(x)
     }
 }
 
 /// Three `e^x` at once, bit for bit `[libm::exp(x[0]), libm::exp(x[1]), libm::exp(x[2])]`: the
-/// force kernel's three neighbour weights (eq. 4). When all three lie in 2⁻²⁸ < |x| < 512 the
-/// argument reduction picks k by selects instead of branches (k = 0 for |x| ≤ ½ ln 2, where
-/// `x − 0·ln2hi` and `0·ln2lo` are exact, so the one formula is libm's both ways) and the three
-/// evaluations run as independent straight-line chains the CPU overlaps (two SIMD lanes where
-/// the compiler pairs them; every lane rounds as the scalar operation does).
+/// force kernel's three neighbour weights (eq. 4). When all three are in range they run as
+/// independent straight-line chains the CPU overlaps (two SIMD lanes where the compiler pairs
+/// them; every lane rounds as the scalar operation does).
 #[inline(always)]
 pub fn exp3(x: [f64; 3]) -> [f64; 3] {
-    let high = |v: f64| ((v.to_bits() >> 32) as u32) & 0x7fff_ffff;
-    let hx = [high(x[0]), high(x[1]), high(x[2])];
-    let fast = |h: u32| (0x3e30_0001..0x4080_0000).contains(&h);
-    if !(fast(hx[0]) && fast(hx[1]) && fast(hx[2])) {
+    let h = [high(x[0]), high(x[1]), high(x[2])];
+    if !(in_range(h[0]) && in_range(h[1]) && in_range(h[2])) {
         return [exp(x[0]), exp(x[1]), exp(x[2])];
     }
-    let mut out = [0.0; 3];
-    for l in 0..3 {
-        let (v, h) = (x[l], hx[l]);
-        let half = if v < 0.0 { -0.5 } else { 0.5 };
-        let one = if v < 0.0 { -1 } else { 1 };
-        let far = (INVLN2 * v + half) as i32;
-        let k = if h >= 0x3ff0_a2b2 {
-            far
-        } else if h > 0x3fd6_2e42 {
-            one
-        } else {
-            0
-        };
-        let kf = k as f64;
-        let hi = v - kf * LN2HI;
-        let lo = kf * LN2LO;
-        let r = hi - lo;
-        let rr = r * r;
-        let c = r - rr * (P1 + rr * (P2 + rr * (P3 + rr * (P4 + rr * P5))));
-        let y = 1.0 + (r * c / (2.0 - c) - lo + hi);
-        out[l] = y * f64::from_bits(((0x3ff + k) as u64) << 52);
-    }
-    out
+    [
+        exp_reduced(x[0], h[0]),
+        exp_reduced(x[1], h[1]),
+        exp_reduced(x[2], h[2]),
+    ]
 }
 
 #[cfg(test)]

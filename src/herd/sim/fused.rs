@@ -4,7 +4,9 @@
 //!
 //! The tensor-op path of [`super::Model::forces`] builds ≈ 60 small `[N, K]` operations per step,
 //! each with its own allocation and autodiff node; this op replaces them with one node whose
-//! backward recomputes the pair terms from the saved inputs (positions, headings, coefficients).
+//! backward reads the bearings and weight exponentials its forward kept
+//! ([`herdfit_kernels::PairTerms`]) and recomputes the rest from the saved inputs (positions,
+//! headings, coefficients).
 //!
 //! How it reaches burn's autodiff (ARCHITECTURE.md, "Departures"): the project's tensors are
 //! backend-erased (`Tensor<D>` on a runtime `Device`). burn 0.22's `extension` feature lets a
@@ -250,15 +252,19 @@ where
     let coef_rows = prims[4].primitive().shape()[0];
     let values = prims.each_ref().map(|p| read(p.primitive().clone()));
     let mut state = saved(values, coef_rows, dtype, dec);
-    let out = upload(state.forward_keep(), vec![state.lists.n, 2], dtype);
+    let shape = vec![state.lists.n, 2];
     let nodes = prims.each_ref().map(|p| p.node());
+    // Pair terms are kept only where a backward pass will read them.
     let out = match FusedForcesBackward
         .prepare::<C>(nodes)
         .compute_bound()
         .stateful()
     {
-        OpsKind::Tracked(prep) => prep.finish(Arc::new(state), out),
-        OpsKind::UnTracked(prep) => prep.finish(out),
+        OpsKind::Tracked(prep) => {
+            let out = upload(state.forward_keep(), shape, dtype);
+            prep.finish(Arc::new(state), out)
+        }
+        OpsKind::UnTracked(prep) => prep.finish(upload(state.forward(), shape, dtype)),
     };
     Some(Tensor::from_primitive::<Autodiff<NdArray, C>>(out))
 }
