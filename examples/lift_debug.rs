@@ -33,6 +33,7 @@ fn main() {
     let obs = Observations::new(&t2, &cam).unwrap();
     for c in &a[4..] {
         let cfg: LiftConfig = serde_json::from_str(c).unwrap();
+        let (cfg, _) = herdfit::lift::estimate::resolve(&obs, &cfg).unwrap();
         let t0 = std::time::Instant::now();
         let fbf = frame_by_frame(&obs, &cfg, &mut NoProgress).unwrap();
         let (s, log) = whole_sequence(&obs, &fbf, &cfg, &mut NoProgress).unwrap();
@@ -55,7 +56,7 @@ fn main() {
                     td.iter().map(|d| d * 1.3).collect::<Vec<f64>>(),
                 ),
                 ("truth x0.7", td.iter().map(|d| d * 0.7).collect()),
-                ("const mid", vec![0.5 * (cfg.d_near + cfg.d_far); td.len()]),
+                ("const mid", vec![0.5 * (cfg.near() + cfg.far()); td.len()]),
             ] {
                 let (s, log) = whole_sequence(&obs, &init, &cfg, &mut NoProgress).unwrap();
                 println!(

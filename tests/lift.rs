@@ -96,7 +96,7 @@ fn lifted_tracks_project_onto_the_input_tracks_within_1e_6_px() {
         &std::fs::read_to_string(dir.path().join("lifted.report.json")).unwrap(),
     )
     .unwrap();
-    assert_eq!(report["schema"], "herdfit.lift-report/1");
+    assert_eq!(report["schema"], "herdfit.lift-report/2");
     assert!(
         report["whole_sequence"]["reprojection_max_px"]
             .as_f64()
@@ -194,9 +194,9 @@ fn on_both_jackdaw_flights_the_whole_sequence_beats_constant_depth_and_frame_by_
     for name in ["transit_05", "mob_10"] {
         let truth = read_jackdaw(&shared_data().join(format!("jackdaws/{name}.csv"))).unwrap();
         let cfg = LiftConfig {
-            v_target: 9.0 / 60.0,
-            d_near: 10.0,
-            d_far: 150.0,
+            v_target: Some(9.0 / 60.0),
+            d_near: Some(10.0),
+            d_far: Some(150.0),
             ..LiftConfig::default()
         };
         let ev = evaluate(&truth, &jackdaw_camera(name), &cfg, false, &mut NoProgress).unwrap();
@@ -433,8 +433,15 @@ fn bad_inputs_fail_with_one_line_and_leave_nothing_behind() {
         e.contains("good.csv") && e.contains("needs 3D tracks"),
         "{e}"
     );
+    // Five frames are too few to estimate v_target from how the birds turn: the user is told to
+    // give it.
+    let e = run("good.csv", "cam.json");
+    assert!(
+        e.contains("good.csv") && e.contains("v_target not given") && e.contains("give v_target"),
+        "{e}"
+    );
     assert_eq!(listing(d), before, "nothing new on disk");
-    // The good input works.
+    // The good input works with v_target and the bounds given.
     ok(&[
         "lift",
         "run",
@@ -445,6 +452,12 @@ fn bad_inputs_fail_with_one_line_and_leave_nothing_behind() {
         s(&out),
         "--iterations",
         "5",
+        "--v-target",
+        "0.1",
+        "--d-near",
+        "1",
+        "--d-far",
+        "100",
     ]);
     assert!(out.is_file());
 }

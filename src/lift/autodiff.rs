@@ -88,7 +88,7 @@ impl Graph {
     /// The weighted terms (each a one-element tensor) at log-depths `u`.
     fn energy(&self, u: &Tensor<1>, cfg: &LiftConfig, n: usize) -> Vec<(&'static str, Tensor<1>)> {
         let w = &cfg.sequence;
-        let vt = cfg.v_target;
+        let vt = cfg.vt();
         let scale = 1.0 / n as f64;
         let d = u.clone().exp();
         let q = [

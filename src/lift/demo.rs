@@ -66,9 +66,9 @@ impl fmt::Display for DemoSummary {
 /// per frame, bounds 20–400 m.
 pub fn demo_config(boids: &BoidsConfig) -> LiftConfig {
     LiftConfig {
-        v_target: boids.cruise / boids.fps,
-        d_near: 20.0,
-        d_far: 400.0,
+        v_target: Some(boids.cruise / boids.fps),
+        d_near: Some(20.0),
+        d_far: Some(400.0),
         ..LiftConfig::default()
     }
 }

@@ -11,7 +11,10 @@
 //!
 //! Four depth estimates: (a) every bird at its frame's true mean depth (a baseline that knows
 //! more than a lift may), (b) every bird at the median of [d_near, d_far] (what the bounds alone
-//! give), (c) the thesis's frame-by-frame method, (d) the whole-sequence method.
+//! give; when the bounds are estimated, at the estimate's depth guess D₀ instead, see
+//! [`super::estimate`]), (c) the thesis's frame-by-frame method, (d) the whole-sequence method.
+//! The whole sequence is also assessed by itself ([`super::confidence`]), so its self-assessment
+//! can be checked against its error.
 
 use super::observe::Observations;
 use super::{frame, project_tracks, sequence, Checks, LiftConfig};
@@ -22,7 +25,7 @@ use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 
 /// Schema tag of evaluation reports.
-pub const EVAL_SCHEMA: &str = "herdfit.lift-eval/1";
+pub const EVAL_SCHEMA: &str = "herdfit.lift-eval/2";
 
 type V3 = [f64; 3];
 
@@ -154,7 +157,7 @@ fn extents(obs: &Observations, b: &[V3], depth: &[f64]) -> (f64, f64) {
     (med(diam), med(span))
 }
 
-/// An evaluation report (`herdfit.lift-eval/1`).
+/// An evaluation report (`herdfit.lift-eval/2`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalReport {
     pub schema: String,
@@ -166,6 +169,10 @@ pub struct EvalReport {
     pub config: LiftConfig,
     pub truth: TruthStats,
     pub methods: Vec<MethodScore>,
+    /// v_target and the bounds used, and how they were found.
+    pub estimate: super::estimate::Estimate,
+    /// The whole sequence's self-assessment.
+    pub confidence: super::confidence::Confidence,
 }
 
 /// Everything an evaluation computed, for plots.
@@ -229,6 +236,8 @@ pub fn evaluate(
     cfg.check()?;
     let (tracks2d, truth_depth) = project_tracks(truth, camera, crop)?;
     let obs = Observations::new(&tracks2d, camera)?;
+    let (cfg, est) = super::estimate::resolve(&obs, cfg)?;
+    let cfg = &cfg;
     let bt = obs.positions(&truth_depth);
     let truth_changes = Quantiles::of(&speed_changes(&obs, &bt));
     let mut speeds: Vec<f64> = (0..obs.len())
@@ -244,11 +253,18 @@ pub fn evaluate(
         let m = truth_depth[r.clone()].iter().sum::<f64>() / r.len() as f64;
         frame_mean[r.clone()].iter_mut().for_each(|d| *d = m);
     }
-    // (b) the median of the bounds.
-    let constant = vec![0.5 * (cfg.d_near + cfg.d_far); n];
+    // (b) the median of the bounds (of the estimate's depth guess when they are estimated).
+    let constant = vec![
+        match est.bounds_source {
+            super::estimate::Source::Given => 0.5 * (cfg.near() + cfg.far()),
+            super::estimate::Source::Estimated => est.depth_guess,
+        };
+        n
+    ];
     // (c), (d).
     let fbf = frame::frame_by_frame(&obs, cfg, progress)?;
     let (seq, _) = sequence::whole_sequence(&obs, &fbf, cfg, progress)?;
+    let confidence = super::confidence::assess(&obs, &seq, cfg, &est, progress)?;
     let named = [
         ("true_mean_depth", frame_mean),
         ("constant_median", constant),
@@ -277,6 +293,8 @@ pub fn evaluate(
             depth_extent,
         },
         methods,
+        estimate: est,
+        confidence,
     };
     Ok(Evaluation {
         report,

@@ -162,10 +162,17 @@ pub fn frame_by_frame(
     progress: &mut dyn Progress,
 ) -> Result<Vec<f64>> {
     cfg.check()?;
+    let resolved;
+    let cfg = if cfg.resolved() {
+        cfg
+    } else {
+        resolved = super::estimate::resolve(obs, cfg)?.0;
+        &resolved
+    };
     let n = obs.len();
     let mut depth = vec![f64::NAN; n];
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let (lo, hi) = (cfg.d_near, cfg.d_far);
+    let (lo, hi) = (cfg.near(), cfg.far());
     progress.start("lift frame by frame", obs.frames.len() as u64);
     let mut prev_range: Option<std::ops::Range<usize>> = None;
     for (fi, (_, range)) in obs.frames.iter().enumerate() {
@@ -189,7 +196,7 @@ pub fn frame_by_frame(
                     None => vec![Term {
                         w: 1.0,
                         a: a0,
-                        s: cfg.v_target,
+                        s: cfg.vt(),
                     }],
                     Some(pp) => {
                         let v_last = norm(sub(bp, obs.position(pp, depth[pp])));
@@ -263,9 +270,9 @@ fn scatter(
     cfg: &LiftConfig,
     rng: &mut ChaCha8Rng,
 ) -> f64 {
-    let mut best = (f64::NEG_INFINITY, cfg.d_near);
+    let mut best = (f64::NEG_INFINITY, cfg.near());
     for _ in 0..SCATTER_TRIES {
-        let d = rng.gen_range(cfg.d_near..=cfg.d_far);
+        let d = rng.gen_range(cfg.near()..=cfg.far());
         let p = obs.position(i, d);
         let gap = placed
             .iter()
@@ -287,12 +294,12 @@ fn join(obs: &Observations, i: usize, placed: &[V3], median: f64, cfg: &LiftConf
     let step = cfg.spacing().max(1e-9);
     for k in 0..200 {
         let off = (k as f64 / 2.0).ceil() * if k % 2 == 1 { 1.0 } else { -1.0 };
-        let d = (median + off * step).clamp(cfg.d_near, cfg.d_far);
+        let d = (median + off * step).clamp(cfg.near(), cfg.far());
         if spaced(obs.position(i, d), placed, cfg.spacing()) {
             return d;
         }
     }
-    median.clamp(cfg.d_near, cfg.d_far)
+    median.clamp(cfg.near(), cfg.far())
 }
 
 #[cfg(test)]

@@ -283,10 +283,10 @@ mod tests {
                 / n)
                 .sqrt()
         };
-        let mid = 0.5 * (cfg.d_near + cfg.d_far);
+        let mid = 0.5 * (cfg.near() + cfg.far());
         let (seq, constant) = (rmse(&|i| depth[i]), rmse(&|_| mid));
         assert!(seq < 0.5 * constant, "{seq} m vs {constant} m");
-        assert!(depth.iter().all(|d| (cfg.d_near..=cfg.d_far).contains(d)));
+        assert!(depth.iter().all(|d| (cfg.near()..=cfg.far()).contains(d)));
         assert!(log.end.total < 1e-3 * log.start.total, "{log:?}");
     }
 }

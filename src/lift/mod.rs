@@ -16,12 +16,18 @@
 //! 6. [`render`] — top and side views (PNG, AVI) and a rendered frame of an exported glTF.
 //!
 //! The thesis's five user parameters (§3.7) keep its names and its Table 4.1 values as defaults
-//! (results 1 and 2): v_target 0.1, λ_t 0.3, λ_f 1.0, w_sep 2, d_sep 0.9. Lengths are in the
+//! (results 1 and 2): λ_t 0.3, λ_f 1.0, w_sep 2, d_sep 0.9; v_target and the depth bounds, when
+//! not given, are estimated from the tracks and the camera ([`estimate`]). Lengths are in the
 //! camera's world unit; v_target is per frame (the position-based velocity of eq. 3.3).
+//!
+//! A lift says how far it can be trusted ([`confidence`]): the whole sequence is run again from a
+//! second start and the two results compared.
 
 mod autodiff;
 pub mod boids;
+pub mod confidence;
 mod demo;
+pub mod estimate;
 pub mod eval;
 pub mod frame;
 mod knots;
@@ -41,7 +47,7 @@ use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 
 /// Schema tag of lifting reports.
-pub const LIFT_REPORT_SCHEMA: &str = "herdfit.lift-report/1";
+pub const LIFT_REPORT_SCHEMA: &str = "herdfit.lift-report/2";
 
 /// How the depths are found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -58,8 +64,9 @@ pub enum Method {
 #[serde(deny_unknown_fields, default)]
 pub struct LiftConfig {
     pub method: Method,
-    /// v_target: the birds' speed, world units per frame (eq. 3.3; Algorithm 3).
-    pub v_target: f64,
+    /// v_target: the birds' speed, world units per frame (eq. 3.3; Algorithm 3); estimated from
+    /// the tracks and the camera when absent ([`estimate`]).
+    pub v_target: Option<f64>,
     /// λ_t: weight of trajectory smoothness (eq. 3.2, 3.4).
     pub lambda_t: f64,
     /// λ_f: weight of flock-behaviour similarity (eq. 3.2).
@@ -68,31 +75,37 @@ pub struct LiftConfig {
     pub d_sep: f64,
     /// w_sep: separation vs cohesion in the flock target (Algorithm 3).
     pub w_sep: f64,
-    /// Depth bounds d_near < d < d_far (eq. 3.5).
-    pub d_near: f64,
-    pub d_far: f64,
+    /// Depth bounds d_near < d < d_far (eq. 3.5); estimated when absent ([`estimate`]).
+    pub d_near: Option<f64>,
+    pub d_far: Option<f64>,
     /// Least distance between birds scattered in the first frame (§3.5); d_sep when absent.
     pub min_spacing: Option<f64>,
     /// Seed of the first frame's scatter.
     pub seed: u64,
     /// The whole-sequence stage.
     pub sequence: SequenceConfig,
+    /// How v_target and the bounds are estimated when absent.
+    pub estimate: estimate::EstimateConfig,
+    /// How the lift judges itself (method `sequence`).
+    pub confidence: confidence::ConfidenceConfig,
 }
 
 impl Default for LiftConfig {
     fn default() -> Self {
         LiftConfig {
             method: Method::Sequence,
-            v_target: 0.1,
+            v_target: None,
             lambda_t: 0.3,
             lambda_f: 1.0,
             d_sep: 0.9,
             w_sep: 2.0,
-            d_near: 1.0,
-            d_far: 100.0,
+            d_near: None,
+            d_far: None,
             min_spacing: None,
             seed: 0,
             sequence: SequenceConfig::default(),
+            estimate: estimate::EstimateConfig::default(),
+            confidence: confidence::ConfidenceConfig::default(),
         }
     }
 }
@@ -102,12 +115,14 @@ impl LiftConfig {
     pub fn check(&self) -> Result<()> {
         for (k, v) in [
             ("v_target", self.v_target),
-            ("d_sep", self.d_sep),
+            ("d_sep", Some(self.d_sep)),
             ("d_near", self.d_near),
             ("d_far", self.d_far),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(format!("{k} = {v} must be > 0")));
+            if let Some(v) = v {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(Error::invalid(format!("{k} = {v} must be > 0")));
+                }
             }
         }
         for (k, v) in [("lambda_t", self.lambda_t), ("lambda_f", self.lambda_f)] {
@@ -121,18 +136,42 @@ impl LiftConfig {
                 self.w_sep
             )));
         }
-        if self.d_near >= self.d_far {
-            return Err(Error::invalid(format!(
-                "d_near = {} must be below d_far = {}",
-                self.d_near, self.d_far
-            )));
+        if let (Some(a), Some(b)) = (self.d_near, self.d_far) {
+            if a >= b {
+                return Err(Error::invalid(format!(
+                    "d_near = {a} must be below d_far = {b}"
+                )));
+            }
         }
         if let Some(m) = self.min_spacing {
             if !(m.is_finite() && m >= 0.0) {
                 return Err(Error::invalid(format!("min_spacing = {m} must be ≥ 0")));
             }
         }
-        self.sequence.check()
+        self.sequence.check()?;
+        self.estimate.check()?;
+        self.confidence.check()
+    }
+
+    /// v_target, world units per frame, once resolved ([`estimate::resolve`], which every entry
+    /// point calls first); NaN before.
+    pub fn vt(&self) -> f64 {
+        self.v_target.unwrap_or(f64::NAN)
+    }
+
+    /// d_near once resolved; NaN before.
+    pub fn near(&self) -> f64 {
+        self.d_near.unwrap_or(f64::NAN)
+    }
+
+    /// d_far once resolved; NaN before.
+    pub fn far(&self) -> f64 {
+        self.d_far.unwrap_or(f64::NAN)
+    }
+
+    /// Whether v_target and both bounds are set.
+    pub fn resolved(&self) -> bool {
+        self.v_target.is_some() && self.d_near.is_some() && self.d_far.is_some()
     }
 
     /// The first frame's least spacing.
@@ -199,6 +238,10 @@ pub struct LiftReport {
     /// The whole-sequence result's checks and energy (method `sequence`).
     pub whole_sequence: Option<Checks>,
     pub sequence_log: Option<sequence::SequenceLog>,
+    /// v_target and the bounds used, and how they were found.
+    pub estimate: estimate::Estimate,
+    /// How far the whole-sequence result can be trusted (method `sequence`).
+    pub confidence: Option<confidence::Confidence>,
 }
 
 /// A lift's result: the 3D tracks (the chosen method's), every depth and the report.
@@ -220,6 +263,8 @@ pub fn lift(
 ) -> Result<Lifted> {
     cfg.check()?;
     let obs = Observations::new(tracks, camera)?;
+    let (cfg, est) = estimate::resolve(&obs, cfg)?;
+    let cfg = &cfg;
     let frame_depth = frame::frame_by_frame(&obs, cfg, progress)?;
     let (depth, seq) = match cfg.method {
         Method::Frame => (frame_depth.clone(), None),
@@ -227,6 +272,10 @@ pub fn lift(
             let (d, log) = sequence::whole_sequence(&obs, &frame_depth, cfg, progress)?;
             (d, Some(log))
         }
+    };
+    let confidence = match cfg.method {
+        Method::Frame => None,
+        Method::Sequence => Some(confidence::assess(&obs, &depth, cfg, &est, progress)?),
     };
     let report = LiftReport {
         schema: LIFT_REPORT_SCHEMA.into(),
@@ -237,6 +286,8 @@ pub fn lift(
         frame_by_frame: Checks::new(&obs, &frame_depth, cfg.d_sep),
         whole_sequence: seq.as_ref().map(|_| Checks::new(&obs, &depth, cfg.d_sep)),
         sequence_log: seq,
+        estimate: est,
+        confidence,
     };
     let out = obs.tracks_3d(
         &depth,

@@ -359,7 +359,7 @@ impl<'a> Energy<'a> {
                     separation: sc.w_separation,
                     level: sc.w_level,
                     scale: 1.0 / n as f64,
-                    v_target: cfg.v_target,
+                    v_target: cfg.vt(),
                     d_sep: cfg.d_sep,
                 };
                 let t = herdfit_kernels::lift::sequence_energy(&st, plan, &w, u, grad, ws);
@@ -379,6 +379,13 @@ impl<'a> Energy<'a> {
 
 /// The energy's terms at depths `depth` (no gradient), by `cfg.sequence.gradient`.
 pub fn energy_terms(obs: &Observations, depth: &[f64], cfg: &LiftConfig) -> Result<EnergyTerms> {
+    let resolved;
+    let cfg = if cfg.resolved() {
+        cfg
+    } else {
+        resolved = super::estimate::resolve(obs, cfg)?.0;
+        &resolved
+    };
     let s = Structure::new(obs, cfg.sequence.neighbours);
     let u: Vec<f64> = depth.iter().map(|d| d.ln()).collect();
     Energy::new(obs, &s, cfg)?.eval(&u, None)
@@ -397,7 +404,7 @@ impl CoarseProblem {
         let s = Structure::new(&coarse.obs, cfg.sequence.neighbours);
         let mut cfg = cfg.clone();
         let k = stride as f64;
-        cfg.v_target *= k;
+        cfg.v_target = Some(cfg.vt() * k);
         cfg.sequence.w_accel /= k * k;
         CoarseProblem { coarse, s, cfg }
     }
@@ -424,6 +431,13 @@ pub fn whole_sequence(
     progress: &mut dyn Progress,
 ) -> Result<(Vec<f64>, SequenceLog)> {
     cfg.check()?;
+    let resolved;
+    let cfg = if cfg.resolved() {
+        cfg
+    } else {
+        resolved = super::estimate::resolve(obs, cfg)?.0;
+        &resolved
+    };
     let sc = &cfg.sequence;
     let n = obs.len();
     if init.len() != n {
@@ -434,10 +448,10 @@ pub fn whole_sequence(
     }
     let s = Structure::new(obs, sc.neighbours);
     let mut energy = Energy::new(obs, &s, cfg)?;
-    let (lo, hi) = (cfg.d_near.ln(), cfg.d_far.ln());
+    let (lo, hi) = (cfg.near().ln(), cfg.far().ln());
     let mut u: Vec<f64> = init
         .iter()
-        .map(|d| d.clamp(cfg.d_near, cfg.d_far).ln())
+        .map(|d| d.clamp(cfg.near(), cfg.far()).ln())
         .collect();
     let start = energy.eval(&init.iter().map(|d| d.ln()).collect::<Vec<_>>(), None)?;
     let segs = segments(obs);
@@ -541,7 +555,7 @@ pub fn whole_sequence(
     }
     let depth: Vec<f64> = u
         .iter()
-        .map(|x| x.exp().clamp(cfg.d_near, cfg.d_far))
+        .map(|x| x.exp().clamp(cfg.near(), cfg.far()))
         .collect();
     let end = energy.eval(&depth.iter().map(|d| d.ln()).collect::<Vec<_>>(), None)?;
     Ok((

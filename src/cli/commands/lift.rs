@@ -1,6 +1,7 @@
 //! `herdfit lift …`: 3D flocks from 2D tracks (Lin's thesis). Each verb parses its flags into the
 //! library's config, makes one library call and prints.
 
+use super::lift_print;
 use crate::cli::Bars;
 use crate::data::atomic::{check_writable, write_atomic, AtomicDir};
 use crate::data::camera::Camera;
@@ -12,7 +13,7 @@ use crate::lift::eval::evaluate;
 use crate::lift::render::{views_png, Layer, COLOURS};
 use crate::lift::{lift, project_tracks, LiftConfig, Method};
 use clap::{Args, Subcommand};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 #[derive(Subcommand, Debug)]
 pub enum LiftCommand {
@@ -38,7 +39,8 @@ pub struct LiftFlags {
     /// frame: the thesis's frame-by-frame method; sequence: then the whole-sequence optimisation.
     #[arg(long, value_parser = ["frame", "sequence"])]
     pub method: Option<String>,
-    /// v_target, the birds' speed in world units per frame.
+    /// v_target, the birds' speed in world units per frame (estimated from the tracks and the
+    /// camera when absent: the report says how).
     #[arg(long, value_name = "V")]
     pub v_target: Option<f64>,
     /// λ_t, weight of trajectory smoothness.
@@ -53,10 +55,10 @@ pub struct LiftFlags {
     /// w_sep, separation against cohesion.
     #[arg(long, value_name = "W", allow_hyphen_values = true)]
     pub w_sep: Option<f64>,
-    /// Nearest allowed depth.
+    /// Nearest allowed depth (estimated when absent).
     #[arg(long, value_name = "D")]
     pub d_near: Option<f64>,
-    /// Farthest allowed depth.
+    /// Farthest allowed depth (estimated when absent).
     #[arg(long, value_name = "D")]
     pub d_far: Option<f64>,
     /// Iterations of the whole-sequence optimisation.
@@ -97,13 +99,19 @@ impl LiftFlags {
                 *dst = v;
             }
         };
-        set(&mut c.v_target, self.v_target);
+        if self.v_target.is_some() {
+            c.v_target = self.v_target;
+        }
+        if self.d_near.is_some() {
+            c.d_near = self.d_near;
+        }
+        if self.d_far.is_some() {
+            c.d_far = self.d_far;
+        }
         set(&mut c.lambda_t, self.lambda_t);
         set(&mut c.lambda_f, self.lambda_f);
         set(&mut c.d_sep, self.d_sep);
         set(&mut c.w_sep, self.w_sep);
-        set(&mut c.d_near, self.d_near);
-        set(&mut c.d_far, self.d_far);
         if let Some(n) = self.iterations {
             c.sequence.iterations = n;
         }
@@ -147,7 +155,7 @@ pub struct RunArgs {
     /// Output 3D tracks (herdfit.tracks/1 CSV; its sidecar beside it).
     #[arg(long, value_name = "OUT.csv")]
     pub out: PathBuf,
-    /// Report (herdfit.lift-report/1); OUT.report.json when omitted.
+    /// Report (herdfit.lift-report/2); OUT.report.json when omitted.
     #[arg(long, value_name = "REPORT.json")]
     pub report: Option<PathBuf>,
     /// Folder for top.png and side.png.
@@ -359,6 +367,10 @@ fn run_cmd(a: RunArgs) -> Result<()> {
             camera.units.as_str()
         ))
     );
+    lift_print::print_estimate(&r.estimate, camera.units.as_str());
+    if let Some(c) = &r.confidence {
+        lift_print::print_confidence(c);
+    }
     println!("  report: {}", report_path.display());
     Ok(())
 }
@@ -503,54 +515,8 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
         &camera,
     )?;
     dir.commit()?;
-    print_eval(&ev.report, &a.out, secs);
+    lift_print::print_eval(&ev.report, &a.out, secs);
     Ok(())
-}
-
-fn print_eval(r: &crate::lift::eval::EvalReport, out: &Path, secs: f64) {
-    let u = r.camera.units.as_str();
-    println!(
-        "lift evaluate: {} birds, {} frames, {} points; mean true depth {:.2} {u}; flock extent {:.2} {u} (depth {:.2} {u}); truth's closest pair {}",
-        r.birds,
-        r.frames,
-        r.observations,
-        r.truth.mean_depth,
-        r.truth.extent,
-        r.truth.depth_extent,
-        r.truth.min_distance.map_or("–".into(), |d| format!("{d:.3} {u}"))
-    );
-    println!(
-        "  {:<16} {:>10} {:>10} {:>10} {:>9} {:>12} {:>9} {:>22}",
-        "estimate",
-        "depth RMSE",
-        "(relative)",
-        "3D RMSE",
-        "/ extent",
-        "closest pair",
-        "< d_sep/2",
-        "speed change vs truth"
-    );
-    for m in &r.methods {
-        println!(
-            "  {:<16} {:>10.3} {:>9.1}% {:>10.3} {:>9.2} {:>12} {:>9} {:>6.2} {:>6.2} {:>6.2}",
-            m.name,
-            m.depth_rmse,
-            100.0 * m.depth_rmse_relative,
-            m.position_rmse,
-            m.position_rmse_per_extent,
-            m.checks
-                .min_distance
-                .map_or("–".into(), |d| format!("{d:.3}")),
-            m.checks.pairs_below_half_d_sep,
-            m.speed_change_ratio[0],
-            m.speed_change_ratio[1],
-            m.speed_change_ratio[2]
-        );
-    }
-    println!(
-        "  (speed change: mean, median, p90 over the truth's); {secs:.1} s; wrote {}",
-        out.display()
-    );
 }
 
 fn camera_cmd(a: CameraArgs) -> Result<()> {

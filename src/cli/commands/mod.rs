@@ -15,6 +15,7 @@ pub mod gradcheck;
 pub mod import_reference;
 pub mod import_tracks;
 pub mod lift;
+mod lift_print;
 pub mod simulate;
 pub mod synth;
 pub mod validate;
