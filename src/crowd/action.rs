@@ -27,9 +27,10 @@ pub enum ClusterChoice {
 }
 
 /// What the action model outputs within the chosen cluster.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ActionOutput {
+    #[default]
     /// Eq. 3's regression, kept within the cluster's spread and attracted toward the nearest
     /// sample (§5.2–5.3; the paper).
     Regression,
@@ -80,12 +81,6 @@ pub struct ActionConfig {
 
 fn is_regression(o: &ActionOutput) -> bool {
     *o == ActionOutput::Regression
-}
-
-impl Default for ActionOutput {
-    fn default() -> Self {
-        ActionOutput::Regression
-    }
 }
 
 impl Default for ActionConfig {

@@ -32,6 +32,9 @@ pub struct HoldoutConfig {
     pub split: f64,
     /// A measure holds when its simulated distance is at most this many times the halves'.
     pub limit: f64,
+    /// Agents leave on reaching their goals (or when their time is up) instead of when the real
+    /// ones left (`crowd simulate --leave-at-goal`).
+    pub leave_at_goal: bool,
 }
 
 impl Default for HoldoutConfig {
@@ -44,6 +47,7 @@ impl Default for HoldoutConfig {
             },
             split: 0.5,
             limit: 2.0,
+            leave_at_goal: false,
         }
     }
 }
@@ -145,7 +149,10 @@ pub fn holdout(
     let (first, second, split_frame) = split_in_time(tracks, cfg.split)?;
     let model = learn(std::slice::from_ref(&first), &cfg.learn, progress)?;
     let test = Scene::from_tracks(&second, 0.0)?;
-    let entries = entries_from_tracks(&test);
+    let mut entries = entries_from_tracks(&test);
+    if cfg.leave_at_goal {
+        entries.iter_mut().for_each(|e| e.leave = None);
+    }
     let run = simulate(&model, layout, &entries, &cfg.sim, progress)?;
     let sim = Scene::from_tracks(&run.tracks, 0.0)?;
     let learnt = Scene::from_tracks(&first, 0.0)?;

@@ -448,34 +448,9 @@ pub fn simulate(
         advance(model, &mut agents, &plans, walls, keep);
         separate(&mut agents, cfg.min_distance, SEPARATION_PASSES, walls);
         agent_steps += agents.len() as u64;
-        // Leave at the goal (unless queueing or grouped) or at the deadline.
-        let mut i = 0;
-        while i < agents.len() {
-            let m = &minds[i];
-            let free = m.group.is_none() && m.line.is_none();
-            let at_goal = m.goal.is_some_and(|g| {
-                (agents[i].pos[0] - g[0]).hypot(agents[i].pos[1] - g[1]) < cfg.arrive
-            });
-            let home = at_goal && free && !m.leaves_on_time;
-            let late = t + 1 >= m.deadline && (free || m.leaves_on_time);
-            if home || late {
-                if let Some(g) = m.group {
-                    machine.groups[g].retain(|&id| id != agents[i].id);
-                }
-                if let Some(li) = m.line {
-                    machine.lines[li].1.retain(|&id| id != agents[i].id);
-                }
-                if home || at_goal {
-                    arrived += 1;
-                } else {
-                    timed_out += 1;
-                }
-                agents.remove(i);
-                minds.remove(i);
-            } else {
-                i += 1;
-            }
-        }
+        let (home, late) = depart(t, &mut agents, &mut minds, &mut machine, cfg);
+        arrived += home;
+        timed_out += late;
         progress.inc(1);
     }
     progress.finish();
@@ -493,6 +468,46 @@ pub fn simulate(
         groups_formed: machine.groups_formed,
         line_joins: machine.line_joins,
     })
+}
+
+/// Removes the agents that leave after step `t`: at their goal (unless queueing, grouped or
+/// leaving on time) or at their deadline. Returns (arrived, timed out).
+fn depart(
+    t: usize,
+    agents: &mut Vec<Agent>,
+    minds: &mut Vec<Mind>,
+    machine: &mut Machine,
+    cfg: &SimConfig,
+) -> (usize, usize) {
+    let (mut arrived, mut timed_out) = (0, 0);
+    let mut i = 0;
+    while i < agents.len() {
+        let m = &minds[i];
+        let free = m.group.is_none() && m.line.is_none();
+        let at_goal = m
+            .goal
+            .is_some_and(|g| (agents[i].pos[0] - g[0]).hypot(agents[i].pos[1] - g[1]) < cfg.arrive);
+        let home = at_goal && free && !m.leaves_on_time;
+        let late = t + 1 >= m.deadline && (free || m.leaves_on_time);
+        if !(home || late) {
+            i += 1;
+            continue;
+        }
+        if let Some(g) = m.group {
+            machine.groups[g].retain(|&id| id != agents[i].id);
+        }
+        if let Some(li) = m.line {
+            machine.lines[li].1.retain(|&id| id != agents[i].id);
+        }
+        if at_goal {
+            arrived += 1;
+        } else {
+            timed_out += 1;
+        }
+        agents.remove(i);
+        minds.remove(i);
+    }
+    (arrived, timed_out)
 }
 
 /// Per agent: whether goal steering applies (walking to its goal or to its place in a line;

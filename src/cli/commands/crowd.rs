@@ -87,7 +87,7 @@ pub struct LearnFlags {
 impl LearnFlags {
     fn config(&self, base: LearnConfig) -> Result<LearnConfig> {
         let mut c = match &self.config {
-            Some(p) => read_json::<LearnConfig>(p)?,
+            Some(p) => over(&base, p)?,
             None => base,
         };
         if let Some(v) = self.radius {
@@ -116,6 +116,24 @@ impl LearnFlags {
         }
         Ok(c)
     }
+}
+
+/// `base` with the keys of the JSON file `p` put over it (objects key by key, anything else
+/// replaced), so a `--config` file changes only what it names, whichever preset it starts from.
+fn over<T: serde::Serialize + serde::de::DeserializeOwned>(base: &T, p: &Path) -> Result<T> {
+    fn put(b: &mut serde_json::Value, o: serde_json::Value) {
+        match (b, o) {
+            (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+                for (k, v) in o {
+                    put(b.entry(k).or_insert(serde_json::Value::Null), v);
+                }
+            }
+            (b, o) => *b = o,
+        }
+    }
+    let mut v = serde_json::to_value(base).map_err(|e| Error::Internal(e.to_string()))?;
+    put(&mut v, read_json(p)?);
+    serde_json::from_value(v).map_err(|e| Error::file(p, format!("bad configuration: {e}")))
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
@@ -258,6 +276,9 @@ pub struct HoldoutArgs {
     pub split: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Agents leave on reaching their goals instead of when the real ones left.
+    #[arg(long)]
+    pub leave_at_goal: bool,
     /// Goal cone of the simulation (degrees; see `crowd simulate --goal-cone`).
     #[arg(long, value_name = "DEG", default_value_t = SimConfig::default().goal_cone_deg)]
     pub goal_cone: f64,
@@ -526,6 +547,7 @@ fn holdout_cmd(a: HoldoutArgs) -> Result<()> {
             ..base.sim.clone()
         },
         split: a.split,
+        leave_at_goal: a.leave_at_goal,
         ..base
     };
     cfg.check()?;
