@@ -67,20 +67,26 @@ fn rows(csv: &Path) -> BTreeMap<u64, Vec<(u64, f64, f64)>> {
     m
 }
 
+/// `crowd learn SRC --preset pedestrians EXTRA… --out DIR/m.json`.
+fn learn(dir: &Path, src: &Path, extra: &[&str]) -> PathBuf {
+    let model = dir.join("m.json");
+    let mut a = vec!["crowd", "learn", s(src), "--preset", "pedestrians"];
+    a.extend_from_slice(extra);
+    a.extend_from_slice(&["--out", s(&model)]);
+    ok(&a);
+    model
+}
+
+/// A JSON file.
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
 #[test]
 fn entries_leave_when_the_real_ones_did_and_a_layout_s_obstacle_holds() {
     let dir = tempfile::tempdir().unwrap();
     let src = corridor(dir.path(), 24);
-    let model = dir.path().join("m.json");
-    ok(&[
-        "crowd",
-        "learn",
-        s(&src),
-        "--preset",
-        "pedestrians",
-        "--out",
-        s(&model),
-    ]);
+    let model = learn(dir.path(), &src, &[]);
     // A pillar across the middle of the walkers' paths.
     let layout = dir.path().join("pillar.json");
     std::fs::write(
@@ -150,20 +156,7 @@ fn a_config_file_changes_only_what_it_names_over_the_preset() {
         r#"{"features": {"radius": 2.5}, "action": {"k": 50}}"#,
     )
     .unwrap();
-    let model = dir.path().join("m.json");
-    ok(&[
-        "crowd",
-        "learn",
-        s(&src),
-        "--preset",
-        "pedestrians",
-        "--config",
-        s(&cfg),
-        "--out",
-        s(&model),
-    ]);
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let m = json(&learn(dir.path(), &src, &["--config", s(&cfg)]));
     let c = &m["config"];
     assert_eq!(c["features"]["radius"], 2.5);
     assert_eq!(c["action"]["k"], 50);
@@ -190,13 +183,12 @@ fn the_split_in_time_halves_the_agent_frames_of_a_real_scene() {
 /// polarization) and the number of simulated individuals.
 fn holdout(scene: &str, extra: &[&str]) -> ([f64; 4], u64, String) {
     let dir = tempfile::tempdir().unwrap();
-    let json = dir.path().join("h.json");
+    let out = dir.path().join("h.json");
     let src = eth_ucy().join(format!("{scene}.txt"));
-    let mut a = vec!["crowd", "holdout", s(&src), "--json", s(&json)];
+    let mut a = vec!["crowd", "holdout", s(&src), "--json", s(&out)];
     a.extend_from_slice(extra);
     let text = ok(&a);
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let r = json(&out);
     assert_eq!(r["schema"], "herdfit.crowd-holdout/1");
     let m = r["measures"].as_array().unwrap();
     let ratio = |i: usize| m[i]["ratio"].as_f64().unwrap();
