@@ -22,7 +22,7 @@ Cameras are ground observers looking at the flock's centroid from D metres behin
 (horizontally) and H metres below it, 1920 × 1080, 60° horizontal field of view.
 
     python3 scripts/lift-validate.py --work /tmp/lv [--herdfit target/release/herdfit]
-        [--parts 1,2,3] [--config '{"sequence":{"w_accel":400}}'] [--out lv.json]
+        [--parts 1,2,3] [--config '{"sequence":{"w_accel":400}}'] [--seed-offset 5] [--out lv.json]
 """
 import argparse
 import json
@@ -207,6 +207,7 @@ def part2(args, work, flights, fits):
 def part3(args, work):
     rows = []
     for birds, seed in SYN_FLOCKS:
+        seed += args.seed_offset
         syn = f"{work}/syn_{birds}_{seed}"
         if not os.path.exists(syn + "/truth3d.csv"):
             cfgp = syn + ".json"
@@ -233,6 +234,8 @@ def main():
     ap.add_argument("--data", default=None, help="the jackdaw folder (default ../shared/data/jackdaws)")
     ap.add_argument("--parts", default="1,2,3")
     ap.add_argument("--config", default="{}", help="lift config JSON merged into every run")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="added to the synthetic flocks' seeds (a fresh set of 20 cases)")
     ap.add_argument("--out")
     args = ap.parse_args()
     os.makedirs(args.work, exist_ok=True)

@@ -125,6 +125,8 @@ fn a_short_whole_sequence_run_gives_the_same_depths_with_either_gradient() {
         .zip(&dd)
         .map(|(a, d)| ((a - d) / d).abs())
         .fold(0.0, f64::max);
-    assert!(worst < 1e-6, "largest relative depth difference {worst}");
+    // Both are f64, but they sum in different orders and six L-BFGS iterations amplify the
+    // rounding: 1.05e-6 with the default w_separation 10 (issue #50; the bound was 1e-6 with 100).
+    assert!(worst < 1e-5, "largest relative depth difference {worst}");
     assert!(la.end.total < la.start.total);
 }
