@@ -24,6 +24,7 @@ use super::LiftConfig;
 use crate::data::tracks::Units;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 
 /// Settings of the estimate (`estimate.<key>`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -162,6 +163,16 @@ pub fn turning(obs: &Observations, lag_s: f64) -> (Option<f64>, Option<f64>, usi
     }
     let n = om.len();
     (median(om), median(w), n)
+}
+
+/// `cfg` itself when v_target and both bounds are set, else `cfg` resolved ([`resolve`]): what
+/// the library's entry points call first.
+pub fn ensure<'a>(obs: &Observations, cfg: &'a LiftConfig) -> Result<Cow<'a, LiftConfig>> {
+    Ok(if cfg.resolved() {
+        Cow::Borrowed(cfg)
+    } else {
+        Cow::Owned(resolve(obs, cfg)?.0)
+    })
 }
 
 /// Fewest turning-rate samples the estimate accepts.

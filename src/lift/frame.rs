@@ -162,13 +162,8 @@ pub fn frame_by_frame(
     progress: &mut dyn Progress,
 ) -> Result<Vec<f64>> {
     cfg.check()?;
-    let resolved;
-    let cfg = if cfg.resolved() {
-        cfg
-    } else {
-        resolved = super::estimate::resolve(obs, cfg)?.0;
-        &resolved
-    };
+    let cfg = super::estimate::ensure(obs, cfg)?;
+    let cfg = &*cfg;
     let n = obs.len();
     let mut depth = vec![f64::NAN; n];
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);

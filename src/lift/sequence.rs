@@ -382,13 +382,8 @@ impl<'a> Energy<'a> {
 
 /// The energy's terms at depths `depth` (no gradient), by `cfg.sequence.gradient`.
 pub fn energy_terms(obs: &Observations, depth: &[f64], cfg: &LiftConfig) -> Result<EnergyTerms> {
-    let resolved;
-    let cfg = if cfg.resolved() {
-        cfg
-    } else {
-        resolved = super::estimate::resolve(obs, cfg)?.0;
-        &resolved
-    };
+    let cfg = super::estimate::ensure(obs, cfg)?;
+    let cfg = &*cfg;
     let s = Structure::new(obs, cfg.sequence.neighbours);
     let u: Vec<f64> = depth.iter().map(|d| d.ln()).collect();
     Energy::new(obs, &s, cfg)?.eval(&u, None)
@@ -434,13 +429,8 @@ pub fn whole_sequence(
     progress: &mut dyn Progress,
 ) -> Result<(Vec<f64>, SequenceLog)> {
     cfg.check()?;
-    let resolved;
-    let cfg = if cfg.resolved() {
-        cfg
-    } else {
-        resolved = super::estimate::resolve(obs, cfg)?.0;
-        &resolved
-    };
+    let cfg = super::estimate::ensure(obs, cfg)?;
+    let cfg = &*cfg;
     let sc = &cfg.sequence;
     let n = obs.len();
     if init.len() != n {
