@@ -31,8 +31,8 @@ fn corridor(frames: usize, rho: f32, vx: f32) -> ClipFields {
             &Grid {
                 origin: [0.0, 0.0],
                 cell_size: 1.0,
-                nx: nx,
-                ny: ny,
+                nx,
+                ny,
             },
             10.0,
             frames,
