@@ -9,7 +9,8 @@ ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 VENV="$ROOT/.venv-workflow"
 REQ="$ROOT/workflow/requirements.txt"
 
-APT_PACKAGES=(slurmctld slurmd slurm-client munge)
+# python3-venv: Debian's python3 makes no venv without it (ensurepip).
+APT_PACKAGES=(python3-venv slurmctld slurmd slurm-client munge)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
