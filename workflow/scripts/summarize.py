@@ -35,7 +35,7 @@ MEASURES = [
 ERR_COLS = [m if m.endswith("_error") else m + "_error" for m in MEASURES]
 COLUMNS = (
     ["clip", "kind", "input", "status", "failed_step", "error", "frames", "fit_frames",
-     "heldout_frames", "seeds"]
+     "heldout_frames", "seeds", "tracks", "boundary_entry_cells", "boundary_exit_cells"]
     + ERR_COLS
     + ["baseline_" + c for c in ERR_COLS]
     + ["fit_density_error_start", "fit_density_error_fitted", "fit_velocity_error_start",
@@ -92,11 +92,16 @@ def clip_row(results, clip):
     baseline = sets.get("baseline", {})
     ev = prov.get("evaluation", {})
     unc = params.get("uncertainty") or {}
+    # validate --boundary auto: the gates found from the video's edge flux; none = a closed clip.
+    gates = (report.get("boundary") or {}).get("gates") or {}
     row.update(
         frames=report["frames"][1],
         fit_frames=f"{fit_frames[0]}..{fit_frames[1]}",
         heldout_frames=f"{report['frames'][0]}..{report['frames'][1]}",
         seeds=report["seeds"],
+        tracks="yes" if report.get("tracks") else "no",
+        boundary_entry_cells=len(gates.get("entries", [])),
+        boundary_exit_cells=len(gates.get("exits", [])),
         fit_density_error_start=ev.get("start", {}).get("density_error", ""),
         fit_density_error_fitted=ev.get("fitted", {}).get("density_error", ""),
         fit_velocity_error_start=ev.get("start", {}).get("velocity_error", ""),
@@ -143,23 +148,29 @@ def md_bytes(rows, version):
         f"{len(rows)} clips: {len(ok)} fitted and validated, {len(bad)} not ({version}). Held-out "
         "errors of the fitted set, each the mean over the held-out frames and the seeds "
         "(`validate`; density and velocity relative, the measures |simulation − video|); fit: "
-        "density and velocity error at the start and fitted set on the fit's own frames.",
+        "density and velocity error at the start and fitted set on the fit's own frames; "
+        "tracks: fitted and validated from the tracked animals; boundary: entry/exit cells of "
+        "the open boundary found from the video (`--boundary auto`), or closed.",
         "",
-        "| clip | kind | status | fit frames | held-out | density | velocity | polarization "
+        "| clip | kind | status | fit frames | held-out | tracks | boundary | density | velocity "
+        "| polarization "
         "| ang. mom. centroid | ang. mom. centre | aspect ratio | fit density start → fitted "
         "| fit velocity start → fitted | determined |",
-        "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         if r["status"] != "ok":
             out.append(f"| {r['clip']} | {r['kind']} | {r['status']} ({r['failed_step']}) |"
-                       + " |" * 11)
+                       + " |" * 13)
             continue
         fit_d = f"{fmt(r['fit_density_error_start'])} → {fmt(r['fit_density_error_fitted'])}"
         fit_v = f"{fmt(r['fit_velocity_error_start'])} → {fmt(r['fit_velocity_error_fitted'])}"
         det = f"{r['determined_directions']}/12" if r["determined_directions"] != "" else "—"
+        ins, outs = r["boundary_entry_cells"], r["boundary_exit_cells"]
+        boundary = f"{ins} in, {outs} out" if ins or outs else "closed"
         out.append(
             f"| {r['clip']} | {r['kind']} | ok | {r['fit_frames']} | {r['heldout_frames']} | "
+            f"{r['tracks']} | {boundary} | "
             + " | ".join(fmt(r[c]) for c in ERR_COLS)
             + f" | {fit_d} | {fit_v} | {det} |"
         )

@@ -2,10 +2,12 @@
 
     .venv-workflow/bin/python -m pytest workflow/tests -v
 
-Inputs: two small synthetic herd videos (`herdfit synth --video-file`, 80 animals, 40 frames),
-one real input (the Herds-From-Video reference text of sheep-narrow from ../shared/data, via
-import-reference; a longer fit, so that it is still running when the run is killed) and a
-corrupt video (the first 30 kB of a good one). The local run (--cores 2) is killed with SIGKILL
+Inputs, one of each kind the workflow reads: two small synthetic herd videos (`herdfit synth
+--video-file`, 80 animals, 40 frames; extract), the Herds-From-Video reference text of
+sheep-narrow from ../shared/data (import-reference; a longer fit, so that it is still running
+when the run is killed), 8 tracked fish (trajectorytools' idtracker.ai .npy that
+scripts/fetch-testdata.sh puts in .testdata; import-tracks with per-clip flags, fitted and
+validated with --tracks) and a corrupt video (the first 30 kB of a good one). The local run (--cores 2) is killed with SIGKILL
 midway and run again; then the same workflow runs through a one-node Slurm cluster started here;
 the two summaries must be the same bytes. The tests run in file order and share the runs
 (module-scoped fixtures); each asserts one thing a user relies on.
@@ -33,7 +35,8 @@ PROFILE = ROOT / "workflow" / "profiles" / "slurm"
 CLUSTER = ROOT / "workflow" / "tests" / "slurm-cluster.sh"
 HERDFIT = os.environ.get("HERDFIT_BIN") or str(ROOT / "target" / "release" / "herdfit")
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(SNAKEFILE)]
-GOOD = ["sheep_narrow", "synth1", "synth2"]
+GOOD = ["fish", "sheep_narrow", "synth1", "synth2"]
+FISH = ROOT / ".testdata" / "trajectorytools" / "test_trajectories_idtrackerai.npy"
 # The sheep fit's epochs: long enough to be killed in the middle of (about 0.2 s each on one
 # core: it runs for more than twice as long as a synthetic clip's extract, fit and validate).
 SHEEP_EPOCHS = 60
@@ -66,6 +69,9 @@ def work(tmp_path_factory):
     ref = shared_data() / "herds-from-video" / "sheep_narrow" / "04_20_21_12"
     for part in ("meta", "frame", "cell"):
         os.symlink(f"{ref}_data_{part}.txt", inp / f"sheep_narrow_data_{part}.txt")
+    if not FISH.is_file():
+        pytest.fail(f"{FISH}: missing (bash scripts/fetch-testdata.sh)")
+    os.symlink(FISH, inp / "fish.npy")
     (inp / "corrupt.avi").write_bytes((inp / "synth1.avi").read_bytes()[:30000])
     threads = {"threads": 1, "mem_mb": 1000, "runtime": 10}
     cfg = {
@@ -73,7 +79,11 @@ def work(tmp_path_factory):
         "herdfit": HERDFIT,
         "fit": {"epochs": 2, "uncertainty": False, "args": "--eval-seeds 1"},
         "validate": {"seeds": 2},
-        "clips": {"sheep_narrow": {"fit": {"epochs": SHEEP_EPOCHS}}},
+        "clips": {
+            "sheep_narrow": {"fit": {"epochs": SHEEP_EPOCHS}},
+            # Pixels without a recorded body length: the flag import-tracks asks for; 100 frames.
+            "fish": {"import_tracks": {"args": "--body-length-px 30 --frames 0..100"}},
+        },
         # One core per job: two jobs side by side on the 2-core CI machine, here and in Slurm.
         "resources": {r: threads for r in
                       ("extract", "import_reference", "import_tracks", "fit", "validate", "summary")},
@@ -122,6 +132,7 @@ STEPS = {
     "synth1": [("extract", "clips/synth1")], "synth2": [("extract", "clips/synth2")],
     "corrupt": [("extract", "clips/corrupt")],
     "sheep_narrow": [("import_reference", "clips/sheep_narrow")],
+    "fish": [("import_tracks", "clips/fish")],
 }
 for _c in STEPS:
     STEPS[_c] += [("fit", f"fits/{_c}/params.json"), ("validate", f"validation/{_c}")]
@@ -237,6 +248,15 @@ def test_summary_lists_the_failure_and_the_finished_clips(work, local):
     assert rows["sheep_narrow"]["heldout_frames"] == "99..199"
     assert rows["sheep_narrow"]["fit_frames"] == "0..99"
     assert rows["synth1"]["heldout_frames"] == "20..40"
+    # The fish (import-tracks with the clip's own flags: 100 frames) fitted and validated from
+    # their tracks; the sheep's open boundary (validate --boundary auto) found, the synthetic
+    # clips' closed arenas left closed.
+    assert rows["fish"]["kind"] == "tracks" and rows["fish"]["tracks"] == "yes"
+    assert rows["fish"]["heldout_frames"] == "50..100"
+    assert [rows[c]["tracks"] for c in ("sheep_narrow", "synth1")] == ["no", "no"]
+    assert int(rows["sheep_narrow"]["boundary_entry_cells"]) > 0
+    assert int(rows["sheep_narrow"]["boundary_exit_cells"]) > 0
+    assert (rows["synth1"]["boundary_entry_cells"], rows["synth1"]["boundary_exit_cells"]) == ("0", "0")
     md = (work / "results" / "summary.md").read_text()
     assert "**corrupt**" in md and bad["error"] in md
     assert (work / "results" / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
