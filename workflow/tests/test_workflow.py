@@ -18,6 +18,7 @@ HERDFIT_BIN names the binary (default target/release/herdfit), HERDFIT_SHARED_DA
 import base64
 import csv
 import glob
+import hashlib
 import json
 import os
 import pathlib
@@ -159,6 +160,7 @@ def local(work):
     """The local run: started, killed with SIGKILL while the sheep fit is in its epochs and at
     least one synthetic clip is done, then unlocked and run again with --keep-going."""
     log = open(work / "local-1.log", "w")
+    t_start = time.time()
     proc = subprocess.Popen(
         SNAKEMAKE + ["--configfile", "config.json", "--cores", "2", "--keep-going"],
         cwd=work, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
@@ -185,6 +187,7 @@ def local(work):
                 break
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)  # snakemake and every herdfit it started
+    killed_s = time.time() - t_start
     proc.wait()
     log.close()
     finished = finished_jobs(work, "results")
@@ -193,13 +196,14 @@ def local(work):
     t0 = time.time()
     rerun = snakemake(work, "--cores", "2", "--keep-going", "--rerun-incomplete", log="local-2.log")
     return {"finished": finished, "epochs_at_kill": epochs, "rerun": rerun,
-            "rerun_s": time.time() - t0}
+            "killed_s": killed_s, "rerun_s": time.time() - t0}
 
 
 def test_killed_run_reruns_only_the_unfinished_jobs(work, local):
     ran = jobs_run(local["rerun"].stdout)
     per_clip = [(r, c) for r, c in ran if c is not None]
-    print(f"\nfinished before the kill: {sorted(local['finished'])}\nthe rerun ran: {ran}")
+    print(f"\nkilled after {local['killed_s']:.0f} s; finished before the kill: "
+          f"{sorted(local['finished'])}\nthe rerun ({local['rerun_s']:.0f} s) ran: {ran}")
     assert per_clip, "the rerun ran nothing"
     redone = [j for j in per_clip if j in local["finished"]]
     assert not redone, f"the rerun redid finished jobs: {redone}"
@@ -295,6 +299,8 @@ def test_slurm_run_writes_the_local_summary_bytes(work, slurm):
     for name in ("summary.csv", "summary.md", "summary.png"):
         local = (work / "results" / name).read_bytes()
         remote = (work / "results-slurm" / name).read_bytes()
+        print(f"{name}: local sha256 {hashlib.sha256(local).hexdigest()[:16]} ({len(local)} B), "
+              f"Slurm {hashlib.sha256(remote).hexdigest()[:16]} ({len(remote)} B)")
         assert local == remote, name
 
 
