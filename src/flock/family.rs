@@ -258,8 +258,8 @@ impl Family {
         let (r, c) = side_residuals(self.model, self.nl, x, y);
         let out = |v: f64, b: &[f64; 2]| (b[0] - v).max(v - b[1]).max(0.0);
         let mut total: f64 = r.iter().zip(&self.bands).map(|(v, b)| out(*v, b)).sum();
-        for side in 0..2 {
-            for (p, (v, b)) in c[side].iter().zip(&self.coefs[side]).enumerate() {
+        for (cs, bs) in c.iter().zip(&self.coefs) {
+            for (p, (v, b)) in cs.iter().zip(bs).enumerate() {
                 total += out(*v, b) * self.reach.powi(p as i32 + 1);
             }
         }
