@@ -23,6 +23,7 @@ pub mod attract;
 pub mod behaviour;
 pub mod eval;
 pub mod features;
+pub mod forecast;
 pub mod kmeans;
 pub mod knn;
 pub mod layout;
