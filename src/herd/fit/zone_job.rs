@@ -5,7 +5,6 @@
 use super::global::fit_zones_global;
 use super::job::{loss_plot, FitJob};
 use super::log::write_log;
-use super::zones::Zones;
 use crate::backend::cpu_device;
 use crate::data::agents::AgentRow;
 use crate::data::atomic::check_writable;
@@ -15,6 +14,7 @@ use crate::herd::eval::run_from;
 use crate::herd::guidance::guidance_fields;
 use crate::herd::params::{param_names, Params, SpeedModel};
 use crate::herd::zoned::ZoneSets;
+use crate::herd::zones::Zones;
 use crate::measure::fields::field_errors;
 use crate::progress::Progress;
 use std::ops::Range;
