@@ -33,8 +33,8 @@ t0=$(date +%s)
 
 # run NAME ARGS…: runs the binary, its stdout kept in stdout/NAME.txt (stderr only shown on
 # failure) with the wall-clock times it prints replaced by "…" (the identifiability estimate's
-# "(estimated in 3.3 s)", the demo's "; 11 s", "(1 s)" and "agent-steps in 0.21 s"), its wall
-# time appended to timings.txt (not hashed).
+# "(estimated in 3.3 s)", the demo's "; 11 s", "animation (1 s)" and "agent-steps in 0.21 s"),
+# its wall time appended to timings.txt (not hashed).
 run() {
     local name=$1 t=$SECONDS
     shift
@@ -44,7 +44,7 @@ run() {
         exit 1
     fi
     sed -E -e 's/\(estimated in [0-9.]+ s\)/(estimated in … s)/' -e 's/; [0-9.]+ s$/; … s/' \
-        -e 's/\([0-9.]+ s\)$/(… s)/' -e 's/agent-steps in [0-9.]+ s$/agent-steps in … s/' \
+        -e 's/animation \([0-9.]+ s\)$/animation (… s)/' -e 's/agent-steps in [0-9.]+ s$/agent-steps in … s/' \
         "stdout/$name.raw" >"stdout/$name.txt"
     rm -f "stdout/$name.err" "stdout/$name.raw"
     echo "$name $((SECONDS - t)) s" >>timings.txt
