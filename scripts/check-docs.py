@@ -11,6 +11,7 @@
 """
 
 import os
+import pathlib
 import re
 import sys
 
@@ -28,7 +29,7 @@ def anchor(heading):
 
 def headings(path):
     out, fence = [], False
-    for line in open(path, encoding="utf-8"):
+    for line in pathlib.Path(path).read_text(encoding="utf-8").splitlines(True):
         if line.startswith("```"):
             fence = not fence
         elif not fence and re.match(r"#{1,6} ", line):
@@ -43,7 +44,7 @@ def check(root):
         if not os.path.exists(path):
             bad.append(f"{name}: missing")
             continue
-        n = sum(1 for _ in open(path, encoding="utf-8"))
+        n = len(pathlib.Path(path).read_text(encoding="utf-8").splitlines())
         if n > limit:
             bad.append(f"{name}: {n} lines (limit {limit})")
         for h in headings(path):
@@ -58,7 +59,7 @@ def check(root):
         path = os.path.join(root, rel)
         if not os.path.exists(path):
             continue
-        text = open(path, encoding="utf-8").read()
+        text = pathlib.Path(path).read_text(encoding="utf-8")
         text = re.sub(r"```.*?```", "", text, flags=re.S)
         for target in LINK.findall(text):
             if re.match(r"[a-z]+:", target):
@@ -82,7 +83,7 @@ def main():
     if bad:
         sys.exit(1)
     sizes = ", ".join(
-        f"{n} {sum(1 for _ in open(os.path.join(root, n), encoding='utf-8'))}/{l}"
+        f"{n} {len(pathlib.Path(root, n).read_text(encoding='utf-8').splitlines())}/{l}"
         for n, l in LIMITS.items()
     )
     print(f"docs: {sizes} lines; headings undated; links resolve")

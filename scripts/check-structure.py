@@ -18,6 +18,7 @@ strings, raw strings and char literals, so braces inside them are not counted.
 """
 
 import os
+import pathlib
 import re
 import sys
 
@@ -132,7 +133,7 @@ def circle_errors():
             continue
 
         def read(rel):
-            return code_only(open(os.path.join(ROOT, rel), encoding="utf-8").read())
+            return code_only(pathlib.Path(os.path.join(ROOT, rel)).read_text(encoding="utf-8"))
 
         graph = imports.crate_graph(root, read, ROOT)
         for folder, units, loops in imports.circles(graph):
@@ -158,7 +159,7 @@ def main():
     sizes, fns = [], []
     for path in rust_files():
         rel = os.path.relpath(path, ROOT)
-        text = open(path, encoding="utf-8").read()
+        text = pathlib.Path(path).read_text(encoding="utf-8")
         lines = text.count("\n") + (0 if text.endswith("\n") or not text else 1)
         sizes.append((lines, rel))
         if lines > MAX_FILE:

@@ -10,6 +10,7 @@ limit and a broken link.
 """
 
 import os
+import pathlib
 import re
 import shutil
 import subprocess
@@ -116,7 +117,7 @@ class EquationTable(unittest.TestCase):
     def test_every_function_the_equation_table_names_exists(self):
         # ARCHITECTURE.md's "Paper equations → code": each `module::item` resolves to a file
         # that defines the item; a bare `item` after it in the same cell is defined in that file.
-        text = open(os.path.join(REPO, "ARCHITECTURE.md"), encoding="utf-8").read()
+        text = pathlib.Path(os.path.join(REPO, "ARCHITECTURE.md")).read_text(encoding="utf-8")
         table = text[text.index("## Paper equations") : text.index("## Invariants")]
         checked = 0
         for row in table.splitlines()[4:]:
@@ -132,7 +133,7 @@ class EquationTable(unittest.TestCase):
                     # A bare item, or `Type::method`, of the module named before it in the cell.
                     self.assertIsNotNone(last, f"{name}: no module before it in: {row}")
                     items = name.split("::")
-                src = open(os.path.join(REPO, last), encoding="utf-8").read()
+                src = pathlib.Path(os.path.join(REPO, last)).read_text(encoding="utf-8")
                 for item in items:
                     self.assertTrue(defined(item, src), f"{name}: {item} is not defined in {last}")
                 checked += 1
