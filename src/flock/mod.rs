@@ -6,7 +6,7 @@
 //! Stages, one file each: [`synth`] (synthetic examples with known truth), [`extract`] (§4:
 //! ordering, gaps, leader, RANSAC side fits in [`ransac`]), [`power`] (§5 Step 2: Hummel's g_ij,
 //! Munk's theorem), [`steady`] (Algorithm 1, with the eq. 4 solver in [`solve`]), [`hpr`] and
-//! [`initiation`] (§6), [`animate`] (the whole animation), [`write`] (its folder, with
+//! [`initiation`] (§6), [`animate`] (the whole animation), [`write`](mod@write) (its folder, with
 //! [`figures`] and `render`, feature `video`).
 
 pub mod animate;

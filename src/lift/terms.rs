@@ -1,5 +1,5 @@
 //! What the whole-sequence energy of [`super::sequence`] is made of, shared by its hand-derived
-//! gradient and its autodiff reference ([`super::autodiff`]): the index lists of its terms
+//! gradient and its autodiff reference (`lift::autodiff`): the index lists of its terms
 //! ([`Structure`], fixed by the tracks alone) and the terms' values at one point
 //! ([`EnergyTerms`]).
 

@@ -315,7 +315,7 @@ pub struct ValidateConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames: Option<[usize; 2]>,
     /// Which measures to report: herdfit's own, or also the reference implementation's
-    /// ([`reference`]). Not written when herdfit's own.
+    /// ([`reference`](mod@reference)). Not written when herdfit's own.
     #[serde(default, skip_serializing_if = "is_herdfit")]
     pub measures: Measures,
 }
