@@ -11,7 +11,8 @@ use std::path::Path;
 /// Schema tag of the savings CSV's sidecar.
 pub const SAVINGS_SCHEMA: &str = "herdfit.flock-savings/1";
 
-/// The savings CSV: `frame,time,id,e,xi` (e: fraction of the bird's induced power saved).
+/// The savings CSV: `frame,time,id,e,xi` (e: the bird's induced-power saving in units of a lone
+/// bird's induced power, eq. 1 with C = 1; see `write_outputs`).
 pub fn savings_csv(rows: &[(u64, f64, u64, f64, f64)]) -> String {
     use std::fmt::Write as _;
     let mut s = String::from("frame,time,id,e,xi\n");
@@ -47,8 +48,9 @@ pub fn write_outputs(anim: &Animation, out: &Path, progress: &mut dyn Progress) 
             "frame": "frame of tracks.csv",
             "time": "seconds",
             "id": "bird id of tracks.csv",
-            "e": "power reduction e_i = Σ_j g_ij (Klotsman & Tal eq. 1, Hummel 1983): fraction of the bird's induced power saved",
-            "xi": "relative power reduction ξ_i = e_i / Σ e",
+            "e": "induced-power saving e_i = Σ_j g_ij (Klotsman & Tal eq. 1 with the drag ratio C = 1; Hummel 1983): the induced power (induced drag × speed) the other birds' upwash removes from bird i, in units of the induced power of the same bird flying alone. Hummel's horseshoe-vortex model is linear and has no ceiling: e exceeds 1 where wing tips overlap (neighbours less than one wingspan apart laterally), the upwash there more than cancelling the bird's own induced drag. It is not the fraction of the bird's total flight power: that is C·e with C the induced share of its flight power at cruise (Cutts & Speakman 1994 estimate C ≈ 0.17 for pink-footed geese: 14 % of induced power, 2.4 % of total).",
+      "flock mean": "report.json flock_mean_saving: e averaged over birds and steady frames, the figure field studies estimate from photographed skeins (14 %: Cutts & Speakman 1994, pink-footed geese; 36 %: Hainsworth 1987, Canada geese; both of induced power, with Lissaman & Shollenberger's model)",
+            "xi": "relative power reduction ξ_i = e_i / Σ e (§5 Step 3)",
         },
         "frames": "the F steady-flight frames after the hand-over (the model assumes steady formation flight)",
     });
