@@ -12,7 +12,7 @@ use herdfit::flock::extract::{extract, ExtractConfig};
 use herdfit::flock::initiation::{random_start, Initiation, InitiationConfig, Target};
 use herdfit::flock::pairs::Pairs;
 use herdfit::flock::solve::PositionProblem;
-use herdfit::flock::{power, steady, synth};
+use herdfit::flock::{keys, power, steady, synth};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rand::SeedableRng;
@@ -100,7 +100,7 @@ fn key_shape(c: &mut Criterion) {
     g.bench_function("analytic_jacobian", |b| {
         b.iter(|| {
             let mut rng = ChaCha8Rng::seed_from_u64(7);
-            steady::next_key(
+            keys::next_key(
                 &s.first, s.nl, s.nr, &s.range, s.gaps, &s.family, &cfg, &mut rng,
             )
         })
@@ -112,21 +112,21 @@ fn key_shape(c: &mut Criterion) {
     g.bench_function("analytic_jacobian_budget_400n", |b| {
         b.iter(|| {
             let mut rng = ChaCha8Rng::seed_from_u64(7);
-            steady::next_key(
+            keys::next_key(
                 &s.first, s.nl, s.nr, &s.range, s.gaps, &s.family, &old, &mut rng,
             )
         })
     });
     // One solve of the key shape's final equations from the previous positions.
     let mut rng = ChaCha8Rng::seed_from_u64(7);
-    let k = steady::next_key(
+    let k = keys::next_key(
         &s.first, s.nl, s.nr, &s.range, s.gaps, &s.family, &cfg, &mut rng,
     );
     // The key shape after it (from a key shape on a uniform layout, as every later one is).
     g.bench_function("second_key_shape", |b| {
         b.iter(|| {
             let mut rng = ChaCha8Rng::seed_from_u64(8);
-            steady::next_key(&k, s.nl, s.nr, &s.range, s.gaps, &s.family, &cfg, &mut rng)
+            keys::next_key(&k, s.nl, s.nr, &s.range, s.gaps, &s.family, &cfg, &mut rng)
         })
     });
     let x: Vec<f64> = k.pos.iter().map(|p| p[0]).collect();

@@ -59,9 +59,9 @@ fn main() {
                 fingerprint: 0.0,
             };
             for _ in 0..nkeys {
-                let bx = keys::eq2_box(&prev.xi_target, &range, &cfg);
+                let bx = steady::eq2_box(&prev.xi_target, &range, &cfg);
                 let t0 = Instant::now();
-                let k = steady::next_key(&prev, init.nl, init.nr, &range, gr, &fam, &cfg, &mut rng);
+                let k = keys::next_key(&prev, init.nl, init.nr, &range, gr, &fam, &cfg, &mut rng);
                 r.seconds += t0.elapsed().as_secs_f64();
                 for (a, b) in k.xi.iter().zip(&k.xi_draw) {
                     r.worst = r.worst.max((a - b).abs() / b);

@@ -29,15 +29,14 @@ use herdfit::herd::fit::global::objective;
 use herdfit::herd::fit::job::{run, FitJob};
 use herdfit::herd::fit::run::zone_loss_of;
 use herdfit::herd::fit::zone_job::run_zones;
-use herdfit::herd::fit::zones::{
-    NamedSet, ParamSets, ZoneSpec, Zones, ZonesFile, PARAM_SETS_SCHEMA,
-};
 use herdfit::herd::fit::{fit_zones, FitConfig, LossKind, UncertaintyConfig};
 use herdfit::herd::params::Params;
+use herdfit::herd::sets::{NamedSet, ParamSets, PARAM_SETS_SCHEMA};
 use herdfit::herd::synth::{write_clip, SynthJob};
 use herdfit::herd::validate::zones::{validate_zones, ZoneSetReport};
 use herdfit::herd::validate::ValidateConfig;
 use herdfit::herd::zoned::ZoneSets;
+use herdfit::herd::zones::{ZoneSpec, Zones, ZonesFile};
 use herdfit::progress::NoProgress;
 use rand::{Rng, SeedableRng};
 use std::path::Path;
@@ -119,7 +118,7 @@ fn main() -> herdfit::Result<()> {
     let (truth_path, zones_path) = (out.join("truth-sets.json"), out.join("zones.json"));
     write(&truth_path, &bundle)?;
     let zfile = ZonesFile {
-        schema: herdfit::herd::fit::zones::ZONES_SCHEMA.into(),
+        schema: herdfit::herd::zones::ZONES_SCHEMA.into(),
         mask: None,
         zones: zones.clone(),
     };

@@ -1,10 +1,16 @@
 #!/usr/bin/env python3
 """Structure guard (ARCHITECTURE.md, invariants): no Rust source file over 600 lines and no
-function over 150 lines under src/ and kernels/ (tests/ is exempt), and no subsystem folder
-(src/herd, src/flock, src/crowd, src/lift) importing another one.
+function over 150 lines under src/ and kernels/ (tests/ is exempt), no subsystem folder
+(src/herd, src/flock, src/crowd, src/lift) importing another one, and no circle of imports:
+inside every folder, its files and subfolders (each with all below it) import each other
+without a loop (so neither two files nor two folders such as herd/fit and herd/author import
+each other, directly or round a longer loop). Which file imports which is read by
+scripts/imports.py: an import is an arrow to the file that defines the item (re-exports
+followed), test code and a module's arrows to its own submodules left out.
 
     python3 scripts/check-structure.py            # check; exit 1 and list every violation
     python3 scripts/check-structure.py --report   # also print the longest files and functions
+    python3 scripts/check-structure.py --root DIR # check the tree at DIR (its src/, kernels/)
 
 A function's length runs from the line of its `fn` keyword to the line of its closing brace
 (closures and nested items inside it count towards it). The scanner understands comments,
@@ -12,10 +18,17 @@ strings, raw strings and char literals, so braces inside them are not counted.
 """
 
 import os
+import pathlib
 import re
 import sys
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import imports  # noqa: E402
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CRATES = ["src/lib.rs", "kernels/src/lib.rs"]
+# File arrows shown per arrow of a loop (the rest counted).
+SHOWN_ARROWS = 3
 DIRS = ["src", "kernels"]
 MAX_FILE = 600
 MAX_FN = 150
@@ -101,31 +114,10 @@ def functions(code):
     for m in FN.finditer(code):
         # The body starts at the first `{` at bracket depth 0 after the signature; a `;` first
         # means a declaration without a body (trait method).
-        depth, j = 0, m.end()
-        body = None
-        while j < len(code):
-            ch = code[j]
-            if ch in "([":
-                depth += 1
-            elif ch in ")]":
-                depth -= 1
-            elif ch == ";" and depth == 0:
-                break
-            elif ch == "{" and depth == 0:
-                body = j
-                break
-            j += 1
-        if body is None:
+        kind, body = imports.signature_end(code, m.end())
+        if kind != "{":
             continue
-        level, k = 0, body
-        while k < len(code):
-            if code[k] == "{":
-                level += 1
-            elif code[k] == "}":
-                level -= 1
-                if level == 0:
-                    break
-            k += 1
+        k = imports.matching(code, body)
         found.append((m.group(1), line_of[m.start()], line_of[min(k, len(code) - 1)]))
     return found
 
@@ -133,13 +125,41 @@ def functions(code):
 USE = re.compile(r"\bcrate::(herd|flock|crowd|lift)\b")
 
 
+def circle_errors():
+    """(key, message) of every circle of imports between the entries of one folder."""
+    out = []
+    for root in CRATES:
+        if not os.path.exists(os.path.join(ROOT, root)):
+            continue
+
+        def read(rel):
+            return code_only(pathlib.Path(os.path.join(ROOT, rel)).read_text(encoding="utf-8"))
+
+        graph = imports.crate_graph(root, read, ROOT)
+        for folder, units, loops in imports.circles(graph):
+            short = lambda u: u[len(folder) + 1 :] if folder else u  # noqa: E731
+            lines = [f"circle of imports in {folder}/: {', '.join(short(u) for u in units)}"]
+            for loop in loops:
+                lines.append("  loop: " + " -> ".join(short(u) for u, _, _ in loop + loop[:1]))
+                for u, v, fs in loop:
+                    for a, b, n in fs[:SHOWN_ARROWS]:
+                        lines.append(f"    {a} -> {b}: {', '.join(n)}")
+                    if len(fs) > SHOWN_ARROWS:
+                        lines.append(f"    … and {len(fs) - SHOWN_ARROWS} more from {short(u)} to {short(v)}")
+            out.append((f"circle {folder}: {' '.join(units)}", "\n".join(lines)))
+    return out
+
+
 def main():
+    global ROOT
     report = "--report" in sys.argv
+    if "--root" in sys.argv:
+        ROOT = os.path.abspath(sys.argv[sys.argv.index("--root") + 1])
     bad = []
     sizes, fns = [], []
     for path in rust_files():
         rel = os.path.relpath(path, ROOT)
-        text = open(path, encoding="utf-8").read()
+        text = pathlib.Path(path).read_text(encoding="utf-8")
         lines = text.count("\n") + (0 if text.endswith("\n") or not text else 1)
         sizes.append((lines, rel))
         if lines > MAX_FILE:
@@ -155,6 +175,8 @@ def main():
                 if m.group(1) != parts[1]:
                     line = code.count("\n", 0, m.start()) + 1
                     bad.append((rel, f"{rel}:{line}: subsystem {parts[1]} imports crate::{m.group(1)}"))
+    circles = circle_errors()
+    bad += circles
     if report:
         print("longest files:")
         for n, rel in sorted(sizes, reverse=True)[:15]:
@@ -173,7 +195,10 @@ def main():
     if known:
         print(f"structure: {len(known)} known violation(s) left, no new ones")
         return
-    print(f"structure: {len(sizes)} files ≤ {MAX_FILE} lines, {len(fns)} functions ≤ {MAX_FN} lines, subsystems independent")
+    print(
+        f"structure: {len(sizes)} files ≤ {MAX_FILE} lines, {len(fns)} functions ≤ {MAX_FN} lines, "
+        "subsystems independent, no circle of imports"
+    )
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use plotters::coord::types::RangedCoordf64;
+use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -57,12 +58,47 @@ fn builder<'a, 'b, DB: DrawingBackend>(
     b
 }
 
-/// Axes without a mesh, labelled `x` and `y` in 12 px.
-fn bare_axes<DB: DrawingBackend>(
-    chart: &mut ChartContext<DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+/// What a drawing closure of [`png`] returns: any plotting error, as text for the message.
+pub(crate) type Drawn = std::result::Result<(), Box<dyn std::error::Error>>;
+
+/// The drawing area of a PNG being drawn by [`png`].
+pub(crate) type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+/// Draws a `size` bitmap with `draw` and writes it atomically as the PNG `path` (the font
+/// registered first; a drawing error names the file: "plotting: …").
+pub(crate) fn png(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> Drawn) -> Result<()> {
+    font_ready().map_err(|e| e.in_file(path))?;
+    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
+    let fail = |e: Box<dyn std::error::Error>| Error::file(path, format!("plotting: {e}"));
+    {
+        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+        draw(&root).map_err(fail)?;
+        root.present().map_err(|e| fail(e.into()))?;
+    }
+    crate::data::atomic::persist(tmp, path)
+}
+
+type Chart2d<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+type DrawResult<DB> =
+    std::result::Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
+
+/// Axes with a mesh, labelled `x` and `y` in `font` px.
+pub(crate) fn axes<DB: DrawingBackend>(
+    chart: &mut Chart2d<DB>,
     x: &str,
     y: &str,
-) -> std::result::Result<(), String> {
+    font: i32,
+) -> DrawResult<DB> {
+    chart
+        .configure_mesh()
+        .x_desc(x)
+        .y_desc(y)
+        .label_style(("sans-serif", font))
+        .draw()
+}
+
+/// Axes without a mesh, labelled `x` and `y` in 12 px.
+fn bare_axes<DB: DrawingBackend>(chart: &mut Chart2d<DB>, x: &str, y: &str) -> DrawResult<DB> {
     chart
         .configure_mesh()
         .disable_mesh()
@@ -70,7 +106,42 @@ fn bare_axes<DB: DrawingBackend>(
         .y_desc(y)
         .label_style(("sans-serif", 12))
         .draw()
-        .map_err(|e| e.to_string())
+}
+
+/// The chart's legend: its series labels on white of opacity `opacity`, a black border, text in
+/// `font` px.
+pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    opacity: f64,
+    font: i32,
+) -> DrawResult<DB> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(opacity))
+        .border_style(BLACK)
+        .label_font(("sans-serif", font))
+        .draw()
+}
+
+/// The bounding box (x0, x1, y0, y1) of the finite points, or the unit square when there are
+/// none.
+fn extent(points: impl Iterator<Item = (f64, f64)>) -> (f64, f64, f64, f64) {
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for (x, y) in points.filter(|p| p.0.is_finite() && p.1.is_finite()) {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if !x0.is_finite() {
+        return (0.0, 1.0, 0.0, 1.0);
+    }
+    (x0, x1, y0, y1)
 }
 
 /// One named series of (x, y) points.
@@ -88,70 +159,32 @@ pub fn line_chart(
     y_label: &str,
     series: &[Series],
 ) -> Result<()> {
-    font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
-    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for s in series {
-        for &(x, y) in &s.points {
-            if x.is_finite() && y.is_finite() {
-                x0 = x0.min(x);
-                x1 = x1.max(x);
-                y0 = y0.min(y);
-                y1 = y1.max(y);
-            }
-        }
-    }
-    if !x0.is_finite() {
-        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
-    }
+    let (x0, mut x1, y0, y1) = extent(series.iter().flat_map(|s| s.points.iter().copied()));
     if x1 <= x0 {
         x1 = x0 + 1.0;
     }
     let pad = ((y1 - y0) * 0.05).max(1e-9);
-    {
-        let root = BitMapBackend::new(tmp.path(), (900, 500)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let mut chart = builder(&root, title, 22, 12, (40, 60))
-            .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
-            .map_err(|e| fail(e.to_string()))?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .label_style(("sans-serif", 14))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+    png(path, (900, 500), |root| {
+        root.fill(&WHITE)?;
+        let mut chart = builder(root, title, 22, 12, (40, 60))
+            .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))?;
+        axes(&mut chart, x_label, y_label, 14)?;
         for s in series {
             let c = s.colour;
             chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), c.stroke_width(2)))
-                .map_err(|e| fail(e.to_string()))?
+                .draw_series(LineSeries::new(s.points.iter().copied(), c.stroke_width(2)))?
                 .label(s.name)
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
                 });
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
-        root.present().map_err(|e| fail(e.to_string()))?;
-    }
-    crate::data::atomic::persist(tmp, path)
+        legend(&mut chart, 0.8, 14)?;
+        Ok(())
+    })
 }
 
 /// A heat map of `values[row][col]` (row 0 at the bottom) written atomically as PNG.
 pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
-    font_ready().map_err(|e| e.in_file(path))?;
     let ny = values.len().max(1);
     let nx = values.first().map_or(1, |r| r.len()).max(1);
     let max = values
@@ -161,40 +194,33 @@ pub fn heat_map(path: &Path, title: &str, values: &[Vec<f64>]) -> Result<()> {
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max)
         .max(1e-12);
-    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
-    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
-    {
-        let root = BitMapBackend::new(tmp.path(), (640, 560)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    png(path, (640, 560), |root| {
+        root.fill(&WHITE)?;
         let caption = format!("{title} (max {max:.3})");
-        let mut chart = builder(&root, &caption, 18, 12, (30, 40))
-            .build_cartesian_2d(0.0..nx as f64, 0.0..ny as f64)
-            .map_err(|e| fail(e.to_string()))?;
-        bare_axes(&mut chart, "coarse cell x", "coarse cell y").map_err(fail)?;
-        chart
-            .draw_series(values.iter().enumerate().flat_map(|(iy, row)| {
-                row.iter().enumerate().map(move |(ix, &v)| {
-                    let t = if v.is_finite() {
-                        (v / max).clamp(0.0, 1.0)
-                    } else {
-                        0.0
-                    };
-                    // White → orange → dark red.
-                    let c = RGBColor(
-                        (255.0 - 60.0 * t) as u8,
-                        (255.0 - 215.0 * t) as u8,
-                        (255.0 - 235.0 * t) as u8,
-                    );
-                    Rectangle::new(
-                        [(ix as f64, iy as f64), (ix as f64 + 1.0, iy as f64 + 1.0)],
-                        c.filled(),
-                    )
-                })
-            }))
-            .map_err(|e| fail(e.to_string()))?;
-        root.present().map_err(|e| fail(e.to_string()))?;
-    }
-    crate::data::atomic::persist(tmp, path)
+        let mut chart = builder(root, &caption, 18, 12, (30, 40))
+            .build_cartesian_2d(0.0..nx as f64, 0.0..ny as f64)?;
+        bare_axes(&mut chart, "coarse cell x", "coarse cell y")?;
+        chart.draw_series(values.iter().enumerate().flat_map(|(iy, row)| {
+            row.iter().enumerate().map(move |(ix, &v)| {
+                let t = if v.is_finite() {
+                    (v / max).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                // White → orange → dark red.
+                let c = RGBColor(
+                    (255.0 - 60.0 * t) as u8,
+                    (255.0 - 215.0 * t) as u8,
+                    (255.0 - 235.0 * t) as u8,
+                );
+                Rectangle::new(
+                    [(ix as f64, iy as f64), (ix as f64 + 1.0, iy as f64 + 1.0)],
+                    c.filled(),
+                )
+            })
+        }))?;
+        Ok(())
+    })
 }
 
 /// A top view of a scene: obstacle cells (grey), optional per-cell vectors (a navigation field,
@@ -210,40 +236,29 @@ pub fn scene_plot(
     lines: &[Vec<[f64; 2]>],
     agents: &[([f64; 2], usize)],
 ) -> Result<()> {
-    font_ready().map_err(|e| e.in_file(path))?;
     let size = grid.size();
-    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
-    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let wpx = 1000u32;
     let hpx = ((wpx as f64 - 80.0) * size[1] / size[0] + 90.0).clamp(200.0, 1400.0) as u32;
-    {
-        let root = BitMapBackend::new(tmp.path(), (wpx, hpx)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let mut chart = builder(&root, title, 20, 10, (30, 40))
-            .build_cartesian_2d(
-                grid.origin[0]..grid.origin[0] + size[0],
-                grid.origin[1]..grid.origin[1] + size[1],
-            )
-            .map_err(|e| fail(e.to_string()))?;
-        bare_axes(&mut chart, "x (BL)", "y (BL)").map_err(fail)?;
+    png(path, (wpx, hpx), |root| {
+        root.fill(&WHITE)?;
+        let mut chart = builder(root, title, 20, 10, (30, 40)).build_cartesian_2d(
+            grid.origin[0]..grid.origin[0] + size[0],
+            grid.origin[1]..grid.origin[1] + size[1],
+        )?;
+        bare_axes(&mut chart, "x (BL)", "y (BL)")?;
         let c = grid.cell_size;
-        chart
-            .draw_series(
-                obstacles
-                    .indexed_iter()
-                    .filter(|(_, &v)| v != 0)
-                    .map(|((iy, ix), _)| {
-                        let p = grid.centre(ix, iy);
-                        Rectangle::new(
-                            [
-                                (p[0] - c / 2.0, p[1] - c / 2.0),
-                                (p[0] + c / 2.0, p[1] + c / 2.0),
-                            ],
-                            RGBColor(110, 110, 110).filled(),
-                        )
-                    }),
-            )
-            .map_err(|e| fail(e.to_string()))?;
+        chart.draw_series(obstacles.indexed_iter().filter(|(_, &v)| v != 0).map(
+            |((iy, ix), _)| {
+                let p = grid.centre(ix, iy);
+                Rectangle::new(
+                    [
+                        (p[0] - c / 2.0, p[1] - c / 2.0),
+                        (p[0] + c / 2.0, p[1] + c / 2.0),
+                    ],
+                    RGBColor(110, 110, 110).filled(),
+                )
+            },
+        ))?;
         if let Some(v) = vectors {
             let mut strokes = Vec::new();
             for iy in 0..grid.ny {
@@ -257,26 +272,20 @@ pub fn scene_plot(
                     }
                 }
             }
-            chart
-                .draw_series(strokes.iter().map(|(a, b)| {
-                    PathElement::new(vec![(a[0], a[1]), (b[0], b[1])], RGBColor(31, 119, 180))
-                }))
-                .map_err(|e| fail(e.to_string()))?;
-            chart
-                .draw_series(
-                    strokes.iter().map(|(_, b)| {
-                        Circle::new((b[0], b[1]), 1, RGBColor(31, 119, 180).filled())
-                    }),
-                )
-                .map_err(|e| fail(e.to_string()))?;
+            chart.draw_series(strokes.iter().map(|(a, b)| {
+                PathElement::new(vec![(a[0], a[1]), (b[0], b[1])], RGBColor(31, 119, 180))
+            }))?;
+            chart.draw_series(
+                strokes
+                    .iter()
+                    .map(|(_, b)| Circle::new((b[0], b[1]), 1, RGBColor(31, 119, 180).filled())),
+            )?;
         }
         for l in lines {
-            chart
-                .draw_series(LineSeries::new(
-                    l.iter().map(|p| (p[0], p[1])),
-                    RGBColor(214, 39, 40).stroke_width(2),
-                ))
-                .map_err(|e| fail(e.to_string()))?;
+            chart.draw_series(LineSeries::new(
+                l.iter().map(|p| (p[0], p[1])),
+                RGBColor(214, 39, 40).stroke_width(2),
+            ))?;
         }
         let palette = [
             RGBColor(0, 0, 0),
@@ -284,21 +293,13 @@ pub fn scene_plot(
             RGBColor(44, 160, 44),
             RGBColor(148, 103, 189),
         ];
-        chart
-            .draw_series(
-                agents
-                    .iter()
-                    .map(|(p, g)| Circle::new((p[0], p[1]), 2, palette[g % 4].filled())),
-            )
-            .map_err(|e| fail(e.to_string()))?;
-        root.present().map_err(|e| fail(e.to_string()))?;
-    }
-    crate::data::atomic::persist(tmp, path)
-}
-
-/// Registers the plot font (for modules that draw their own charts with plotters).
-pub(crate) fn ensure_font() -> Result<()> {
-    font_ready()
+        chart.draw_series(
+            agents
+                .iter()
+                .map(|(p, g)| Circle::new((p[0], p[1]), 2, palette[g % 4].filled())),
+        )?;
+        Ok(())
+    })
 }
 
 /// A group of polylines of one colour, with a legend entry, for [`paths_plot`].
@@ -319,59 +320,32 @@ pub fn paths_plot(
     marks: &[(&str, (f64, f64), RGBColor)],
     size: (u32, u32),
 ) -> Result<()> {
-    font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
-    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
-    let pts = groups
-        .iter()
-        .flat_map(|g| g.lines.iter().flatten().copied())
-        .chain(marks.iter().map(|m| m.1))
-        .filter(|p| p.0.is_finite() && p.1.is_finite());
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
+    let (x0, x1, y0, y1) = extent(
+        groups
+            .iter()
+            .flat_map(|g| g.lines.iter().flatten().copied())
+            .chain(marks.iter().map(|m| m.1)),
     );
-    for (x, y) in pts {
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
-    }
-    if !x0.is_finite() {
-        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
-    }
     // Equal scale: widen the narrower range to the plot area's aspect ratio.
     let (aw, ah) = (size.0 as f64 - 90.0, size.1 as f64 - 80.0);
     let (w, h) = ((x1 - x0).max(1e-9) * 1.06, (y1 - y0).max(1e-9) * 1.06);
     let per_px = (w / aw).max(h / ah);
     let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
     let (hx, hy) = (0.5 * per_px * aw, 0.5 * per_px * ah);
-    {
-        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let mut chart = ChartBuilder::on(&root)
+    png(path, size, |root| {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 20))
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(50)
-            .build_cartesian_2d((cx - hx)..(cx + hx), (cy - hy)..(cy + hy))
-            .map_err(|e| fail(e.to_string()))?;
-        chart
-            .configure_mesh()
-            .x_desc(labels.0)
-            .y_desc(labels.1)
-            .label_style(("sans-serif", 13))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+            .build_cartesian_2d((cx - hx)..(cx + hx), (cy - hy)..(cy + hy))?;
+        axes(&mut chart, labels.0, labels.1, 13)?;
         for g in groups {
             let style = g.colour.stroke_width(g.width);
             let mut first = true;
             for l in &g.lines {
-                let s = chart
-                    .draw_series(LineSeries::new(l.iter().copied(), style))
-                    .map_err(|e| fail(e.to_string()))?;
+                let s = chart.draw_series(LineSeries::new(l.iter().copied(), style))?;
                 if first {
                     let c = g.colour;
                     s.label(g.name).legend(move |(x, y)| {
@@ -384,21 +358,13 @@ pub fn paths_plot(
         for (name, p, c) in marks {
             let c = *c;
             chart
-                .draw_series(std::iter::once(Cross::new(*p, 7, c.stroke_width(3))))
-                .map_err(|e| fail(e.to_string()))?
+                .draw_series(std::iter::once(Cross::new(*p, 7, c.stroke_width(3))))?
                 .label(*name)
                 .legend(move |(x, y)| Cross::new((x + 10, y), 5, c.stroke_width(2)));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
-        root.present().map_err(|e| fail(e.to_string()))?;
-    }
-    crate::data::atomic::persist(tmp, path)
+        legend(&mut chart, 0.85, 13)?;
+        Ok(())
+    })
 }
 
 /// Filled, outlined polygons in pixel coordinates (drawn in the order given: painter's
@@ -410,11 +376,7 @@ pub fn polygons_png(
     polygons: &[(Vec<(i32, i32)>, RGBColor)],
     caption: &str,
 ) -> Result<()> {
-    font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
-    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
-    {
-        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+    png(path, size, |root| {
         let mix = |a: u8, b: u8, t: f64| (a as f64 + (b as f64 - a as f64) * t).round() as u8;
         for y in 0..size.1 as i32 {
             let t = y as f64 / size.1.max(1) as f64;
@@ -423,20 +385,16 @@ pub fn polygons_png(
                 mix(sky.0 .1, sky.1 .1, t),
                 mix(sky.0 .2, sky.1 .2, t),
             );
-            root.draw(&PathElement::new(vec![(0, y), (size.0 as i32, y)], c))
-                .map_err(|e| fail(e.to_string()))?;
+            root.draw(&PathElement::new(vec![(0, y), (size.0 as i32, y)], c))?;
         }
         for (pts, c) in polygons {
-            root.draw(&Polygon::new(pts.clone(), c.filled()))
-                .map_err(|e| fail(e.to_string()))?;
+            root.draw(&Polygon::new(pts.clone(), c.filled()))?;
         }
         root.draw(&Text::new(
             caption.to_string(),
             (10, 10),
             ("sans-serif", 18).into_font(),
-        ))
-        .map_err(|e| fail(e.to_string()))?;
-        root.present().map_err(|e| fail(e.to_string()))?;
-    }
-    crate::data::atomic::persist(tmp, path)
+        ))?;
+        Ok(())
+    })
 }

@@ -6,7 +6,7 @@ mod common;
 use common::{fails, ok, s};
 use herdfit::flock::extract::{self, ExtractConfig, ShapeKind, Side};
 use herdfit::flock::initiation::{self, Initiation, InitiationConfig, Target};
-use herdfit::flock::{animate, power, steady, synth};
+use herdfit::flock::{animate, keys, power, steady, synth};
 use herdfit::progress::NoProgress;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -185,10 +185,10 @@ fn check_keys(example: &synth::SynthConfig, n: usize, keys: usize, seed: u64) ->
     assert_eq!(init.shapes[0].len(), n);
     assert_eq!(init.nl + init.nr + 1, n);
     let first = steady::first_key(&init.shapes[0]).unwrap();
-    let mut prev = steady::settle(first, &range, &fam, &cfg, &mut rng);
+    let mut prev = keys::settle(first, &range, &fam, &cfg, &mut rng);
     let (mut worst, mut rejected) = (0.0f64, 0);
     for key in 0..keys {
-        let k = steady::next_key(&prev, init.nl, init.nr, &range, gr, &fam, &cfg, &mut rng);
+        let k = keys::next_key(&prev, init.nl, init.nr, &range, gr, &fam, &cfg, &mut rng);
         assert!(k.reproduced, "N = {n} key {key}: no draw reproduced");
         assert_eq!(k.xi_target, k.xi_draw, "N = {n} key {key}");
         // ξ of the solved positions against the drawn targets.

@@ -7,12 +7,12 @@ mod common;
 use common::{fails, ok, s};
 use herdfit::backend::{cpu_device, Precision};
 use herdfit::data::{ClipFields, Grid};
-use herdfit::herd::fit::zones::Zones;
 use herdfit::herd::params::Params;
 use herdfit::herd::sim::{
     random_herd, theta_tensor, Decide, Guidance, HerdSpec, HerdState, Model, Recording, SpeedMap,
     World,
 };
+use herdfit::herd::zones::Zones;
 use rand::SeedableRng;
 use std::path::{Path, PathBuf};
 

@@ -7,7 +7,7 @@
 //! rather than on (speed, angle), which has no wrap-around at ±π.
 
 pub use super::attract::{attract, attract_by, polar, AttractConfig, AttractScratch, Polar};
-use super::features::V2;
+use super::features::{d2, V2};
 pub use super::kmeans::kmeans;
 use super::kmeans::kmeans_into;
 use super::knn::StateTree;
@@ -386,11 +386,6 @@ fn argmax(p: &[f64]) -> usize {
         }
     }
     best
-}
-
-/// Squared distance of two 2-D points.
-pub(super) fn d2(a: V2, b: V2) -> f64 {
-    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
 }
 
 /// Squared bandwidth: the squared distance to the `nth` neighbour (1-based), or the largest

@@ -1,8 +1,7 @@
 //! §5.3 attraction: the regression's output kept within the chosen cluster's spread, then
 //! perturbed toward the nearest sample of the cluster in the joint (state, action) space.
 
-use super::action::d2;
-use super::features::V2;
+use super::features::{d2, V2};
 
 /// Settings of [`attract`]: half-width `c` of the perturbation range and the output limit
 /// `limit`, both in standard deviations, and `grid` candidates per axis.
@@ -152,8 +151,32 @@ pub fn attract_by(
         }
         best
     };
-    let mut best = (score(out, f64::INFINITY), out);
-    let steps = grid.max(1);
+    let spread = [c * sd_v, c * sd_a];
+    grid_best(
+        out,
+        grid.max(1),
+        [v0, a0],
+        spread,
+        (lo_v, hi_v),
+        clamp_a,
+        score,
+    )
+}
+
+/// §5.3's search: `start`, then the `steps` × `steps` candidates of speed v0 + spread₀·t
+/// (clamped to `speeds`) and direction `clamp_a`(a0 + spread₁·t), t from −1 to 1, each scored by
+/// `score(candidate, best score so far)`; the first candidate of least score.
+#[inline(always)]
+fn grid_best(
+    start: V2,
+    steps: usize,
+    [v0, a0]: [f64; 2],
+    spread: [f64; 2],
+    (lo_v, hi_v): (f64, f64),
+    clamp_a: impl Fn(f64) -> f64,
+    score: impl Fn(V2, f64) -> f64,
+) -> V2 {
+    let mut best = (score(start, f64::INFINITY), start);
     for iv in 0..steps {
         for ia in 0..steps {
             let t = |i: usize| {
@@ -163,8 +186,8 @@ pub fn attract_by(
                     2.0 * i as f64 / (steps - 1) as f64 - 1.0
                 }
             };
-            let v = (v0 + c * sd_v * t(iv)).clamp(lo_v, hi_v);
-            let a = clamp_a(a0 + c * sd_a * t(ia));
+            let v = (v0 + spread[0] * t(iv)).clamp(lo_v, hi_v);
+            let a = clamp_a(a0 + spread[1] * t(ia));
             let cand = [v * a.cos(), v * a.sin()];
             let sc = score(cand, best.0);
             if sc < best.0 {
@@ -256,26 +279,8 @@ mod tests {
             }
             best
         };
-        let mut best = (score(out, f64::INFINITY), out);
-        for iv in 0..grid {
-            for ia in 0..grid {
-                let t = |i: usize| {
-                    if grid == 1 {
-                        0.0
-                    } else {
-                        2.0 * i as f64 / (grid - 1) as f64 - 1.0
-                    }
-                };
-                let v = (v0 + c * sd_v * t(iv)).clamp(lo_v, hi_v);
-                let a = clamp_a(a0 + c * sd_a * t(ia));
-                let cand = [v * a.cos(), v * a.sin()];
-                let sc = score(cand, best.0);
-                if sc < best.0 {
-                    best = (sc, cand);
-                }
-            }
-        }
-        best.1
+        let spread = [c * sd_v, c * sd_a];
+        grid_best(out, grid, [v0, a0], spread, (lo_v, hi_v), clamp_a, score)
     }
 
     #[test]

@@ -9,15 +9,13 @@
 //! with a complete window ending its observation at f are scored.
 
 use super::behaviour::LOCOMOTION;
-use super::features::{formation, headings, Scene, V2};
-use super::model::{learn, read_tracks, BehaviourSpec, CrowdModel, LearnConfig};
-use super::sim::SEPARATION_PASSES;
-use super::step::{advance, plan, separate, Agent};
+use super::features::Scene;
+use super::forecast::{score_scene, Acc, Forecast};
+use super::model::{learn, read_tracks, BehaviourSpec, LearnConfig};
 use super::tune::{inner_scores, training, with, Candidate, TuningConfig};
 use crate::data::tracks::Tracks;
 use crate::error::{Error, Result};
 use crate::progress::Progress;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -102,6 +100,17 @@ impl Default for EvalConfig {
 }
 
 impl EvalConfig {
+    /// What a forecast rollout needs of these settings.
+    pub(crate) fn forecast(&self) -> Forecast {
+        Forecast {
+            observe: self.observe,
+            predict: self.predict,
+            collision_distance: self.collision_distance,
+            seed: self.seed,
+            min_distance: self.min_distance,
+        }
+    }
+
     /// Checks every value; errors name the key.
     pub fn check(&self) -> Result<()> {
         self.learn.check()?;
@@ -142,7 +151,7 @@ pub struct Scores {
 /// model's collision rate).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct CollisionCauses {
-    /// Pairs within [`NEAR`] at the observation's end (walking together or passing close).
+    /// Pairs within [`super::forecast::NEAR`] at the observation's end (walking together or passing close).
     pub near_at_start: f64,
     /// Pairs farther apart whose predicted paths met.
     pub converging: f64,
@@ -176,143 +185,6 @@ pub struct EvalReport {
     pub average: Option<Fold>,
 }
 
-#[derive(Default, Clone)]
-pub(crate) struct Acc {
-    pub(crate) windows: usize,
-    pub(crate) pairs: usize,
-    pub(crate) ade: [f64; 2],
-    pub(crate) fde: [f64; 2],
-    pub(crate) coll: [usize; 3],
-    /// Model collisions of pairs within [`NEAR`] of each other at the observation's end, and
-    /// of the others.
-    pub(crate) cause: [usize; 2],
-}
-
-/// Pairs closer than this (m) at the end of their observation count as walking together
-/// (the training data's mean interpersonal distance in groups is 0.82 m, RESULTS.md §4).
-pub const NEAR: f64 = 1.0;
-
-impl Acc {
-    pub(crate) fn add(&mut self, o: &Acc) {
-        self.windows += o.windows;
-        self.pairs += o.pairs;
-        for i in 0..2 {
-            self.ade[i] += o.ade[i];
-            self.fde[i] += o.fde[i];
-        }
-        for i in 0..3 {
-            self.coll[i] += o.coll[i];
-        }
-        for i in 0..2 {
-            self.cause[i] += o.cause[i];
-        }
-    }
-}
-
-fn dist(a: V2, b: V2) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
-/// Rolls out the agents observed at frame `f` and scores those with complete windows.
-fn forecast_frame(model: &CrowdModel, scene: &Scene, f: usize, cfg: &EvalConfig) -> Acc {
-    let (obs, pred) = (cfg.observe, cfg.predict);
-    let fc = &model.config.features;
-    let mut agents = Vec::new();
-    let mut scored = Vec::new(); // (agent index, segment)
-    for &k in &scene.at_frame[f] {
-        let s = &scene.segments[k];
-        if f == s.start {
-            continue;
-        }
-        let a0 = s.start.max((f + 1).saturating_sub(obs));
-        let hist: Vec<V2> = s.pos[a0 - s.start..=f - s.start].to_vec();
-        let heads = headings(&hist, fc.still_speed * scene.dt);
-        let h = *heads.last().expect("history");
-        let mut a = Agent::new(
-            s.id,
-            hist.clone(),
-            h,
-            None,
-            cfg.seed ^ ((f as u64) << 20),
-            scene.dt,
-        );
-        let hp = heads[heads.len() - 2];
-        a.prev_formation = formation(hist[hist.len() - 2], hp, scene.others(f - 1, k), fc.radius);
-        if a0 + obs == f + 1 && s.end() > f + pred {
-            scored.push((agents.len(), k));
-        }
-        agents.push(a);
-    }
-    let mut acc = Acc::default();
-    if scored.is_empty() {
-        return acc;
-    }
-    let keep = fc.intent_window + 2;
-    let mut paths = vec![Vec::with_capacity(pred); agents.len()];
-    for _ in 0..pred {
-        let plans = plan(model, &mut agents);
-        advance(model, &mut agents, &plans, None, keep);
-        separate(&mut agents, cfg.min_distance, SEPARATION_PASSES, None);
-        for (p, a) in paths.iter_mut().zip(&agents) {
-            p.push(a.pos);
-        }
-    }
-    let cv = |k: usize, t: usize| {
-        let s = &scene.segments[k];
-        let (p, q) = (s.pos[f - s.start - 1], s.pos[f - s.start]);
-        let m = (t + 1) as f64;
-        [q[0] + m * (q[0] - p[0]), q[1] + m * (q[1] - p[1])]
-    };
-    let truth = |k: usize, t: usize| scene.segments[k].pos[f + 1 + t - scene.segments[k].start];
-    for &(i, k) in &scored {
-        acc.windows += 1;
-        for (t, &p) in paths[i].iter().enumerate() {
-            acc.ade[0] += dist(p, truth(k, t)) / pred as f64;
-            acc.ade[1] += dist(cv(k, t), truth(k, t)) / pred as f64;
-        }
-        acc.fde[0] += dist(paths[i][pred - 1], truth(k, pred - 1));
-        acc.fde[1] += dist(cv(k, pred - 1), truth(k, pred - 1));
-    }
-    let r = cfg.collision_distance;
-    for (x, &(i, k)) in scored.iter().enumerate() {
-        for &(j, l) in &scored[x + 1..] {
-            acc.pairs += 1;
-            let hit = |g: &dyn Fn(usize) -> (V2, V2)| {
-                (0..pred).any(|t| {
-                    let (a, b) = g(t);
-                    dist(a, b) < r
-                })
-            };
-            let m = hit(&|t| (paths[i][t], paths[j][t]));
-            acc.coll[0] += usize::from(m);
-            if m {
-                let now = |k: usize| scene.segments[k].pos[f - scene.segments[k].start];
-                acc.cause[usize::from(dist(now(k), now(l)) >= NEAR)] += 1;
-            }
-            acc.coll[1] += usize::from(hit(&|t| (cv(k, t), cv(l, t))));
-            acc.coll[2] += usize::from(hit(&|t| (truth(k, t), truth(l, t))));
-        }
-    }
-    acc
-}
-
-/// Scores `model` on one scene's frames (parallel over observation ends, summed in frame order).
-pub(crate) fn score_scene(
-    model: &CrowdModel,
-    scene: &Scene,
-    cfg: &EvalConfig,
-    stride: usize,
-) -> Acc {
-    let ends: Vec<usize> = (1..scene.frames()).step_by(stride).collect();
-    let per: Vec<Acc> = ends
-        .into_par_iter()
-        .map(|f| forecast_frame(model, scene, f, cfg))
-        .collect();
-    let mut acc = Acc::default();
-    per.iter().for_each(|a| acc.add(a));
-    acc
-}
-
 fn read(dir: &Path, name: &str, fps: f64) -> Result<Tracks> {
     read_tracks(&dir.join(name), fps)
 }
@@ -339,9 +211,18 @@ pub fn evaluate(cfg: &EvalConfig, progress: &mut dyn Progress) -> Result<EvalRep
         .map(|(n, _)| *n)
         .filter(|n| cfg.scenes.is_empty() || cfg.scenes.iter().any(|s| s == n))
         .collect();
+    let fc = cfg.forecast();
     let tuned = cfg.tuning.lists(&cfg.learn).iter().any(|l| l.len() > 1);
     let inner = if tuned {
-        inner_scores(&files, &extra, &tests, cfg, progress)?
+        inner_scores(
+            &files,
+            &extra,
+            &tests,
+            &cfg.learn,
+            &cfg.tuning,
+            &fc,
+            progress,
+        )?
     } else {
         vec![vec![]; tests.len()]
     };
@@ -376,7 +257,7 @@ pub fn evaluate(cfg: &EvalConfig, progress: &mut dyn Progress) -> Result<EvalRep
                 .iter(),
         ) {
             let scene = Scene::from_tracks(t, 0.0).map_err(|e| e.in_file(cfg.data.join(f)))?;
-            acc.add(&score_scene(&model, &scene, cfg, 1));
+            acc.add(&score_scene(&model, &scene, &fc, 1));
             progress.inc(1);
         }
         progress.finish();

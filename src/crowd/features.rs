@@ -9,6 +9,11 @@ use serde::{Deserialize, Serialize};
 /// A 2-D vector (position, velocity, direction).
 pub type V2 = [f64; 2];
 
+/// Squared distance of two 2-D points.
+pub(super) fn d2(a: V2, b: V2) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
 /// Number of radial sectors of the neighbourhood formation (§4, Figure 2).
 pub const SECTORS: usize = 8;
 

@@ -2,8 +2,7 @@
 //! Lloyd iteration on 2-D points with k-means++ seeding from the agent's own generator
 //! (cross-checked against linfa-clustering in `tests/crowd.rs`).
 
-use super::action::d2;
-use super::features::V2;
+use super::features::{d2, V2};
 use rand::Rng;
 
 /// k-means (Lloyd, k-means++ seeding from `rng`) of 2-D points into at most `k` clusters; fills

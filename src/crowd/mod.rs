@@ -27,6 +27,7 @@ pub mod behaviour;
 pub mod entries;
 pub mod eval;
 pub mod features;
+pub mod forecast;
 pub mod holdout;
 pub mod kmeans;
 pub mod knn;

@@ -61,97 +61,76 @@ pub fn top_view_png(
     frame: u64,
     trail: u64,
 ) -> Result<()> {
-    crate::plot::ensure_font().map_err(|e| e.in_file(path))?;
     let b = extent(&[tracks], layout);
     let (w, h) = (b[1][0] - b[0][0], b[1][1] - b[0][1]);
     let wpx = 1000u32;
     let hpx = ((wpx as f64 - 80.0) * h / w + 90.0).clamp(240.0, 1400.0) as u32;
-    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
-    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let unit = tracks.meta.units.as_str();
-    {
-        let root = BitMapBackend::new(tmp.path(), (wpx, hpx)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let mut chart = ChartBuilder::on(&root)
+    crate::plot::png(path, (wpx, hpx), |root| {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 20))
             .margin(10)
             .x_label_area_size(30)
             .y_label_area_size(40)
-            .build_cartesian_2d(b[0][0]..b[1][0], b[0][1]..b[1][1])
-            .map_err(|e| fail(e.to_string()))?;
+            .build_cartesian_2d(b[0][0]..b[1][0], b[0][1]..b[1][1])?;
         chart
             .configure_mesh()
             .disable_mesh()
             .x_desc(format!("x ({unit})"))
             .y_desc(format!("y ({unit})"))
             .label_style(("sans-serif", 12))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+            .draw()?;
         if let Some(l) = layout {
             for o in &l.obstacles {
-                chart
-                    .draw_series(std::iter::once(Polygon::new(
-                        o.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(),
-                        RGBColor(150, 150, 150).filled(),
-                    )))
-                    .map_err(|e| fail(e.to_string()))?;
+                chart.draw_series(std::iter::once(Polygon::new(
+                    o.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(),
+                    RGBColor(150, 150, 150).filled(),
+                )))?;
             }
             for r in &l.regions {
                 let mut pts: Vec<(f64, f64)> = r.polygon.iter().map(|p| (p[0], p[1])).collect();
                 pts.push(pts[0]);
                 let (cr, cg, cb) = behaviour_colour(Some(&r.behaviour));
-                chart
-                    .draw_series(std::iter::once(PathElement::new(pts, RGBColor(cr, cg, cb))))
-                    .map_err(|e| fail(e.to_string()))?;
+                chart.draw_series(std::iter::once(PathElement::new(pts, RGBColor(cr, cg, cb))))?;
             }
             for wl in &l.walls {
-                chart
-                    .draw_series(std::iter::once(PathElement::new(
-                        wl.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(),
-                        BLACK.stroke_width(3),
-                    )))
-                    .map_err(|e| fail(e.to_string()))?;
+                chart.draw_series(std::iter::once(PathElement::new(
+                    wl.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(),
+                    BLACK.stroke_width(3),
+                )))?;
             }
             for p in &l.pivots {
-                chart
-                    .draw_series(std::iter::once(TriangleMarker::new(
-                        (p.position[0], p.position[1]),
-                        8,
-                        RED.filled(),
-                    )))
-                    .map_err(|e| fail(e.to_string()))?;
+                chart.draw_series(std::iter::once(TriangleMarker::new(
+                    (p.position[0], p.position[1]),
+                    8,
+                    RED.filled(),
+                )))?;
             }
         }
         let from = frame.saturating_sub(trail);
         if let Some(o) = overlay {
             for pts in trails(o, from, frame).values() {
-                chart
-                    .draw_series(std::iter::once(PathElement::new(
-                        pts.iter().map(|(p, _)| (p[0], p[1])).collect::<Vec<_>>(),
-                        RGBColor(190, 190, 190),
-                    )))
-                    .map_err(|e| fail(e.to_string()))?;
+                chart.draw_series(std::iter::once(PathElement::new(
+                    pts.iter().map(|(p, _)| (p[0], p[1])).collect::<Vec<_>>(),
+                    RGBColor(190, 190, 190),
+                )))?;
             }
         }
         for pts in trails(tracks, from, frame).values() {
             let (cr, cg, cb) = behaviour_colour(pts.last().and_then(|p| p.1.as_deref()));
             let c = RGBColor(cr, cg, cb);
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    pts.iter().map(|(p, _)| (p[0], p[1])).collect::<Vec<_>>(),
-                    c.mix(0.5),
-                )))
-                .map_err(|e| fail(e.to_string()))?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                pts.iter().map(|(p, _)| (p[0], p[1])).collect::<Vec<_>>(),
+                c.mix(0.5),
+            )))?;
         }
-        chart
-            .draw_series(tracks.rows.iter().filter(|r| r.frame == frame).map(|r| {
-                let (cr, cg, cb) = behaviour_colour(r.role.as_deref());
-                Circle::new((r.pos[0], r.pos[1]), 4, RGBColor(cr, cg, cb).filled())
-            }))
-            .map_err(|e| fail(e.to_string()))?;
-        root.present().map_err(|e| fail(e.to_string()))?;
-    }
-    crate::data::atomic::persist(tmp, path)
+        chart.draw_series(tracks.rows.iter().filter(|r| r.frame == frame).map(|r| {
+            let (cr, cg, cb) = behaviour_colour(r.role.as_deref());
+            Circle::new((r.pos[0], r.pos[1]), 4, RGBColor(cr, cg, cb).filled())
+        }))?;
+        Ok(())
+    })
 }
 
 /// An MJPG AVI of every frame (agents as discs with short trails), `px` pixels per unit.

@@ -1,9 +1,8 @@
 //! Hyper-parameters of `crowd evaluate` chosen by leave-one-scene-out inside each test scene's
 //! training scenes (nested cross-validation: the test scene never takes part in the choice).
 
-use super::eval::{score_scene, Acc, EvalConfig};
-use super::features::Scene;
-use super::model::{learn, CrowdModel, LearnConfig};
+use super::forecast::{score_files, Forecast};
+use super::model::{learn, LearnConfig};
 use crate::data::tracks::Tracks;
 use crate::error::{Error, Result};
 use crate::progress::{NoProgress, Progress};
@@ -105,20 +104,6 @@ pub(crate) fn training<'a>(
         .collect()
 }
 
-pub(crate) fn score_files(
-    model: &CrowdModel,
-    tracks: &[Tracks],
-    cfg: &EvalConfig,
-    stride: usize,
-) -> Result<Acc> {
-    let mut acc = Acc::default();
-    for t in tracks {
-        let scene = Scene::from_tracks(t, 0.0)?;
-        acc.add(&score_scene(model, &scene, cfg, stride));
-    }
-    Ok(acc)
-}
-
 /// A learn configuration with candidate `c` = (smoothing, formation weight, bandwidth scale,
 /// inertia).
 pub(crate) fn with(l: &LearnConfig, c: [f64; 4]) -> LearnConfig {
@@ -137,10 +122,12 @@ pub(crate) fn inner_scores(
     files: &[(&str, Vec<Tracks>)],
     extra: &[Tracks],
     tests: &[&str],
-    cfg: &EvalConfig,
+    learnt: &LearnConfig,
+    tuning: &TuningConfig,
+    forecast: &Forecast,
     progress: &mut dyn Progress,
 ) -> Result<Vec<Vec<Candidate>>> {
-    let [sm, fo, bw, ine] = cfg.tuning.lists(&cfg.learn);
+    let [sm, fo, bw, ine] = tuning.lists(learnt);
     let mut cands: Vec<[f64; 4]> = Vec::new();
     for &a in &sm {
         for &b in &fo {
@@ -166,7 +153,7 @@ pub(crate) fn inner_scores(
             for &w in &fo {
                 let mut model = learn(
                     &train,
-                    &with(&cfg.learn, [s, w, bw[0], ine[0]]),
+                    &with(learnt, [s, w, bw[0], ine[0]]),
                     &mut NoProgress,
                 )?;
                 for (ci, c) in cands.iter().enumerate() {
@@ -178,7 +165,7 @@ pub(crate) fn inner_scores(
                     for (t, h) in [(a, b), (b, a)] {
                         if let Some(ti) = tests.iter().position(|n| *n == names[t]) {
                             let acc =
-                                score_files(&model, &files[h].1, cfg, cfg.tuning.frame_stride)?;
+                                score_files(&model, &files[h].1, forecast, tuning.frame_stride)?;
                             let n = acc.windows.max(1) as f64;
                             let e = &mut sums[ti][ci];
                             e[0] += acc.ade[0] / n;

@@ -1,7 +1,7 @@
-//! Validation of the polygons that input files hold (scene obstacles and regions, crowd layouts,
-//! an arena border): at least three finite points, a non-zero area and no edge crossing another
-//! (issue #14: a self-intersecting or zero-area polygon has no inside the even–odd rule can
-//! agree on with the user).
+//! Polygons that input files hold (scene obstacles and regions, zones, crowd layouts, an arena
+//! border): the even–odd point-in-polygon test, and validation — at least three finite points, a
+//! non-zero area and no edge crossing another (issue #14: a self-intersecting or zero-area
+//! polygon has no inside the even–odd rule can agree on with the user).
 
 use crate::limits::MAX_COORD;
 
@@ -9,6 +9,22 @@ type P2 = [f64; 2];
 
 fn cross(o: P2, a: P2, b: P2) -> f64 {
     (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+}
+
+/// Is `p` inside the polygon (even–odd rule)?
+pub fn in_polygon(p: P2, poly: &[P2]) -> bool {
+    let mut inside = false;
+    let n = poly.len();
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) {
+            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if p[0] < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
 }
 
 /// Do the closed segments `a–b` and `c–d` share a point?

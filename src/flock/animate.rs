@@ -1,7 +1,7 @@
 //! `herdfit flock animate`: an example's shape parameters → an initiation (§6) that converges to
-//! the first key shape, a hand-over, and an F-frame steady flight (§5, Algorithm 1), written as
-//! a folder: 3D tracks (metres, z = altitude), per-bird power reduction per steady frame, key
-//! shapes and checks in `report.json`, two PNG plots and (feature `video`) an AVI from above.
+//! the first key shape, a hand-over, and an F-frame steady flight (§5, Algorithm 1): 3D tracks
+//! (metres, z = altitude), per-bird power reduction per steady frame, key shapes and checks, in
+//! memory ([`Animation`]); [`super::write`] writes them as a folder.
 
 use super::extract::ShapeParams;
 use super::family::{self, Family};
@@ -9,6 +9,7 @@ use super::frames::{
     hand_over_time, initiation_frames, max_accel, rows_and_savings, steady_frames, Frames,
 };
 use super::initiation::{self, Initiation, InitiationConfig, InitiationRun, Target};
+use super::keys::{next_key, settle};
 use super::steady::{self, KeyShape, SteadyConfig, Timeline};
 use crate::data::tracks::{Tracks, TracksMeta, Units};
 use crate::error::{Error, Result};
@@ -16,12 +17,9 @@ use crate::progress::Progress;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 
 /// Schema tag of the animation report.
 pub const REPORT_SCHEMA: &str = "herdfit.flock-animation/1";
-/// Schema tag of the savings CSV's sidecar.
-pub const SAVINGS_SCHEMA: &str = "herdfit.flock-savings/1";
 
 /// Settings of [`animate`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -186,7 +184,7 @@ pub struct SteadySetup {
 }
 
 /// Steps 1–2 for `n` birds and the first key shape: Step 1's first shape brought into the
-/// example's family ([`steady::settle`]).
+/// example's family ([`settle`]).
 pub fn steady_setup(
     params: &ShapeParams,
     n: usize,
@@ -196,7 +194,7 @@ pub fn steady_setup(
     let init = steady::initial_shapes(params, n, cfg, rng)?;
     let (_, range) = steady::ranges(&init.shapes)?;
     let family = Family::of_example(params, &init);
-    let first = steady::settle(
+    let first = settle(
         steady::first_key(&init.shapes[0])?,
         &range,
         &family,
@@ -251,7 +249,7 @@ fn build_keys(
             progress.finish();
             return (keys, tl);
         }
-        let k = steady::next_key(
+        let k = next_key(
             keys.last().unwrap(),
             nl,
             nr,
@@ -486,68 +484,4 @@ fn mean_wing_tip_spacing(frames: &[Vec<[f64; 2]>]) -> f64 {
         }
     }
     sum / count.max(1) as f64
-}
-
-/// The savings CSV: `frame,time,id,e,xi` (e: the bird's induced-power saving in units of a lone
-/// bird's induced power, eq. 1 with C = 1; see `write_outputs`).
-pub fn savings_csv(rows: &[(u64, f64, u64, f64, f64)]) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::from("frame,time,id,e,xi\n");
-    for (f, t, id, e, xi) in rows {
-        let _ = writeln!(s, "{f},{t},{id},{e},{xi}");
-    }
-    s
-}
-
-/// Reads `shape` (a `herdfit.flock-shape/1` file), animates it and writes the folder `out`
-/// (all-or-nothing): `tracks.csv`/`tracks.json`, `savings.csv`/`savings.json`, `report.json`,
-/// `shapes.png`, `savings.png` and, with the `video` feature and `video`, `flock.avi`.
-pub fn animate_file(
-    shape: &Path,
-    out: &Path,
-    cfg: &AnimateConfig,
-    progress: &mut dyn Progress,
-) -> Result<AnimationReport> {
-    let params = ShapeParams::load(shape)?;
-    let anim = animate(&params, &shape.display().to_string(), cfg, progress)?;
-    write_outputs(&anim, out, progress)?;
-    Ok(anim.report)
-}
-
-/// Writes an animation's folder atomically.
-pub fn write_outputs(anim: &Animation, out: &Path, progress: &mut dyn Progress) -> Result<()> {
-    let dir = crate::data::atomic::AtomicDir::create(out)?;
-    anim.tracks.save(&dir.path("tracks.csv"))?;
-    dir.write("savings.csv", savings_csv(&anim.savings).as_bytes())?;
-    let side = serde_json::json!({
-        "schema": SAVINGS_SCHEMA,
-        "columns": {
-            "frame": "frame of tracks.csv",
-            "time": "seconds",
-            "id": "bird id of tracks.csv",
-            "e": "induced-power saving e_i = Σ_j g_ij (Klotsman & Tal eq. 1 with the drag ratio C = 1; Hummel 1983): the induced power (induced drag × speed) the other birds' upwash removes from bird i, in units of the induced power of the same bird flying alone. Hummel's horseshoe-vortex model is linear and has no ceiling: e exceeds 1 where wing tips overlap (neighbours less than one wingspan apart laterally), the upwash there more than cancelling the bird's own induced drag. It is not the fraction of the bird's total flight power: that is C·e with C the induced share of its flight power at cruise (Cutts & Speakman 1994 estimate C ≈ 0.17 for pink-footed geese: 14 % of induced power, 2.4 % of total).",
-      "flock mean": "report.json flock_mean_saving: e averaged over birds and steady frames, the figure field studies estimate from photographed skeins (14 %: Cutts & Speakman 1994, pink-footed geese; 36 %: Hainsworth 1987, Canada geese; both of induced power, with Lissaman & Shollenberger's model)",
-            "xi": "relative power reduction ξ_i = e_i / Σ e (§5 Step 3)",
-        },
-        "frames": "the F steady-flight frames after the hand-over (the model assumes steady formation flight)",
-    });
-    dir.write(
-        "savings.json",
-        format!(
-            "{}\n",
-            serde_json::to_string_pretty(&side).map_err(|e| Error::Internal(e.to_string()))?
-        )
-        .as_bytes(),
-    )?;
-    let rep = serde_json::to_string_pretty(&anim.report)
-        .map_err(|e| Error::Internal(format!("report: {e}")))?;
-    dir.write("report.json", format!("{rep}\n").as_bytes())?;
-    super::figures::shapes_png(&dir.path("shapes.png"), &anim.report)?;
-    super::figures::savings_png(&dir.path("savings.png"), &anim.savings, anim.report.birds)?;
-    #[cfg(feature = "video")]
-    if anim.report.config.video {
-        super::render::render(&dir.path("flock.avi"), anim, progress)?;
-    }
-    let _ = &progress;
-    dir.commit()
 }

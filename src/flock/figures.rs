@@ -1,11 +1,10 @@
 //! PNG figures of an animation: the key shapes with each bird's saving, and the savings over time.
 
 use super::animate::AnimationReport;
-use crate::error::{Error, Result};
+use crate::error::Result;
+use crate::plot::{axes, legend, line_chart, png, Series, PALETTE};
 use plotters::prelude::*;
 use std::path::Path;
-
-use crate::plot::PALETTE;
 
 fn bounds(pts: impl Iterator<Item = [f64; 2]>) -> ([f64; 2], [f64; 2]) {
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -25,9 +24,6 @@ fn bounds(pts: impl Iterator<Item = [f64; 2]>) -> ([f64; 2], [f64; 2]) {
 /// wingspans, flight direction up. Right: each bird's ξ over the key shapes (dots) against its
 /// feasible range [(1 − ε) p_i, (1 + ε) P_i] (bars), birds ordered left to right.
 pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
-    crate::plot::font_ready().map_err(|e| e.in_file(path))?;
-    let tmp = crate::data::atomic::temp_sibling(path, ".png")?;
-    let fail = |e: String| Error::file(path, format!("plotting: {e}"));
     let n = r.birds;
     // Lateral order of the birds in the first key shape.
     let mut order: Vec<usize> = (0..n).collect();
@@ -37,9 +33,8 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
         let step = (k.saturating_sub(1)).div_ceil(5).max(1);
         (0..k).step_by(step).collect()
     };
-    {
-        let root = BitMapBackend::new(tmp.path(), (1400, 620)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    png(path, (1400, 620), |root| {
+        root.fill(&WHITE)?;
         let (l, rt) = root.split_horizontally(700);
         let (lo, hi) = bounds(shown.iter().flat_map(|&k| r.keys[k].pos.iter().copied()));
         let pad = 1.0;
@@ -51,15 +46,13 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
             .margin(12)
             .x_label_area_size(36)
             .y_label_area_size(48)
-            .build_cartesian_2d(lo[0] - pad..hi[0] + pad, lo[1] - pad..hi[1] + pad)
-            .map_err(|e| fail(e.to_string()))?;
-        chart
-            .configure_mesh()
-            .x_desc("lateral x (b)")
-            .y_desc("longitudinal y (b), flight ↑")
-            .label_style(("sans-serif", 13))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+            .build_cartesian_2d(lo[0] - pad..hi[0] + pad, lo[1] - pad..hi[1] + pad)?;
+        axes(
+            &mut chart,
+            "lateral x (b)",
+            "longitudinal y (b), flight ↑",
+            13,
+        )?;
         for (c, &k) in shown.iter().enumerate() {
             let colour = if k == 0 {
                 BLACK
@@ -73,18 +66,11 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
                         .pos
                         .iter()
                         .map(|p| Circle::new((p[0], p[1]), 4, colour.filled())),
-                )
-                .map_err(|e| fail(e.to_string()))?
+                )?
                 .label(format!("key {k} (t = {t:.1} s)"))
                 .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+        legend(&mut chart, 0.8, 13)?;
         let eps = r.config.steady.epsilon;
         let ymax = r
             .xi_range
@@ -101,15 +87,8 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
             .margin(12)
             .x_label_area_size(36)
             .y_label_area_size(60)
-            .build_cartesian_2d(-0.5..n as f64 - 0.5, 0.0..ymax.max(1e-6))
-            .map_err(|e| fail(e.to_string()))?;
-        chart
-            .configure_mesh()
-            .x_desc("bird, left to right")
-            .y_desc("ξ = e_i / Σ e")
-            .label_style(("sans-serif", 13))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+            .build_cartesian_2d(-0.5..n as f64 - 0.5, 0.0..ymax.max(1e-6))?;
+        axes(&mut chart, "bird, left to right", "ξ = e_i / Σ e", 13)?;
         chart
             .draw_series(order.iter().enumerate().map(|(c, &i)| {
                 let v = r.xi_range[i];
@@ -120,8 +99,7 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
                     ],
                     RGBColor(200, 200, 200).filled(),
                 )
-            }))
-            .map_err(|e| fail(e.to_string()))?
+            }))?
             .label("feasible range")
             .legend(|(x, y)| {
                 Rectangle::new(
@@ -130,22 +108,13 @@ pub fn shapes_png(path: &Path, r: &AnimationReport) -> Result<()> {
                 )
             });
         for k in &r.keys {
-            chart
-                .draw_series(order.iter().enumerate().map(|(c, &i)| {
-                    Circle::new((c as f64, k.xi[i]), 2, RGBColor(31, 119, 180).filled())
-                }))
-                .map_err(|e| fail(e.to_string()))?;
+            chart.draw_series(order.iter().enumerate().map(|(c, &i)| {
+                Circle::new((c as f64, k.xi[i]), 2, RGBColor(31, 119, 180).filled())
+            }))?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
-        root.present().map_err(|e| fail(e.to_string()))?;
-    }
-    crate::data::atomic::persist(tmp, path)
+        legend(&mut chart, 0.8, 13)?;
+        Ok(())
+    })
 }
 
 /// The flock's mean power reduction over the steady frames, with the least and the most saving
@@ -161,23 +130,23 @@ pub fn savings_png(path: &Path, rows: &[(u64, f64, u64, f64, f64)], birds: usize
         lo.push((t, e.iter().cloned().fold(f64::INFINITY, f64::min)));
         hi.push((t, e.iter().cloned().fold(f64::NEG_INFINITY, f64::max)));
     }
-    crate::plot::line_chart(
+    line_chart(
         path,
         "induced-power saving over the steady flight",
         "time (s)",
         "saving (% of induced power)",
         &[
-            crate::plot::Series {
+            Series {
                 name: "most saving bird",
                 points: hi,
                 colour: RGBColor(44, 160, 44),
             },
-            crate::plot::Series {
+            Series {
                 name: "flock mean",
                 points: mean,
                 colour: RGBColor(0, 0, 0),
             },
-            crate::plot::Series {
+            Series {
                 name: "least saving bird",
                 points: lo,
                 colour: RGBColor(214, 39, 40),

@@ -24,27 +24,10 @@ use super::family::Family;
 use super::pairs::Pairs;
 use super::power;
 use super::solve::{self, PositionProblem};
-use super::steady::{KeyShape, SteadyConfig};
+use super::steady::{eq2_box, KeyShape, SteadyConfig};
 use nalgebra::{DMatrix, DVector};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
-
-/// Eq. 2's box for every bird: [(1 − ε) p_i, (1 + ε) P_i] ∩ [C₁ ξ̂_{k−1}, C₂ ξ̂_{k−1}] (the
-/// previous value alone where the two do not meet).
-pub fn eq2_box(prev: &[f64], range: &[[f64; 2]], cfg: &SteadyConfig) -> Vec<[f64; 2]> {
-    prev.iter()
-        .zip(range)
-        .map(|(&p, r)| {
-            let lo = ((1.0 - cfg.epsilon) * r[0]).max(cfg.c1 * p);
-            let hi = ((1.0 + cfg.epsilon) * r[1]).min(cfg.c2 * p);
-            if lo <= hi {
-                [lo, hi]
-            } else {
-                [p, p]
-            }
-        })
-        .collect()
-}
 
 /// Uniform lateral layout with gap `gap`: leader at 0, left birds at −k·gap, right at k·gap.
 pub fn layout(nl: usize, nr: usize, gap: f64) -> Vec<f64> {

@@ -6,8 +6,8 @@
 //! Stages, one file each: [`synth`] (synthetic examples with known truth), [`extract`] (§4:
 //! ordering, gaps, leader, RANSAC side fits in [`ransac`]), [`power`] (§5 Step 2: Hummel's g_ij,
 //! Munk's theorem), [`steady`] (Algorithm 1, with the eq. 4 solver in [`solve`]), [`hpr`] and
-//! [`initiation`] (§6), [`animate`] (the whole animation and its files), [`figures`] and
-//! `render` (feature `video`).
+//! [`initiation`] (§6), [`animate`] (the whole animation), [`write`](mod@write) (its folder, with
+//! [`figures`] and `render`, feature `video`).
 
 pub mod animate;
 pub mod extract;
@@ -25,6 +25,7 @@ pub mod render;
 pub mod solve;
 pub mod steady;
 pub mod synth;
+pub mod write;
 
 use crate::error::Result;
 use crate::progress::Progress;
@@ -125,7 +126,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
     };
     cfg.init.max_time = 20.0;
     let anim_dir = dir.join("animation");
-    let rep = animate::animate_file(&shape_path, &anim_dir, &cfg, progress)?;
+    let rep = write::animate_file(&shape_path, &anim_dir, &cfg, progress)?;
     let fold = |f: fn(f64, f64) -> f64, init: f64| rep.mean_saving.iter().cloned().fold(init, f);
     Ok(DemoSummary {
         folder: anim_dir,

@@ -7,7 +7,6 @@
 //! side likewise. Positions are `[x, y]` in wingspans in the flock frame (x right, y forward).
 
 use super::extract::{mean_std, FrameShape, ShapeParams, Side};
-pub use super::keys::{layout, next_key, settle};
 use super::power;
 use super::ransac;
 use crate::error::{Error, Result};
@@ -304,6 +303,23 @@ pub fn ranges(shapes: &[Vec<[f64; 2]>]) -> Result<Ranges> {
     Ok((xis, r))
 }
 
+/// Eq. 2's box for every bird: [(1 − ε) p_i, (1 + ε) P_i] ∩ [C₁ ξ̂_{k−1}, C₂ ξ̂_{k−1}] (the
+/// previous value alone where the two do not meet).
+pub fn eq2_box(prev: &[f64], range: &[[f64; 2]], cfg: &SteadyConfig) -> Vec<[f64; 2]> {
+    prev.iter()
+        .zip(range)
+        .map(|(&p, r)| {
+            let lo = ((1.0 - cfg.epsilon) * r[0]).max(cfg.c1 * p);
+            let hi = ((1.0 + cfg.epsilon) * r[1]).min(cfg.c2 * p);
+            if lo <= hi {
+                [lo, hi]
+            } else {
+                [p, p]
+            }
+        })
+        .collect()
+}
+
 /// Eq. 2: a draw in [(1 − ε) p_i, (1 + ε) P_i] ∩ [C₁ ξ̂_{k−1}, C₂ ξ̂_{k−1}], then the nearest
 /// point of that box on the simplex Σ ξ̂ = 1 (a common shift, clamped to the box, found by
 /// bisection). Returns the draw and the box.
@@ -313,7 +329,7 @@ pub fn draw_xi(
     cfg: &SteadyConfig,
     rng: &mut impl Rng,
 ) -> (Vec<f64>, Vec<[f64; 2]>) {
-    let bx = super::keys::eq2_box(prev, range, cfg);
+    let bx = eq2_box(prev, range, cfg);
     let u: Vec<f64> = bx
         .iter()
         .map(|b| {

@@ -8,13 +8,13 @@
 use crate::backend::Precision;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::fit::identify::summary;
 use crate::herd::fit::{
     fit, identify, write_log, FitConfig, LossKind, Optimizer, Settle, UncertaintyConfig,
     GUIDANCE_SCALE,
 };
 use crate::herd::params::{param_names, Params};
 use crate::herd::synth::{write_clip, SynthJob, SynthVideo};
+use crate::herd::uncertainty::summary;
 use crate::herd::validate::{self, Report, ValidateConfig, ValidateJob};
 use crate::progress::Progress;
 use std::path::{Path, PathBuf};

@@ -208,9 +208,10 @@ pub struct Params {
     pub provenance: Option<serde_json::Value>,
     /// What the fitting clip determines at these values (issue #15 item 2, written by `fit`):
     /// standard errors, eigen-directions and the objective's noise
-    /// ([`crate::herd::fit::identify()`]). Absent in older files, and not written when absent.
+    /// ([`crate::herd::fit::identify()`]; the format: [`crate::herd::uncertainty`]). Absent in
+    /// older files, and not written when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub uncertainty: Option<crate::herd::fit::identify::Uncertainty>,
+    pub uncertainty: Option<crate::herd::uncertainty::Uncertainty>,
 }
 
 impl Default for Params {

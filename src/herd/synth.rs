@@ -358,7 +358,7 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
     let zones = match &job.zone_sets {
         None => None,
         Some(p) => {
-            let bundle = crate::herd::fit::zones::ParamSets::load(p)?;
+            let bundle = crate::herd::sets::ParamSets::load(p)?;
             let z = crate::herd::zoned::ZoneSets::of_bundle(&bundle, p, &grid, &cfg.obstacles)?;
             Some((z, bundle))
         }

@@ -4,11 +4,10 @@
 
 use crate::data::Grid;
 use crate::error::Result;
-use crate::herd::fit::zones::{
-    NamedSet, ParamSets, Zones, ZonesFile, PARAM_SETS_SCHEMA, ZONES_SCHEMA,
-};
 use crate::herd::params::{Params, N_PARAMS};
+use crate::herd::sets::{NamedSet, ParamSets, PARAM_SETS_SCHEMA};
 use crate::herd::sim::{ForceTensors, HerdState, Model, StepDecisions, StepHooks};
+use crate::herd::zones::{ZoneSpec, Zones, ZonesFile, ZONES_SCHEMA};
 use herdfit_kernels::P2;
 use std::path::Path;
 
@@ -35,7 +34,7 @@ impl ZoneSets {
             zones: bundle
                 .sets
                 .iter()
-                .map(|s| crate::herd::fit::zones::ZoneSpec {
+                .map(|s| ZoneSpec {
                     name: s.name.clone(),
                     polygon: s.polygon.clone(),
                     colour: s.colour.clone(),

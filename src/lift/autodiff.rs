@@ -8,7 +8,7 @@
 //! gathers and scatters are its cost (BENCHMARKS.md, "Lift").
 
 use super::observe::Observations;
-use super::sequence::{EnergyTerms, Structure};
+use super::terms::{EnergyTerms, Structure};
 use super::LiftConfig;
 use crate::backend::cpu_device;
 use crate::error::{Error, Result};

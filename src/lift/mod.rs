@@ -35,6 +35,7 @@ pub mod lbfgs;
 pub mod observe;
 pub mod render;
 pub mod sequence;
+pub mod terms;
 
 pub use demo::{demo, demo_config, DemoSummary};
 pub use observe::{project_tracks, Observations};

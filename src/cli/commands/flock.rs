@@ -2,7 +2,7 @@
 //! library's config, makes one library call and prints.
 
 use crate::error::{Error, Result};
-use crate::flock::{animate, extract, synth};
+use crate::flock::{animate, extract, synth, write};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
@@ -244,7 +244,7 @@ fn animate_cmd(a: AnimateArgs) -> Result<()> {
     }
     cfg.check().map_err(flagged)?;
     let mut bars = crate::cli::Bars::default();
-    let r = animate::animate_file(&a.shape, &a.out, &cfg, &mut bars)?;
+    let r = write::animate_file(&a.shape, &a.out, &cfg, &mut bars)?;
     let init = match &r.initiation {
         Some(i) => match i.converged_after {
             Some(t) => format!("initiation converged in {t:.1} s, "),

@@ -10,10 +10,10 @@ use crate::data::atomic::AtomicDir;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::fit::run::fit_zones;
-use crate::herd::fit::zones::Zones;
 use crate::herd::params::Params;
 use crate::herd::validate::zones::{validate_zones, ZoneSetReport};
 use crate::herd::zoned::ZoneSets;
+use crate::herd::zones::Zones;
 use crate::progress::Progress;
 use serde::Serialize;
 

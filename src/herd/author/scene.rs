@@ -2,6 +2,7 @@
 //! optional destination, behaviour regions with their parameter sets and speed caps, the herd's
 //! spawn, duration, fps and seed. Validation names the JSON path of every problem.
 
+use crate::data::polygon::in_polygon;
 use crate::data::Grid;
 use crate::error::{Error, Result};
 use crate::herd::params::Params;
@@ -169,22 +170,6 @@ pub struct Scene {
     pub params: Vec<Params>,
 }
 
-/// Is `p` inside the polygon (even–odd rule)?
-pub fn in_polygon(p: P2, poly: &[P2]) -> bool {
-    let mut inside = false;
-    let n = poly.len();
-    for i in 0..n {
-        let (a, b) = (poly[i], poly[(i + 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1]) {
-            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-            if p[0] < x {
-                inside = !inside;
-            }
-        }
-    }
-    inside
-}
-
 impl Scene {
     /// Reads and validates a scene file.
     pub fn load(path: &Path) -> Result<Scene> {
@@ -249,6 +234,15 @@ impl Scene {
             None => true,
             Some((ix, iy)) => self.obstacles[[iy, ix]] != 0,
         }
+    }
+
+    /// Whether a step from `old` to `p` leaves the world through an exit cell of its boundary
+    /// ([`super::sources::SceneBoundary::exits`]); never without a boundary.
+    pub fn exits_at(&self, old: P2, p: P2) -> bool {
+        self.file
+            .boundary
+            .as_ref()
+            .is_some_and(|b| b.exits(&self.grid, old, p))
     }
 }
 
@@ -478,7 +472,7 @@ fn region_params(file: &SceneFile, path: &Path) -> Result<Vec<Params>> {
         let at = format!("regions[{k}].params");
         params.push(match &r.set {
             None => load_params(&at, &r.params)?,
-            Some(name) => crate::herd::fit::zones::ParamSets::load(&dir.join(&r.params))
+            Some(name) => crate::herd::sets::ParamSets::load(&dir.join(&r.params))
                 .map_err(|e| bad(&at, &e.to_string()))?
                 .get(name)
                 .map_err(|m| bad(&format!("regions[{k}].set"), &m))?

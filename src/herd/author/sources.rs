@@ -1,7 +1,6 @@
 //! A scene's sources and sinks (`boundary` in the scene file): the open boundary of
 //! [`crate::herd::boundary`] on an authored world's edge.
 
-use super::scene::Scene;
 use crate::data::boundary::{Gates, Side};
 use crate::data::Grid;
 use crate::error::{Error, Result};
@@ -33,18 +32,15 @@ impl SceneBoundary {
     }
 }
 
-impl Scene {
-    /// Whether a step from `old` to `p` leaves the world through an exit cell of its
-    /// boundary: the world's edge is crossed on a side where the cell last stood in is an exit.
-    pub fn exits_at(&self, old: [f64; 2], p: [f64; 2]) -> bool {
-        let Some(b) = &self.file.boundary else {
+impl SceneBoundary {
+    /// Whether a step from `old` to `p` leaves a world on `grid` through an exit cell: the
+    /// world's edge is crossed on a side where the cell last stood in is an exit.
+    pub fn exits(&self, grid: &Grid, old: [f64; 2], p: [f64; 2]) -> bool {
+        let Some((ix, iy)) = grid.cell_of(old) else {
             return false;
         };
-        let Some((ix, iy)) = self.grid.cell_of(old) else {
-            return false;
-        };
-        let [w, h] = self.grid.size();
-        b.exits.iter().any(|g| {
+        let [w, h] = grid.size();
+        self.exits.iter().any(|g| {
             g.cell == [ix, iy]
                 && match g.side {
                     Side::Left => p[0] < 0.0,

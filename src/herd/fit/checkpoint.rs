@@ -4,8 +4,9 @@ use super::config::FitConfig;
 use super::log::LogRow;
 use crate::data::atomic::write_atomic;
 use crate::error::{Error, Result};
-use crate::herd::params::N_PARAMS;
+use crate::herd::params::{Params, N_PARAMS};
 use crate::optim::OptState;
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -147,6 +148,25 @@ pub(super) struct Learnt {
     pub(super) zones: Vec<([f64; N_PARAMS], OptState)>,
 }
 
+/// One optimiser step on `theta` with gradient `g` and step size `lr` ([`crate::optim::step`]
+/// with `cfg.optimizer` and `cfg.zero_grad_step`), then clamped to the parameters' ranges.
+pub fn update(
+    theta: &mut [f64; N_PARAMS],
+    g: &[f64; N_PARAMS],
+    opt: &mut OptState,
+    cfg: &FitConfig,
+    lr: f64,
+    rng: &mut impl Rng,
+) {
+    let before = *theta;
+    crate::optim::step(cfg.optimizer, theta, g, opt, lr, cfg.zero_grad_step, rng);
+    Params::clamp_vec(theta);
+    // Frozen parameters keep their value (checked names; an unknown one was refused earlier).
+    for p in cfg.frozen_indices().unwrap_or_default() {
+        theta[p] = before[p];
+    }
+}
+
 impl Learnt {
     /// Every parameter set, zone 0 first, one after another (`[12·Z]`).
     pub(super) fn flat(&self) -> Vec<f64> {
@@ -158,15 +178,15 @@ impl Learnt {
     }
 
     /// One optimiser step on every parameter set with its part of the gradient `g` (`[12·Z]`).
-    pub(super) fn update(&mut self, g: &[f64], cfg: &FitConfig, lr: f64, rng: &mut impl rand::Rng) {
+    pub(super) fn update(&mut self, g: &[f64], cfg: &FitConfig, lr: f64, rng: &mut impl Rng) {
         let part = |k: usize| -> [f64; N_PARAMS] {
             let mut p = [0.0; N_PARAMS];
             p.copy_from_slice(&g[k * N_PARAMS..(k + 1) * N_PARAMS]);
             p
         };
-        super::run::update(&mut self.theta, &part(0), &mut self.opt, cfg, lr, rng);
+        update(&mut self.theta, &part(0), &mut self.opt, cfg, lr, rng);
         for (k, (t, o)) in self.zones.iter_mut().enumerate() {
-            super::run::update(t, &part(k + 1), o, cfg, lr, rng);
+            update(t, &part(k + 1), o, cfg, lr, rng);
         }
     }
 }

@@ -22,10 +22,10 @@
 use super::checkpoint::CheckpointDir;
 use super::config::{FitConfig, GlobalPhase, LossKind};
 use super::run::{fit_clips, fit_zones, loss_of, zone_loss_of, FitResult, ZoneFitResult};
-use super::zones::Zones;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::params::{Params, N_PARAMS};
+use crate::herd::zones::Zones;
 use crate::optim::multistart::{latin_hypercube, multistart, Candidate};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

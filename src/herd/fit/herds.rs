@@ -1,17 +1,29 @@
-//! The fit loop's helpers: the replica herds between windows (refill, population control), the
-//! fit-loss guard and the gradient read-back.
+//! The fit loop's helpers: the replica herds between windows (refill, population control), a
+//! window's forward pass over them, the fit-loss guard and the gradient read-back.
 
 use super::config::FitConfig;
-use super::run::Forward;
+use super::loss::StepTarget;
 use crate::data::agents::AgentRow;
 use crate::data::boundary::Gates;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::sim::{read_vec, Model};
+use crate::herd::sim::{read_vec, HerdState, Model, StepDecisions};
 use crate::herd::start::{population_control, population_control_open};
 use crate::measure::fields::field_errors;
 use burn::tensor::Tensor;
 use rand_chacha::ChaCha8Rng;
+
+/// The forward pass over one window besides its loss: the logged loss values, and each live
+/// replica's plans and end state.
+pub(super) struct Forward {
+    pub(super) e_mean: f64,
+    pub(super) e_var: f64,
+    pub(super) e_fields: f64,
+    /// Replicas that held agents at the start of the window.
+    pub(super) live: Vec<usize>,
+    pub(super) plans: Vec<Vec<(StepDecisions, StepTarget)>>,
+    pub(super) ends: Vec<HerdState>,
+}
 
 /// The K replica herds of one clip in one epoch, with the next free id of each.
 pub(super) struct Herds {

@@ -6,7 +6,7 @@ use super::anchor::Anchors;
 use super::checkpoint::CheckpointDir;
 use super::config::FitConfig;
 use super::global::{fit_global, split_frames, GlobalReport};
-use super::identify::{identify, Uncertainty, UncertaintyConfig};
+use super::identify::{identify, UncertaintyConfig};
 use super::log::{write_log, LogRow};
 use super::run::{loss_of, FitResult};
 use super::still::{stationary_clip, still_measures, StillConfig, StillMeasures};
@@ -17,6 +17,7 @@ use crate::herd::eval::evaluate;
 use crate::herd::guidance::guidance_fields;
 use crate::herd::params::{param_names, Params, SpeedModel};
 use crate::herd::sim::Guidance;
+use crate::herd::uncertainty::Uncertainty;
 use crate::progress::Progress;
 use plotters::style::RGBColor;
 use std::ops::Range;
@@ -480,7 +481,7 @@ impl std::fmt::Display for FitSummary {
         }
         if let Some((u, secs)) = &self.uncertainty {
             let v = self.result.params.to_vec();
-            write!(f, "{}", super::identify::summary(u, &v))?;
+            write!(f, "{}", crate::herd::uncertainty::summary(u, &v))?;
             writeln!(f, "  (estimated in {secs:.1} s)")?;
         }
         let ([lb, la], [b, a]) = (self.loss, self.errors);

@@ -24,8 +24,6 @@ pub mod run;
 pub mod still;
 pub mod target;
 pub mod zone_job;
-mod zone_mask;
-pub mod zones;
 
 pub use crate::herd::eval::{clip_model, evaluate};
 pub use crate::herd::guidance::{
@@ -33,12 +31,12 @@ pub use crate::herd::guidance::{
 };
 pub use crate::herd::start::{init_herd, population_control, settle, start_herd, Settle};
 pub use crate::optim::{OptState, Optimizer};
-pub use checkpoint::{Checkpoint, CheckpointDir};
+pub use checkpoint::{update, Checkpoint, CheckpointDir};
 pub use config::{FitConfig, GlobalPhase, LossKind, ALIGNMENT};
 pub use global::{fit_global, GlobalReport};
-pub use identify::{identify, Uncertainty, UncertaintyConfig};
+pub use identify::{identify, UncertaintyConfig};
 pub use job::{FitJob, FitSummary};
 pub use log::{log_csv, write_log, LogRow};
 pub use loss::{ensemble_loss, fields_loss};
 pub use plan::{plan_step, window_loss};
-pub use run::{fit, fit_clips, fit_zones, loss_of, update, FitResult, ZoneFitResult};
+pub use run::{fit, fit_clips, fit_zones, loss_of, FitResult, ZoneFitResult};

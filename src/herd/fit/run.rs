@@ -4,13 +4,12 @@
 use super::anchor::Anchors;
 use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt, ZoneStarts};
 use super::config::{FitConfig, LossKind};
-use super::herds::{check_finite_step, grad_of, Herds};
+use super::herds::{check_finite_step, grad_of, Forward, Herds};
 use super::log::LogRow;
 use super::loss::StepTarget;
 use super::loss::{add, density_loss, ensemble_loss_weighted, fields_loss_weighted, step_loss};
 use super::plan::{plan_step, window_loss};
 use super::target::Stencil;
-use super::zones::Zones;
 use crate::backend::cpu_device;
 use crate::data::agents::AgentRow;
 use crate::data::boundary::Gates;
@@ -21,35 +20,17 @@ use crate::herd::guidance::guidance_fields;
 use crate::herd::params::SpeedModel;
 use crate::herd::params::ALIGNMENT;
 use crate::herd::params::{Params, N_PARAMS};
-use crate::herd::sim::{read_vec, Model, StepDecisions};
+use crate::herd::sim::{read_vec, Model};
 use crate::herd::sim::{thetas_tensor, ForceTensors, Guidance, HerdState};
 use crate::herd::start::start_herd;
+use crate::herd::zones::Zones;
 use crate::optim::OptState;
 use burn::tensor::{Device, Tensor};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 pub use zone::{fit_zones, zone_loss_of, ZoneFitResult};
 
 mod zone;
-
-/// One optimiser step on `theta` with gradient `g` and step size `lr` ([`crate::optim::step`]
-/// with `cfg.optimizer` and `cfg.zero_grad_step`), then clamped to the parameters' ranges.
-pub fn update(
-    theta: &mut [f64; N_PARAMS],
-    g: &[f64; N_PARAMS],
-    opt: &mut OptState,
-    cfg: &FitConfig,
-    lr: f64,
-    rng: &mut impl Rng,
-) {
-    let before = *theta;
-    crate::optim::step(cfg.optimizer, theta, g, opt, lr, cfg.zero_grad_step, rng);
-    Params::clamp_vec(theta);
-    // Frozen parameters keep their value (checked names; an unknown one was refused earlier).
-    for p in cfg.frozen_indices().unwrap_or_default() {
-        theta[p] = before[p];
-    }
-}
 
 /// Result of a fit.
 #[derive(Clone, Debug)]
@@ -160,18 +141,6 @@ struct FitRun<'a> {
     anchors: Vec<Option<Anchors>>,
     /// Each clip's open boundary (`cfg.boundary`; closed gates change nothing).
     gates: Vec<Gates>,
-}
-
-/// The forward pass over one window besides its loss: the logged loss values, and each live
-/// replica's plans and end state.
-pub(super) struct Forward {
-    e_mean: f64,
-    e_var: f64,
-    e_fields: f64,
-    /// Replicas that held agents at the start of the window.
-    pub(super) live: Vec<usize>,
-    plans: Vec<Vec<(StepDecisions, StepTarget)>>,
-    pub(super) ends: Vec<HerdState>,
 }
 
 fn fit_inner(

@@ -176,7 +176,7 @@ pub struct SetReport {
     pub error_map: Vec<Vec<f64>>,
     /// The set's identifiability estimate from its fit (issue #15 item 2), when it has one.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub uncertainty: Option<crate::herd::fit::identify::Uncertainty>,
+    pub uncertainty: Option<crate::herd::uncertainty::Uncertainty>,
     /// Per seed, the mean over the held-out frames of each measure's error (the order of
     /// [`MEASURES`]); empty for the seeds' mean prediction. The row errors' means are their
     /// average when every frame's value is finite.
@@ -315,7 +315,7 @@ pub struct ValidateConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames: Option<[usize; 2]>,
     /// Which measures to report: herdfit's own, or also the reference implementation's
-    /// ([`reference`]). Not written when herdfit's own.
+    /// ([`reference`](mod@reference)). Not written when herdfit's own.
     #[serde(default, skip_serializing_if = "is_herdfit")]
     pub measures: Measures,
 }

@@ -6,8 +6,8 @@ use super::{validate, Report, SetReport, Stat, ValidateConfig, MEASURES};
 use crate::data::atomic::AtomicDir;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
-use crate::herd::fit::identify::Uncertainty;
 use crate::herd::params::Params;
+use crate::herd::uncertainty::Uncertainty;
 use crate::plot::Series;
 use crate::progress::Progress;
 use plotters::style::RGBColor;
@@ -121,7 +121,7 @@ fn identifiability_md(name: &str, u: &Uncertainty, values: &[f64; 12]) -> String
             d.eigenvalue,
             d.eigenvalue_std,
             if d.determined { "yes" } else { "no" },
-            crate::herd::fit::identify::components(d, 4)
+            crate::herd::uncertainty::components(d, 4)
         ));
     }
     s

@@ -2,7 +2,7 @@
 //! masks (paper §4: N_bp, the pixels per animal, and the body length L): the mode of log-area,
 //! or the components around the area-weighted median when the mode is fragments.
 
-use super::calibrate::{Blob, MIN_COMPONENT};
+use super::blobs::{Blob, MIN_COMPONENT};
 
 /// Body size from the components of the sampled frames ([`body_size`]).
 #[derive(Clone, Copy, Debug)]

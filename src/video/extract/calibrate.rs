@@ -16,6 +16,7 @@
 //! - Or from a user count: N_bp = herd pixels of one frame / the animals counted on it.
 
 use super::background::{Geometry, Sample};
+use super::blobs::{blobs, Blob, MIN_COMPONENT};
 use super::body_size::body_size;
 use super::fields::{difference, Segmenter};
 use super::profile;
@@ -61,6 +62,26 @@ pub struct Calibration {
     pub areas: Vec<f64>,
 }
 
+impl Calibration {
+    /// The segmenter of the fields: this calibration's threshold, opening and smallest
+    /// component.
+    pub(super) fn segmenter<'a>(
+        &self,
+        geom: &'a Geometry<'a>,
+        background: &'a [u8],
+        cfg: &ExtractConfig,
+    ) -> Result<Segmenter<'a>> {
+        Segmenter::new(
+            geom,
+            background,
+            cfg,
+            self.threshold,
+            self.opening,
+            self.min_component_px,
+        )
+    }
+}
+
 /// `f` of every sampled frame, in the sample's order: the first half of the frames on this
 /// thread, the second on another.
 fn per_frame<T: Send>(
@@ -92,9 +113,6 @@ fn sample_blobs(seg: &Segmenter, sample: &Sample, w: usize) -> Result<Vec<Blob>>
     }
     Ok(all)
 }
-
-/// Smallest component (processing pixels) the body-size estimate looks at.
-pub(super) const MIN_COMPONENT: usize = 4;
 
 /// The calibration of an extraction from its background `bg` and `sample` (module docs); `count`
 /// is the index within the sample's range of the frame of `cfg.count`.
@@ -244,81 +262,6 @@ pub(super) fn calibrate(
 
 /// Smallest automatic threshold (grey levels): below it lies compression noise.
 pub(super) const MIN_THRESHOLD: f64 = 10.0;
-
-/// One connected component of a herd mask.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Blob {
-    /// Pixels.
-    pub area: f64,
-    /// Full major and minor axes of the ellipse with the same second moments (pixels).
-    pub major: f64,
-    pub minor: f64,
-}
-
-/// The 8-connected components of `mask` (non-zero = on), `w` pixels wide, of at least
-/// `min_area` pixels; with `keep`, the mask is rewritten without the smaller ones.
-pub(super) fn blobs(mask: &mut [u8], w: usize, min_area: usize, keep: bool) -> Vec<Blob> {
-    let h = mask.len() / w.max(1);
-    let mut seen = vec![false; mask.len()];
-    let mut out = Vec::new();
-    let mut stack = Vec::new();
-    let mut members = Vec::new();
-    for start in 0..mask.len() {
-        if mask[start] == 0 || seen[start] {
-            continue;
-        }
-        seen[start] = true;
-        stack.push(start);
-        members.clear();
-        let (mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        while let Some(p) = stack.pop() {
-            members.push(p);
-            let (x, y) = ((p % w) as f64, (p / w) as f64);
-            sx += x;
-            sy += y;
-            sxx += x * x;
-            syy += y * y;
-            sxy += x * y;
-            let (px, py) = (p % w, p / w);
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let (nx, ny) = (px as i64 + dx, py as i64 + dy);
-                    if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
-                        continue;
-                    }
-                    let q = ny as usize * w + nx as usize;
-                    if mask[q] != 0 && !seen[q] {
-                        seen[q] = true;
-                        stack.push(q);
-                    }
-                }
-            }
-        }
-        let n = members.len() as f64;
-        if members.len() < min_area {
-            if keep {
-                for &p in &members {
-                    mask[p] = 0;
-                }
-            }
-            continue;
-        }
-        // Covariance of the pixel centres (+1/12 for the pixel's own extent).
-        let (mx, my) = (sx / n, sy / n);
-        let cxx = sxx / n - mx * mx + 1.0 / 12.0;
-        let cyy = syy / n - my * my + 1.0 / 12.0;
-        let cxy = sxy / n - mx * my;
-        let tr = cxx + cyy;
-        let disc = ((cxx - cyy).powi(2) / 4.0 + cxy * cxy).sqrt();
-        let (l1, l2) = (tr / 2.0 + disc, (tr / 2.0 - disc).max(0.0));
-        out.push(Blob {
-            area: n,
-            major: 4.0 * l1.sqrt(),
-            minor: 4.0 * l2.sqrt(),
-        });
-    }
-    out
-}
 
 /// Otsu's threshold of the difference histogram `hist` (256 bins) above its noise floor; `None`
 /// when nothing in the frames stands out of the background.

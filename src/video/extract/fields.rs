@@ -5,7 +5,7 @@
 //! variance (paper §4, §6.2).
 
 use super::background::{CellGrid, Geometry};
-use super::calibrate::blobs;
+use super::blobs::blobs;
 use super::camera::Similarity;
 use super::decode::{cv, forward, Video};
 use super::preview::preview_png;
@@ -84,24 +84,6 @@ impl<'a> Segmenter<'a> {
             ones: geom.ones()?,
             kernel,
         })
-    }
-
-    /// The segmenter of the fields: the calibration's threshold, opening and smallest
-    /// component.
-    pub fn calibrated(
-        geom: &'a Geometry<'a>,
-        background: &'a [u8],
-        cfg: &ExtractConfig,
-        calib: &super::Calibration,
-    ) -> Result<Self> {
-        Segmenter::new(
-            geom,
-            background,
-            cfg,
-            calib.threshold,
-            calib.opening,
-            calib.min_component_px,
-        )
     }
 
     /// The herd mask (255 = herd) of the stabilised BGR frame `px` with valid pixels `vm`.

@@ -12,6 +12,7 @@
 //! segmentation, flow, per-cell sums and fields), `preview`, and `job` (the files).
 
 mod background;
+mod blobs;
 mod body_size;
 mod calibrate;
 mod camera;
@@ -431,7 +432,7 @@ pub fn extract(
     let grid = background::CellGrid::new(&geom, calib.grid);
     let obstacles = background::obstacle_cells(cfg, &geom, &grid)?;
     let body_px_proc = body_px * geom.scale * geom.scale;
-    let seg = fields::Segmenter::calibrated(&geom, &bg, cfg, &calib)?;
+    let seg = calib.segmenter(&geom, &bg, cfg)?;
     let t = profile::start();
     let sums = fields::pass_c(
         &mut vid,

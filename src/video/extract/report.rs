@@ -140,13 +140,7 @@ pub(super) fn report_png(calib: &Calibration, camera: &[Similarity]) -> Result<V
                     PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
                 });
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 12))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+        crate::plot::legend(&mut chart, 0.8, 12).map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
     encode(&rgb)

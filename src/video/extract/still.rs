@@ -13,7 +13,7 @@ use super::background::{obstacle_cells, CellGrid, Geometry, Sample};
 use super::calibrate::calibrate;
 use super::camera::Similarity;
 use super::decode::cv;
-use super::fields::{Segmenter, Sums};
+use super::fields::Sums;
 use super::preview::preview_png;
 use super::{ExtractConfig, Extraction};
 use crate::data::ClipSpeed;
@@ -125,7 +125,7 @@ pub(super) fn extract_still(path: &Path, cfg: &ExtractConfig, preview: bool) -> 
     }
     let grid = CellGrid::new(&geom, calib.grid);
     let obstacles = obstacle_cells(cfg, &geom, &grid)?;
-    let seg = Segmenter::calibrated(&geom, &bg, cfg, &calib)?;
+    let seg = calib.segmenter(&geom, &bg, cfg)?;
     let herd = seg.mask(&px, &vm)?;
     let count = grid.herd_pixels(&herd);
     if count.iter().all(|&n| n == 0.0) {

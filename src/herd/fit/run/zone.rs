@@ -6,8 +6,8 @@ use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::fit::config::FitConfig;
 use crate::herd::fit::log::LogRow;
-use crate::herd::fit::zones::Zones;
 use crate::herd::params::Params;
+use crate::herd::zones::Zones;
 
 /// The result of a zone fit: one parameter set per zone (in the zones' order) and the log (its
 /// `theta` is zone 0's).

@@ -4,7 +4,7 @@
 //! zone when every channel is within [`COLOUR_TOLERANCE`] of the zone's colour, so anti-aliased
 //! edges and JPEG noise do not leave cells without a zone.
 
-use super::zones::ZoneSpec;
+use super::ZoneSpec;
 use crate::data::Grid;
 use crate::error::{Error, Result};
 use ndarray::Array2;
