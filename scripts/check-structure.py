@@ -1,7 +1,11 @@
 #!/usr/bin/env python3
 """Structure guard (ARCHITECTURE.md, invariants): no Rust source file over 600 lines and no
 function over 150 lines under src/ and kernels/ (tests/ is exempt), and no subsystem folder
-(src/herd, src/flock, src/crowd, src/lift) importing another one.
+(src/herd, src/flock, src/crowd, src/lift) importing another one, and no file-system write
+outside `src/data/atomic/` (issue #47: every output goes through the run's output plan; a raw
+`std::fs::write`, `File::create`, `OpenOptions`, `create_dir*`, `fs::copy` or `fs::rename` in a
+verb's code would bypass it). Test modules (`#[cfg(test)]` to the end of a file, `tests.rs`) are
+exempt.
 
     python3 scripts/check-structure.py            # check; exit 1 and list every violation
     python3 scripts/check-structure.py --report   # also print the longest files and functions
@@ -131,6 +135,25 @@ def functions(code):
 
 
 USE = re.compile(r"\bcrate::(herd|flock|crowd|lift)\b")
+RAW_WRITE = re.compile(
+    r"\b(fs::write|File::create|OpenOptions|fs::create_dir(_all)?|fs::copy|fs::rename"
+    r"|fs::hard_link|os::unix::fs::symlink)\b"
+)
+
+
+def raw_writes(rel, code):
+    """File-system writes outside data::atomic (before any test module)."""
+    if rel.startswith(os.path.join("src", "data", "atomic")) or os.path.basename(rel) == "tests.rs":
+        return []
+    if "tests" in rel.split(os.sep)[:-1] or rel.startswith("kernels"):
+        return []
+    cut = code.find("#[cfg(test)]")
+    body = code if cut < 0 else code[:cut]
+    out = []
+    for m in RAW_WRITE.finditer(body):
+        line = body.count("\n", 0, m.start()) + 1
+        out.append((rel, f"{rel}:{line}: {m.group(1)} writes past the output plan (use data::atomic)"))
+    return out
 
 
 def main():
@@ -149,6 +172,7 @@ def main():
             fns.append((b - a + 1, f"{rel}:{a} fn {name}"))
             if b - a + 1 > MAX_FN:
                 bad.append((f"{rel} fn {name}", f"{rel}:{a}: fn {name} is {b - a + 1} lines (limit {MAX_FN})"))
+        bad.extend(raw_writes(rel, code))
         parts = rel.split(os.sep)
         if len(parts) > 2 and parts[0] == "src" and parts[1] in SUBSYSTEMS:
             for m in USE.finditer(code):
@@ -173,7 +197,7 @@ def main():
     if known:
         print(f"structure: {len(known)} known violation(s) left, no new ones")
         return
-    print(f"structure: {len(sizes)} files ≤ {MAX_FILE} lines, {len(fns)} functions ≤ {MAX_FN} lines, subsystems independent")
+    print(f"structure: {len(sizes)} files ≤ {MAX_FILE} lines, {len(fns)} functions ≤ {MAX_FN} lines, subsystems independent, no write past data::atomic")
 
 
 if __name__ == "__main__":

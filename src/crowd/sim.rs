@@ -163,6 +163,35 @@ pub fn entries_from_layout(layout: &Layout, dt: f64, speed: f64, seed: u64) -> V
     out
 }
 
+/// The steps a run takes (given, the layout's duration, or until the last entry is done), checked
+/// against the limits before anything runs (issue #47: `--steps` and a layout's duration ran until
+/// killed).
+fn run_steps(
+    layout: Option<&Layout>,
+    entries: &[Entry],
+    cfg: &SimConfig,
+    dt: f64,
+) -> Result<usize> {
+    let steps = if cfg.steps > 0 {
+        cfg.steps
+    } else if let Some(d) = layout.and_then(|l| l.duration) {
+        (d / dt).round().max(1.0) as usize
+    } else {
+        let last = entries.iter().filter(|e| e.goal.is_some());
+        let t = last.map(|e| e.step + expected(e, cfg, dt)).max();
+        t.ok_or_else(|| {
+            Error::invalid("steps = 0 needs goals or a layout duration to know when to stop")
+        })?
+    };
+    crate::limits::check_count("steps", steps, crate::limits::MAX_STEPS)?;
+    crate::limits::check_memory(
+        "steps",
+        "the simulated tracks",
+        entries.len() as f64 * steps as f64 * 96.0,
+    )?;
+    Ok(steps)
+}
+
 /// What a simulation produced.
 pub struct SimResult {
     pub tracks: Tracks,
@@ -403,17 +432,7 @@ pub fn simulate(
         ));
     }
     let dt = model.dt;
-    let steps = if cfg.steps > 0 {
-        cfg.steps
-    } else if let Some(d) = layout.and_then(|l| l.duration) {
-        (d / dt).round().max(1.0) as usize
-    } else {
-        let last = entries.iter().filter(|e| e.goal.is_some());
-        let t = last.map(|e| e.step + expected(e, cfg, dt)).max();
-        t.ok_or_else(|| {
-            Error::invalid("steps = 0 needs goals or a layout duration to know when to stop")
-        })?
-    };
+    let steps = run_steps(layout, entries, cfg, dt)?;
     let segs = layout.map(|l| l.segments()).unwrap_or_default();
     let lines = layout
         .map(|l| {

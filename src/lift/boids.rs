@@ -137,6 +137,37 @@ impl BoidsConfig {
                 return Err(Error::invalid(format!("{k} = {v} must be finite")));
             }
         }
+        // Physical ranges (issue #47): metres, seconds, gains within the coordinate limit.
+        use crate::limits::{within, FPS_RANGE, MAX_COORD};
+        within("fps", self.fps, FPS_RANGE.0, FPS_RANGE.1)?;
+        for (k, v) in [
+            ("cruise", self.cruise),
+            ("r_sep", self.r_sep),
+            ("r_neighbour", self.r_neighbour),
+            ("a_max", self.a_max),
+            ("orbit_period", self.orbit_period),
+            ("observer_distance", self.observer_distance),
+            ("k_sep", self.k_sep),
+            ("k_align", self.k_align),
+            ("k_cohesion", self.k_cohesion),
+            ("k_home", self.k_home),
+            ("orbit_radius", self.orbit_radius),
+        ] {
+            within(k, v, 0.0, MAX_COORD)?;
+        }
+        for (k, v) in [
+            ("altitude", self.altitude),
+            ("observer_height", self.observer_height),
+        ] {
+            within(k, v, -MAX_COORD, MAX_COORD)?;
+        }
+        // Every bird in every frame is kept (3D truth, 2D tracks): ~200 bytes a point.
+        crate::limits::check_memory(
+            "frames",
+            "the flock's tracks",
+            self.birds as f64 * self.frames as f64 * 200.0,
+        )
+        .map_err(|e| Error::invalid(e.to_string().replacen(": ", " = ", 1)))?;
         Ok(())
     }
 

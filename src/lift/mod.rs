@@ -121,6 +121,21 @@ impl LiftConfig {
                 self.w_sep
             )));
         }
+        // World units (metres or body lengths) per frame and distances within the coordinate
+        // limit; weights within ±1e6 (issue #47: --v-target 1e300 was accepted).
+        use crate::limits::{within, MAX_COORD};
+        for (k, v) in [
+            ("v_target", self.v_target),
+            ("d_sep", self.d_sep),
+            ("d_near", self.d_near),
+            ("d_far", self.d_far),
+        ] {
+            within(k, v, 0.0, MAX_COORD)?;
+        }
+        for (k, v) in [("lambda_t", self.lambda_t), ("lambda_f", self.lambda_f)] {
+            within(k, v, 0.0, 1e6)?;
+        }
+        within("w_sep", self.w_sep, -1e6, 1e6)?;
         if self.d_near >= self.d_far {
             return Err(Error::invalid(format!(
                 "d_near = {} must be below d_far = {}",

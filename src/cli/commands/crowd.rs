@@ -1,6 +1,7 @@
 //! `herdfit crowd …`: learn a crowd model from tracks, simulate it, evaluate it on ETH/UCY,
 //! compare crowds. Each verb: flags → config → one library call → print.
 
+use crate::cli::paths::{InDir, InFile, OutFile, OutTracks};
 use crate::crowd::eval::{evaluate, EvalConfig};
 use crate::crowd::features::{IntentWindow, Scene};
 use crate::crowd::layout::Layout;
@@ -35,7 +36,7 @@ pub enum CrowdCommand {
 pub struct LearnFlags {
     /// Configuration (LearnConfig JSON); the flags below override it.
     #[arg(long, value_name = "learn.json")]
-    pub config: Option<PathBuf>,
+    pub config: Option<InFile>,
     /// Neighbourhood radius r of eq. 1 (tracks' unit).
     #[arg(long, value_name = "R")]
     pub radius: Option<f64>,
@@ -62,7 +63,80 @@ pub struct LearnFlags {
     pub eth_fps: Option<f64>,
 }
 
+/// Config keys (as the library's messages start) and the flags that set them.
+const FLAGS: [(&str, &str); 14] = [
+    ("features.radius", "--radius"),
+    ("action.k", "--k"),
+    ("pca_dims", "--pca-dims"),
+    ("smoothing", "--smoothing"),
+    ("max_samples", "--max-samples"),
+    ("features.intent_window", "--intent-window"),
+    ("eth_fps", "--eth-fps"),
+    ("action.attraction", "--attraction"),
+    ("min_distance", "--min-distance"),
+    ("goal_cone", "--goal-cone"),
+    ("steps", "--steps"),
+    ("synth.duration", "--duration"),
+    ("cell", "--cell"),
+    ("seed", "--seed"),
+];
+
+/// A library error about a config key renamed to the flag that set it (issue #47: crowd errors
+/// named the key), or attributed to the settings file `file` when no flag set it.
+fn flagged(e: Error, given: &dyn Fn(&str) -> bool, file: Option<&Path>) -> Error {
+    let rename = |key: &str, rest: &str| -> Option<String> {
+        let (_, flag) = FLAGS.iter().find(|(k, _)| *k == key)?;
+        Some(format!("{flag}: {rest}"))
+    };
+    match e {
+        Error::Invalid(m) => {
+            let key = FLAGS
+                .iter()
+                .map(|(k, _)| *k)
+                .filter(|k| {
+                    m.strip_prefix(k)
+                        .is_some_and(|r| r.starts_with(' ') || r.starts_with(':'))
+                })
+                .max_by_key(|k| k.len());
+            match key {
+                Some(k) if given(k) => {
+                    let rest = m[k.len()..].trim_start_matches([' ', ':']);
+                    let rest = rest.strip_prefix("= ").unwrap_or(rest);
+                    Error::Invalid(rename(k, rest).unwrap_or(m))
+                }
+                _ => match file {
+                    Some(f) => Error::file(f, m),
+                    None => Error::Invalid(m),
+                },
+            }
+        }
+        Error::Config { file: None, err } if given(&err.key) => {
+            Error::Invalid(rename(&err.key, &err.msg).unwrap_or_else(|| err.to_string()))
+        }
+        other => other,
+    }
+}
+
 impl LearnFlags {
+    /// Whether a flag set config key `k`.
+    fn given(&self, k: &str) -> bool {
+        match k {
+            "features.radius" => self.radius.is_some(),
+            "action.k" => self.k.is_some(),
+            "pca_dims" => self.pca_dims.is_some(),
+            "smoothing" => self.smoothing.is_some(),
+            "max_samples" => self.max_samples.is_some(),
+            "features.intent_window" => self.intent_window.is_some(),
+            "eth_fps" => self.eth_fps.is_some(),
+            _ => self.config.is_none(),
+        }
+    }
+
+    /// [`flagged`] for these flags.
+    fn name(&self, e: Error) -> Error {
+        flagged(e, &|k| self.given(k), self.config.as_deref())
+    }
+
     fn config(&self, base: LearnConfig) -> Result<LearnConfig> {
         let mut c = match &self.config {
             Some(p) => read_json::<LearnConfig>(p)?,
@@ -111,24 +185,24 @@ fn write_json<T: serde::Serialize>(p: &Path, v: &T) -> Result<()> {
 pub struct LearnArgs {
     /// Training tracks (several allowed, same units and frame rate).
     #[arg(value_name = "TRACKS", num_args = 1.., required = true)]
-    pub inputs: Vec<PathBuf>,
+    pub inputs: Vec<InFile>,
     #[command(flatten)]
     pub flags: LearnFlags,
     /// Output model.
     #[arg(long, value_name = "MODEL.json")]
-    pub out: PathBuf,
+    pub out: OutFile,
 }
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
     #[arg(value_name = "MODEL.json")]
-    pub model: PathBuf,
+    pub model: InFile,
     /// Layout with walls, obstacles, pivots, regions and spawns.
     #[arg(long, value_name = "LAYOUT.json")]
-    pub layout: Option<PathBuf>,
+    pub layout: Option<InFile>,
     /// Agents enter where and when those of these tracks did, heading to where they left.
     #[arg(long, value_name = "TRACKS", required_unless_present = "layout")]
-    pub entries: Option<PathBuf>,
+    pub entries: Option<InFile>,
     /// Steps (0: the layout's duration or until the last entry is done).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub steps: usize,
@@ -147,16 +221,16 @@ pub struct SimulateArgs {
     pub goal_cone: f64,
     /// Top-view PNG of the middle frame.
     #[arg(long, value_name = "OUT.png")]
-    pub png: Option<PathBuf>,
+    pub png: Option<OutFile>,
     /// Top-view MJPG AVI (needs the `video` feature).
     #[arg(long, value_name = "OUT.avi")]
-    pub video: Option<PathBuf>,
+    pub video: Option<OutFile>,
     /// Comparison with the --entries tracks (JSON).
     #[arg(long, value_name = "OUT.json", requires = "entries")]
-    pub compare: Option<PathBuf>,
+    pub compare: Option<OutFile>,
     /// Output tracks (herdfit.tracks/1 CSV + sidecar).
     #[arg(long, value_name = "TRACKS.csv")]
-    pub out: PathBuf,
+    pub out: OutTracks,
 }
 
 #[derive(Args, Debug)]
@@ -164,7 +238,7 @@ pub struct EvaluateArgs {
     /// Folder of the ETH/UCY text files (default: $HERDFIT_SHARED_DATA/pedestrians/eth-ucy or
     /// ../shared/data/pedestrians/eth-ucy).
     #[arg(long, value_name = "DIR")]
-    pub data: Option<PathBuf>,
+    pub data: Option<InDir>,
     /// Test scene (repeat; default all five).
     #[arg(long, value_name = "NAME")]
     pub scene: Vec<String>,
@@ -181,21 +255,21 @@ pub struct EvaluateArgs {
     /// Hyper-parameter candidates chosen inside each test scene's training scenes (TuningConfig
     /// JSON file: smoothing, bandwidth_scale, formation, inertia lists, frame_stride).
     #[arg(long, value_name = "TUNING.json")]
-    pub tuning: Option<PathBuf>,
+    pub tuning: Option<InFile>,
     /// Hard minimum distance (m) between rolled-out pedestrians (0: off).
     #[arg(long, value_name = "M")]
     pub min_distance: Option<f64>,
     /// Report (herdfit.crowd-eval/1 JSON).
     #[arg(long, value_name = "OUT.json")]
-    pub json: Option<PathBuf>,
+    pub json: Option<OutFile>,
 }
 
 #[derive(Args, Debug)]
 pub struct CompareArgs {
     #[arg(value_name = "A")]
-    pub a: PathBuf,
+    pub a: InFile,
     #[arg(value_name = "B")]
-    pub b: PathBuf,
+    pub b: InFile,
     /// Density-map cell (tracks' unit).
     #[arg(long, value_name = "C", default_value_t = 1.0)]
     pub cell: f64,
@@ -204,7 +278,7 @@ pub struct CompareArgs {
     pub eth_fps: f64,
     /// Report (herdfit.crowd-compare/1 JSON).
     #[arg(long, value_name = "OUT.json")]
-    pub json: Option<PathBuf>,
+    pub json: Option<OutFile>,
 }
 
 #[derive(Args, Debug)]
@@ -215,7 +289,7 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[arg(long, value_name = "TRACKS.csv")]
-    pub out: PathBuf,
+    pub out: OutTracks,
 }
 
 /// Runs a crowd verb.
@@ -231,7 +305,7 @@ pub fn run(c: CrowdCommand) -> Result<()> {
 
 fn learn_cmd(a: LearnArgs) -> Result<()> {
     let cfg = a.flags.config(LearnConfig::default())?;
-    cfg.check()?;
+    cfg.check().map_err(|e| a.flags.name(e))?;
     crate::data::atomic::check_writable(&a.out)?;
     let inputs = a
         .inputs
@@ -266,17 +340,6 @@ fn learn_cmd(a: LearnArgs) -> Result<()> {
 fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     let model = CrowdModel::load(&a.model)?;
     let layout = a.layout.as_deref().map(Layout::load).transpose()?;
-    for p in [
-        Some(&a.out),
-        a.png.as_ref(),
-        a.video.as_ref(),
-        a.compare.as_ref(),
-    ]
-    .into_iter()
-    .flatten()
-    {
-        crate::data::atomic::check_writable(p)?;
-    }
     let real = match &a.entries {
         Some(p) => {
             let t = read_tracks(p, 1.0 / model.dt)?;
@@ -308,7 +371,17 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     };
     let mut bars = crate::cli::Bars::default();
     let t0 = std::time::Instant::now();
-    let run = simulate(&model, layout.as_ref(), &entries, &cfg, &mut bars)?;
+    let run = simulate(&model, layout.as_ref(), &entries, &cfg, &mut bars).map_err(|e| {
+        let from_layout = a.steps == 0 && a.layout.is_some();
+        let e = flagged(e, &|k| k != "steps" || !from_layout, None);
+        match (&a.layout, e) {
+            // Steps drawn from the layout's duration: the layout is to blame.
+            (Some(l), Error::Config { file: None, err }) if from_layout => {
+                Error::file(l, format!("duration: {}", err.msg))
+            }
+            (_, e) => e,
+        }
+    })?;
     let secs = t0.elapsed().as_secs_f64();
     if let Some(p) = &a.png {
         let mid = run.tracks.rows.last().map_or(0, |r| r.frame) / 2;
@@ -370,7 +443,7 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
     let base = EvalConfig::default();
     let mut cfg = EvalConfig {
         learn: a.flags.config(base.learn.clone())?,
-        data: a.data.clone().unwrap_or_else(default_eth_ucy),
+        data: a.data.clone().map_or_else(default_eth_ucy, Into::into),
         scenes: a.scene.clone(),
         seed: a.seed,
         ..base
@@ -391,7 +464,13 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
         crate::data::atomic::check_writable(p)?;
     }
     let mut bars = crate::cli::Bars::default();
-    let rep = evaluate(&cfg, &mut bars)?;
+    let given = |k: &str| match k {
+        "action.attraction" => a.attraction.is_some(),
+        "min_distance" => a.min_distance.is_some(),
+        k => a.flags.given(k),
+    };
+    let rep =
+        evaluate(&cfg, &mut bars).map_err(|e| flagged(e, &given, a.flags.config.as_deref()))?;
     print!("{rep}");
     if let Some(p) = &a.json {
         write_json(p, &rep)?;
@@ -400,6 +479,10 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
 }
 
 fn compare_cmd(a: CompareArgs) -> Result<()> {
+    let flag = |e| flagged(e, &|_| true, None);
+    crate::limits::within("cell", a.cell, 1e-9, crate::limits::MAX_COORD).map_err(flag)?;
+    let (lo, hi) = crate::limits::FPS_RANGE;
+    crate::limits::within("eth_fps", a.eth_fps, lo, hi).map_err(flag)?;
     let load = |p: &Path| -> Result<(Scene, String)> {
         let t = read_tracks(p, a.eth_fps)?;
         let u = t.meta.units.as_str().to_string();
@@ -453,7 +536,7 @@ fn synth_cmd(a: SynthArgs) -> Result<()> {
     if let Some(d) = a.duration {
         cfg.duration = d;
     }
-    let t = synth::corridor(&cfg)?;
+    let t = synth::corridor(&cfg).map_err(|e| flagged(e, &|_| true, None))?;
     t.save(&a.out)?;
     println!(
         "crowd synth: {} walkers, {} rows; wrote {}",

@@ -1,25 +1,25 @@
 //! `herdfit validate`: flags → [`ValidateJob`] → [`run`] → the report's Markdown.
 
 use crate::cli::args::with_flags;
+use crate::cli::paths::{InDir, InFile, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::{Settle, GUIDANCE_SCALE};
 use crate::herd::validate::{run, zone_report, ValidateConfig, ValidateJob};
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ValidateArgs {
     #[arg(value_name = "CLIP/")]
-    pub clip: PathBuf,
+    pub clip: InDir,
     /// The parameter set to validate (e.g. the fit's output), or a zone fit's parameter-set
     /// bundle (validated zone by zone, each agent with its zone's set and speed).
     #[arg(long, value_name = "P.json")]
-    pub params: PathBuf,
+    pub params: InFile,
     /// A baseline to compare with (e.g. the fit's starting parameters); with a bundle, another
     /// bundle of the same zones or one set played in every zone.
     #[arg(long, value_name = "P0.json")]
-    pub baseline: Option<PathBuf>,
+    pub baseline: Option<InFile>,
     /// Fraction of the clip before the held-out part.
     #[arg(long, value_name = "S", default_value_t = 0.5)]
     pub split: f64,
@@ -53,21 +53,21 @@ pub struct ValidateArgs {
     /// `fit --tracks`): each run (each piece, with --horizon) starts from the animals tracked at
     /// its first frame instead of a herd drawn from the fields.
     #[arg(long, value_name = "TRACKS.csv")]
-    pub tracks: Option<PathBuf>,
+    pub tracks: Option<InFile>,
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
     /// Output report folder.
     #[arg(long, value_name = "REPORT/")]
-    pub out: PathBuf,
+    pub out: OutDir,
 }
 
 pub fn exec(a: ValidateArgs) -> Result<()> {
     let job = ValidateJob {
-        clip: a.clip,
-        params: a.params,
-        baseline: a.baseline,
-        out: a.out,
+        clip: a.clip.into(),
+        params: a.params.into(),
+        baseline: a.baseline.map(Into::into),
+        out: a.out.into(),
         video: !a.no_video,
         config: ValidateConfig {
             split: a.split,
@@ -78,7 +78,7 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             guidance_scale: a.guidance_scale,
             ensemble_mean: a.ensemble_mean,
             horizon: a.horizon,
-            tracks: a.tracks,
+            tracks: a.tracks.map(Into::into),
         },
     };
     // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.

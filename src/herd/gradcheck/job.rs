@@ -71,6 +71,7 @@ impl GradcheckConfig {
     /// Checks the steps, the finite-difference step and the replicas; errors name the key.
     pub fn check(&self) -> Result<()> {
         crate::error::check_counts(&[("steps", self.steps)])?;
+        crate::limits::check_count("steps", self.steps, crate::limits::MAX_STEPS)?;
         if let Some(h) = self.fd_step {
             crate::error::check_positive(&[("fd_step", h)])?;
         }
@@ -100,6 +101,7 @@ impl GradcheckJob {
     /// Checks the settings, and that the loss objective has a clip; errors name the key.
     pub fn check(&self) -> Result<()> {
         self.config.check()?;
+        self.run.check()?;
         if self.config.objective == Objective::Loss && self.clip.is_none() {
             return Err(Error::config("clip", "{objective} loss needs a clip"));
         }
