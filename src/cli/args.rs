@@ -3,6 +3,7 @@
 
 use crate::cli::paths::{InFile, OutFile};
 use crate::error::Error;
+use crate::herd::boundary::BoundaryChoice;
 use crate::herd::simulate::{HerdSource, RunFiles};
 use clap::Args;
 use std::path::Path;
@@ -157,6 +158,15 @@ pub const OPTIMIZERS: &[(&str, &str)] = &[
     ),
 ];
 
+/// `--measures` of validate.
+pub const MEASURES: &[(&str, &str)] = &[
+    ("herdfit", "herdfit's own (paper §7.1.2 on the fields, coarse-grid errors)"),
+    (
+        "reference",
+        "herdfit's own and, beside them, the reference implementation's (HerdFromVideo's HerdController.cs), with per-frame logs in its format",
+    ),
+];
+
 /// `--loss`.
 pub const LOSSES: &[(&str, &str)] = &[
     (
@@ -229,4 +239,12 @@ pub fn with_settings(
         }
         (e, _) => with_flags(e, renamed),
     }
+}
+
+/// `--boundary auto|closed|FILE` (issue #46) as the library's [`BoundaryChoice`]; a file named
+/// there is an input of the run's plan ([`InFileOrWord`]).
+pub fn boundary(b: &crate::cli::paths::InFileOrWord) -> Result<BoundaryChoice, Error> {
+    b.text()
+        .parse()
+        .map_err(|e: String| Error::invalid(format!("--boundary: {e}")))
 }

@@ -2,7 +2,7 @@
 
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
-use crate::cli::paths::{InDir, InFile, OutFile, StateDir};
+use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::job::{run, FitJob};
@@ -86,6 +86,11 @@ pub struct FitArgs {
     /// from the fields, so the objective scores the model's steps from where the animals were
     #[arg(long, value_name = "TRACKS.csv")]
     pub tracks: Vec<InFile>,
+    /// The clip's open boundary: `auto` (entry and exit cells from the video's flux across the
+    /// grid's edge; closed when nothing crosses it), `closed`, or a herdfit.boundary/1 file.
+    /// Agents leaving the grid are removed and the count's shortfall enters at the entry cells
+    #[arg(long, value_name = "auto|closed|FILE", default_value = "auto")]
+    pub boundary: InFileOrWord,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
@@ -162,6 +167,7 @@ pub struct FitArgs {
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
+    let boundary = crate::cli::args::boundary(&a.boundary)?;
     let job = FitJob {
         clips: a.clips.into_iter().map(Into::into).collect(),
         start: a.start.map(Into::into),
@@ -187,6 +193,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             frozen: a.freeze,
             density_weight: a.density_weight,
             tracks: a.tracks.into_iter().map(Into::into).collect(),
+            boundary,
             ..FitConfig::default()
         }),
         eval_seeds: a.eval_seeds,
