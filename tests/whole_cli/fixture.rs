@@ -125,6 +125,13 @@ pub fn fixture() -> &'static Path {
             r#"{"schema": "herdfit.obstacle-polygons/1", "polygons": [[[1, 1], [6, 1], [6, 6]]]}"#,
         );
         write(&d, "cells.json", r#"{"cells": [[1, 1]]}"#);
+        // An open boundary of the 8×8 clip (herdfit.boundary/1, issue #46).
+        write(
+            &d,
+            "gates.json",
+            r#"{"schema": "herdfit.boundary/1", "entries": [{"cell": [7, 3], "side": "right"}],
+                "exits": [{"cell": [0, 4], "side": "left"}]}"#,
+        );
         write(
             &d,
             "scene.json",
@@ -256,7 +263,7 @@ pub const BASELINES: &[(&str, &str)] = &[
         "fit",
         "clip --out fp.json --epochs 1 --window 2 --no-uncertainty --start p.json \
              --tracks clip/trajectories.csv --log fl.csv --plot fl.png --checkpoint ck \
-             --frames 0..12",
+             --frames 0..12 --boundary gates.json",
     ),
     (
         "fit",
@@ -271,7 +278,8 @@ pub const BASELINES: &[(&str, &str)] = &[
     (
         "validate",
         "clip --params p.json --baseline p.json --seeds 1 \
-                  --tracks clip/trajectories.csv --out val",
+                  --tracks clip/trajectories.csv --boundary gates.json --frames 2..12 \
+                  --measures reference --out val",
     ),
     (
         "validate",

@@ -74,6 +74,8 @@ impl GradcheckConfig {
         crate::limits::check_count("steps", self.steps, crate::limits::MAX_STEPS)?;
         if let Some(h) = self.fd_step {
             crate::error::check_positive(&[("fd_step", h)])?;
+            // An absolute step on θ: beyond 1 it measures no derivative (issue #47: 1e300 ran).
+            crate::limits::check_range("fd_step", h, 0.0, 1.0, "")?;
         }
         if self.replicas == 0 || self.replicas > 64 {
             return Err(Error::config(
