@@ -105,39 +105,8 @@ impl BoidsConfig {
                 self.frames
             )));
         }
-        for (k, v) in [
-            ("fps", self.fps),
-            ("cruise", self.cruise),
-            ("r_sep", self.r_sep),
-            ("r_neighbour", self.r_neighbour),
-            ("a_max", self.a_max),
-            ("orbit_period", self.orbit_period),
-            ("observer_distance", self.observer_distance),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(format!("{k} = {v} must be > 0")));
-            }
-        }
-        for (k, v) in [
-            ("k_sep", self.k_sep),
-            ("k_align", self.k_align),
-            ("k_cohesion", self.k_cohesion),
-            ("k_home", self.k_home),
-            ("orbit_radius", self.orbit_radius),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(Error::invalid(format!("{k} = {v} must be ≥ 0")));
-            }
-        }
-        for (k, v) in [
-            ("altitude", self.altitude),
-            ("observer_height", self.observer_height),
-        ] {
-            if !v.is_finite() {
-                return Err(Error::invalid(format!("{k} = {v} must be finite")));
-            }
-        }
-        // Physical ranges (issue #47): metres, seconds, gains within the coordinate limit.
+        // Physical ranges (issue #47): metres, seconds and gains within the coordinate limit,
+        // every value finite (the one wording of crate::limits).
         use crate::limits::{within, FPS_RANGE, MAX_COORD};
         within("fps", self.fps, FPS_RANGE.0, FPS_RANGE.1)?;
         for (k, v) in [
@@ -147,6 +116,13 @@ impl BoidsConfig {
             ("a_max", self.a_max),
             ("orbit_period", self.orbit_period),
             ("observer_distance", self.observer_distance),
+        ] {
+            within(k, v, 0.0, MAX_COORD)?;
+            if v <= 0.0 {
+                return Err(Error::invalid(format!("{k} = {v} must be > 0")));
+            }
+        }
+        for (k, v) in [
             ("k_sep", self.k_sep),
             ("k_align", self.k_align),
             ("k_cohesion", self.k_cohesion),
