@@ -1064,6 +1064,19 @@ pub fn run(subject: &Subject, cmd: &clap::Command, infinite_ok: &[&str], threads
         .into_iter()
         .map(Option::unwrap)
         .collect();
+    if let Some((i, r)) = rans
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.seconds.total_cmp(&b.1.seconds))
+    {
+        report.notes.push(format!(
+            "{} baselines in {:.0} s of runs, the slowest `{}` ({:.1} s)",
+            n,
+            rans.iter().map(|r| r.seconds).sum::<f64>(),
+            subject.baselines[i].0,
+            r.seconds
+        ));
+    }
     // Cases of failed baselines cannot be judged.
     cases.retain(|c| rans[c.baseline].ok);
     cases.retain(|c| {

@@ -330,6 +330,10 @@ pub const BASELINES: &[(&str, &str)] = &[
                         --json ev.json",
     ),
     ("crowd compare", "t.csv u.csv --json cmp.json"),
+    (
+        "crowd holdout",
+        "t.csv --split 0.7 --layout layout.json --config learn.json --out ho.csv --json hoj.json",
+    ),
     ("crowd synth", "--duration 5 --out cy.csv"),
     (
         "lift run",

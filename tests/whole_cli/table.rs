@@ -77,10 +77,6 @@ pub struct Arg {
     pub many: bool,
     /// clap ids this argument cannot be used with.
     pub conflicts: Vec<String>,
-    /// clap ids this argument needs.
-    pub requires: Vec<String>,
-    /// The type clap reports (for messages).
-    pub type_name: String,
     /// Takes a value (not a switch).
     pub takes_value: bool,
     /// A positional's place (1, 2, …); `None` for a flag.
@@ -107,9 +103,6 @@ pub struct Verb {
 impl Verb {
     pub fn key(&self) -> String {
         self.words.join(" ")
-    }
-    pub fn arg(&self, id: &str) -> Option<&Arg> {
-        self.args.iter().find(|a| a.id == id)
     }
 }
 
@@ -193,8 +186,6 @@ fn walk(cmd: &clap::Command, words: Vec<String>, out: &mut Vec<Verb>) {
                     .iter()
                     .map(|c| c.get_id().to_string())
                     .collect(),
-                requires: Vec::new(),
-                type_name: format!("{:?}", a.get_value_parser().type_id()),
                 takes_value: a.get_action().takes_values(),
                 index: a.get_index(),
             })

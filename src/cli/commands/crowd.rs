@@ -1,9 +1,11 @@
 //! `herdfit crowd …`: learn a crowd model from tracks, simulate it, evaluate it on ETH/UCY,
 //! compare crowds. Each verb: flags → config → one library call → print.
 
+use super::crowd_flags::{flagged, over, read_json, write_json};
 use crate::cli::paths::{InDir, InFile, OutFile, OutTracks};
 use crate::crowd::eval::{evaluate, EvalConfig};
 use crate::crowd::features::{IntentWindow, Scene};
+use crate::crowd::holdout::{holdout, HoldoutConfig};
 use crate::crowd::layout::Layout;
 use crate::crowd::measure::compare;
 use crate::crowd::model::{learn, read_tracks, CrowdModel, LearnConfig};
@@ -29,6 +31,27 @@ pub enum CrowdCommand {
     Compare(CompareArgs),
     /// Write a synthetic social-force corridor crowd (tracks CSV) to learn from.
     Synth(SynthArgs),
+    /// Split real tracks in time, learn from the first part, simulate the second part's entries
+    /// and compare (Wasserstein distances against those between the two real parts).
+    Holdout(HoldoutArgs),
+}
+
+/// Named learn configurations.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    /// The paper's Table 1 locomotion and chat rows, eq. 3's regression.
+    Paper,
+    /// Imitation of real pedestrians (`LearnConfig::pedestrians`).
+    Pedestrians,
+}
+
+impl Preset {
+    fn config(self) -> LearnConfig {
+        match self {
+            Preset::Paper => LearnConfig::default(),
+            Preset::Pedestrians => LearnConfig::pedestrians(),
+        }
+    }
 }
 
 /// Flags that override a learn configuration.
@@ -63,83 +86,10 @@ pub struct LearnFlags {
     pub eth_fps: Option<f64>,
 }
 
-/// Config keys (as the library's messages start) and the flags that set them.
-const FLAGS: [(&str, &str); 14] = [
-    ("features.radius", "--radius"),
-    ("action.k", "--k"),
-    ("pca_dims", "--pca-dims"),
-    ("smoothing", "--smoothing"),
-    ("max_samples", "--max-samples"),
-    ("features.intent_window", "--intent-window"),
-    ("eth_fps", "--eth-fps"),
-    ("action.attraction", "--attraction"),
-    ("min_distance", "--min-distance"),
-    ("goal_cone", "--goal-cone"),
-    ("steps", "--steps"),
-    ("synth.duration", "--duration"),
-    ("cell", "--cell"),
-    ("seed", "--seed"),
-];
-
-/// A library error about a config key renamed to the flag that set it (issue #47: crowd errors
-/// named the key), or attributed to the settings file `file` when no flag set it.
-fn flagged(e: Error, given: &dyn Fn(&str) -> bool, file: Option<&Path>) -> Error {
-    let rename = |key: &str, rest: &str| -> Option<String> {
-        let (_, flag) = FLAGS.iter().find(|(k, _)| *k == key)?;
-        Some(format!("{flag}: {rest}"))
-    };
-    match e {
-        Error::Invalid(m) => {
-            let key = FLAGS
-                .iter()
-                .map(|(k, _)| *k)
-                .filter(|k| {
-                    m.strip_prefix(k)
-                        .is_some_and(|r| r.starts_with(' ') || r.starts_with(':'))
-                })
-                .max_by_key(|k| k.len());
-            match key {
-                Some(k) if given(k) => {
-                    let rest = m[k.len()..].trim_start_matches([' ', ':']);
-                    let rest = rest.strip_prefix("= ").unwrap_or(rest);
-                    Error::Invalid(rename(k, rest).unwrap_or(m))
-                }
-                _ => match file {
-                    Some(f) => Error::file(f, m),
-                    None => Error::Invalid(m),
-                },
-            }
-        }
-        Error::Config { file: None, err } if given(&err.key) => {
-            Error::Invalid(rename(&err.key, &err.msg).unwrap_or_else(|| err.to_string()))
-        }
-        other => other,
-    }
-}
-
 impl LearnFlags {
-    /// Whether a flag set config key `k`.
-    fn given(&self, k: &str) -> bool {
-        match k {
-            "features.radius" => self.radius.is_some(),
-            "action.k" => self.k.is_some(),
-            "pca_dims" => self.pca_dims.is_some(),
-            "smoothing" => self.smoothing.is_some(),
-            "max_samples" => self.max_samples.is_some(),
-            "features.intent_window" => self.intent_window.is_some(),
-            "eth_fps" => self.eth_fps.is_some(),
-            _ => self.config.is_none(),
-        }
-    }
-
-    /// [`flagged`] for these flags.
-    fn name(&self, e: Error) -> Error {
-        flagged(e, &|k| self.given(k), self.config.as_deref())
-    }
-
     fn config(&self, base: LearnConfig) -> Result<LearnConfig> {
         let mut c = match &self.config {
-            Some(p) => read_json::<LearnConfig>(p)?,
+            Some(p) => over(&base, p)?,
             None => base,
         };
         if let Some(v) = self.radius {
@@ -170,22 +120,14 @@ impl LearnFlags {
     }
 }
 
-fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
-    crate::data::atomic::note_input(p);
-    let s = std::fs::read_to_string(p).map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
-    serde_json::from_str(&s).map_err(|e| Error::file(p, format!("bad configuration: {e}")))
-}
-
-fn write_json<T: serde::Serialize>(p: &Path, v: &T) -> Result<()> {
-    let s = serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()))?;
-    crate::data::atomic::write_atomic(p, format!("{s}\n").as_bytes())
-}
-
 #[derive(Args, Debug)]
 pub struct LearnArgs {
     /// Training tracks (several allowed, same units and frame rate).
     #[arg(value_name = "TRACKS", num_args = 1.., required = true)]
     pub inputs: Vec<InFile>,
+    /// Starting configuration (--config and the flags override it).
+    #[arg(long, value_enum, default_value = "paper")]
+    pub preset: Preset,
     #[command(flatten)]
     pub flags: LearnFlags,
     /// Output model.
@@ -200,7 +142,8 @@ pub struct SimulateArgs {
     /// Layout with walls, obstacles, pivots, regions and spawns.
     #[arg(long, value_name = "LAYOUT.json")]
     pub layout: Option<InFile>,
-    /// Agents enter where and when those of these tracks did, heading to where they left.
+    /// Agents enter where and when those of these tracks did, heading to where they left, and
+    /// leave when they did.
     #[arg(long, value_name = "TRACKS", required_unless_present = "layout")]
     pub entries: Option<InFile>,
     /// Steps (0: the layout's duration or until the last entry is done).
@@ -212,6 +155,10 @@ pub struct SimulateArgs {
     /// ones left, and stay until the end (--steps; default the tracks' length).
     #[arg(long, requires = "entries")]
     pub no_goals: bool,
+    /// With --entries: agents leave on reaching their goals (or when their time is up) instead
+    /// of when the real ones left.
+    #[arg(long, requires = "entries")]
+    pub leave_at_goal: bool,
     /// Every agent uses locomotion (no groups or lines).
     #[arg(long)]
     pub no_behaviours: bool,
@@ -219,6 +166,9 @@ pub struct SimulateArgs {
     /// it (its learnt step is turned to the edge of the cone; 180: off).
     #[arg(long, value_name = "DEG", default_value_t = SimConfig::default().goal_cone_deg)]
     pub goal_cone: f64,
+    /// Hard minimum distance between agents after each step (units; 0: off).
+    #[arg(long, value_name = "M", default_value_t = SimConfig::default().min_distance)]
+    pub min_distance: f64,
     /// Top-view PNG of the middle frame.
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<OutFile>,
@@ -282,6 +232,41 @@ pub struct CompareArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct HoldoutArgs {
+    /// Tracks: herdfit.tracks/1 CSV or ETH/UCY .txt.
+    #[arg(value_name = "TRACKS")]
+    pub tracks: InFile,
+    /// Walls and obstacles the simulated agents keep to (its spawns are not used).
+    #[arg(long, value_name = "LAYOUT.json")]
+    pub layout: Option<InFile>,
+    /// Starting learn configuration (--config and the flags override it).
+    #[arg(long, value_enum, default_value = "pedestrians")]
+    pub preset: Preset,
+    #[command(flatten)]
+    pub flags: LearnFlags,
+    /// Fraction of the agent-frames learnt from (the first part in time).
+    #[arg(long, value_name = "F", default_value_t = 0.5)]
+    pub split: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Agents leave on reaching their goals instead of when the real ones left.
+    #[arg(long)]
+    pub leave_at_goal: bool,
+    /// Goal cone of the simulation (degrees; see `crowd simulate --goal-cone`).
+    #[arg(long, value_name = "DEG", default_value_t = SimConfig::default().goal_cone_deg)]
+    pub goal_cone: f64,
+    /// Hard minimum distance between simulated agents (units; 0: off).
+    #[arg(long, value_name = "M", default_value_t = SimConfig::default().min_distance)]
+    pub min_distance: f64,
+    /// The simulated second part (herdfit.tracks/1 CSV + sidecar).
+    #[arg(long, value_name = "SIM.csv")]
+    pub out: Option<OutTracks>,
+    /// Report (herdfit.crowd-holdout/1 JSON).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<OutFile>,
+}
+
+#[derive(Args, Debug)]
 pub struct SynthArgs {
     /// Seconds simulated.
     #[arg(long, value_name = "S")]
@@ -300,11 +285,12 @@ pub fn run(c: CrowdCommand) -> Result<()> {
         CrowdCommand::Evaluate(a) => evaluate_cmd(a),
         CrowdCommand::Compare(a) => compare_cmd(a),
         CrowdCommand::Synth(a) => synth_cmd(a),
+        CrowdCommand::Holdout(a) => holdout_cmd(a),
     }
 }
 
 fn learn_cmd(a: LearnArgs) -> Result<()> {
-    let cfg = a.flags.config(LearnConfig::default())?;
+    let cfg = a.flags.config(a.preset.config())?;
     cfg.check().map_err(|e| a.flags.name(e))?;
     crate::data::atomic::check_writable(&a.out)?;
     let inputs = a
@@ -351,6 +337,9 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     let entries = match (&real, &layout) {
         (Some((s, _)), _) => {
             let mut e = entries_from_tracks(s);
+            if a.no_goals || a.leave_at_goal {
+                e.iter_mut().for_each(|e| e.leave = None);
+            }
             if a.no_goals {
                 e.iter_mut().for_each(|e| e.goal = None);
                 if steps == 0 {
@@ -367,6 +356,7 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
         seed: a.seed,
         behaviours: !a.no_behaviours,
         goal_cone_deg: a.goal_cone,
+        min_distance: a.min_distance,
         ..SimConfig::default()
     };
     let mut bars = crate::cli::Bars::default();
@@ -524,6 +514,47 @@ fn compare_cmd(a: CompareArgs) -> Result<()> {
     );
     if let Some(p) = &a.json {
         write_json(p, &c)?;
+    }
+    Ok(())
+}
+
+fn holdout_cmd(a: HoldoutArgs) -> Result<()> {
+    let base = HoldoutConfig::default();
+    let cfg = HoldoutConfig {
+        learn: a.flags.config(a.preset.config())?,
+        sim: SimConfig {
+            seed: a.seed,
+            goal_cone_deg: a.goal_cone,
+            min_distance: a.min_distance,
+            ..base.sim.clone()
+        },
+        split: a.split,
+        leave_at_goal: a.leave_at_goal,
+        ..base
+    };
+    let given = |k: &str| match k {
+        "split" => true,
+        k => a.flags.given(k),
+    };
+    cfg.check()
+        .map_err(|e| flagged(e, &given, a.flags.config.as_deref()))?;
+    let layout = a.layout.as_deref().map(Layout::load).transpose()?;
+    let t = read_tracks(&a.tracks, cfg.learn.eth_fps)?;
+    let mut bars = crate::cli::Bars::default();
+    let h = holdout(
+        &t,
+        layout.as_ref(),
+        &cfg,
+        &a.tracks.display().to_string(),
+        &mut bars,
+    )
+    .map_err(|e| e.in_file(&a.tracks))?;
+    println!("{}", h.report);
+    if let Some(p) = &a.out {
+        h.simulated.save(p)?;
+    }
+    if let Some(p) = &a.json {
+        write_json(p, &h.report)?;
     }
     Ok(())
 }
