@@ -217,6 +217,11 @@ impl Active {
                 ));
             }
         }
+        // A folder where a file goes is named as such (issue #14's wording) before the policy's
+        // finer reasons (a folder holding an input).
+        if kind == Kind::File && path.is_dir() {
+            return Err(Error::file(path, "cannot write: is a directory"));
+        }
         check_target(path)?;
         writable(path, kind)?;
         cleanup::remove_stale(super::parent_of(path), path);
