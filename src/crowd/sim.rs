@@ -86,7 +86,7 @@ impl SimConfig {
         if !(self.goal_cone_deg.is_finite() && (0.0..=180.0).contains(&self.goal_cone_deg)) {
             return Err(Error::invalid(format!(
                 "goal_cone = {} must be in 0..=180 degrees",
-                self.goal_cone_deg
+                crate::limits::show(self.goal_cone_deg)
             )));
         }
         // A distance in the tracks' unit: within the coordinate limit (issue #47).

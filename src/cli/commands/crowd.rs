@@ -532,8 +532,9 @@ fn holdout_cmd(a: HoldoutArgs) -> Result<()> {
         leave_at_goal: a.leave_at_goal,
         ..base
     };
+    // --split, --goal-cone and --min-distance always set their keys (they have defaults).
     let given = |k: &str| match k {
-        "split" => true,
+        "split" | "goal_cone" | "min_distance" => true,
         k => a.flags.given(k),
     };
     cfg.check()
