@@ -6,7 +6,10 @@ inside every folder, its files and subfolders (each with all below it) import ea
 without a loop (so neither two files nor two folders such as herd/fit and herd/author import
 each other, directly or round a longer loop). Which file imports which is read by
 scripts/imports.py: an import is an arrow to the file that defines the item (re-exports
-followed), test code and a module's arrows to its own submodules left out.
+followed), test code and a module's arrows to its own submodules left out. And no file-system
+write outside `src/data/atomic/` (issue #47: every output goes through the run's output plan; a
+raw `std::fs::write`, `File::create`, `OpenOptions`, `create_dir*`, `fs::copy` or `fs::rename` in a
+verb's code would bypass it; test modules are exempt).
 
     python3 scripts/check-structure.py            # check; exit 1 and list every violation
     python3 scripts/check-structure.py --report   # also print the longest files and functions
@@ -123,6 +126,25 @@ def functions(code):
 
 
 USE = re.compile(r"\bcrate::(herd|flock|crowd|lift)\b")
+RAW_WRITE = re.compile(
+    r"\b(fs::write|File::create|OpenOptions|fs::create_dir(_all)?|fs::copy|fs::rename"
+    r"|fs::hard_link|os::unix::fs::symlink)\b"
+)
+
+
+def raw_writes(rel, code):
+    """File-system writes outside data::atomic (before any test module)."""
+    if rel.startswith(os.path.join("src", "data", "atomic")) or os.path.basename(rel) == "tests.rs":
+        return []
+    if "tests" in rel.split(os.sep)[:-1] or rel.startswith("kernels"):
+        return []
+    cut = code.find("#[cfg(test)]")
+    body = code if cut < 0 else code[:cut]
+    out = []
+    for m in RAW_WRITE.finditer(body):
+        line = body.count("\n", 0, m.start()) + 1
+        out.append((rel, f"{rel}:{line}: {m.group(1)} writes past the output plan (use data::atomic)"))
+    return out
 
 
 def circle_errors():
@@ -169,6 +191,7 @@ def main():
             fns.append((b - a + 1, f"{rel}:{a} fn {name}"))
             if b - a + 1 > MAX_FN:
                 bad.append((f"{rel} fn {name}", f"{rel}:{a}: fn {name} is {b - a + 1} lines (limit {MAX_FN})"))
+        bad.extend(raw_writes(rel, code))
         parts = rel.split(os.sep)
         if len(parts) > 2 and parts[0] == "src" and parts[1] in SUBSYSTEMS:
             for m in USE.finditer(code):
@@ -197,7 +220,7 @@ def main():
         return
     print(
         f"structure: {len(sizes)} files ≤ {MAX_FILE} lines, {len(fns)} functions ≤ {MAX_FN} lines, "
-        "subsystems independent, no circle of imports"
+        "subsystems independent, no circle of imports, no write past data::atomic"
     )
 
 

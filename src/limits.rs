@@ -7,6 +7,9 @@
 //! | [`MAX_AGENTS`] | 1 000 000 | perception and forces are `O(N·K)` per step: hours per step beyond |
 //! | [`MAX_GRID_CELLS`] | 16 777 216 (4096²) | clip fields are `frames × cells` f64 arrays |
 //! | [`MAX_STEPS`] | 100 000 000 | a run's frames; streamed outputs are also checked against the disk |
+//! | [`MAX_RUNS`] | 10 000 | repetitions of one run: seeds, replicas, repeats, starts (each a whole run) |
+//! | [`MAX_ITERATIONS`] | 1 000 000 | iterations of an optimiser or solver: epochs, sweeps, evaluations |
+//! | [`MAX_SECONDS`] | 1e6 s (11.6 days) | a simulated duration; with the frame rate, bounded by [`MAX_STEPS`] |
 //! | [`FPS_RANGE`] | 1e-3 ..= 1e6 | Δt = 1/fps multiplies every speed; outside, positions overflow or stall |
 //! | [`MAX_COORD`] | 1e9 BL | squared distances stay far from f64 overflow (1e308) and f32 (3e38) |
 //! | [`MAX_DENSITY`] | 1e3 agents/BL² | counts (density × cell area) fit a `usize` |
@@ -23,6 +26,12 @@ pub const MAX_AGENTS: usize = 1_000_000;
 pub const MAX_GRID_CELLS: usize = 1 << 24;
 /// Most steps (frames) in one run.
 pub const MAX_STEPS: usize = 100_000_000;
+/// Most repetitions of one run (seeds averaged over, replicas, timing repeats, starts).
+pub const MAX_RUNS: usize = 10_000;
+/// Most iterations of an optimiser or a solver (epochs, sweeps, evaluations).
+pub const MAX_ITERATIONS: usize = 1_000_000;
+/// Longest simulated duration (seconds).
+pub const MAX_SECONDS: f64 = 1e6;
 /// Frame rates accepted (frames per second).
 pub const FPS_RANGE: (f64, f64) = (1e-3, 1e6);
 /// Largest |coordinate| (body lengths) accepted in an input.
@@ -40,6 +49,98 @@ pub fn show(v: f64) -> String {
     } else {
         format!("{v}")
     }
+}
+
+/// The words of every finiteness error: "NaN is not a finite number".
+pub fn not_finite(v: f64) -> String {
+    format!("{} is not a finite number", show(v))
+}
+
+/// A finite `value` (the one wording of [`not_finite`]).
+pub fn check_finite(key: &str, value: f64) -> Result<()> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::config(key, not_finite(value)))
+    }
+}
+
+/// A finite `value` within `lo..=hi` (`unit` after the range, may be empty).
+pub fn check_range(key: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<()> {
+    check_finite(key, value)?;
+    if !(lo..=hi).contains(&value) {
+        let unit = if unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {unit}")
+        };
+        return Err(Error::config(
+            key,
+            format!(
+                "{} is outside {}..={}{unit}",
+                show(value),
+                show(lo),
+                show(hi)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// `key = value` within `lo..=hi` (finite), as an [`Error::Invalid`] whose message starts with
+/// the key (`"noise = 1e300 is outside 0..=100"`): the form of the configs that the CLI renames
+/// to flags by that prefix.
+pub fn within(key: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
+    if !value.is_finite() {
+        return Err(Error::invalid(format!("{key} = {}", not_finite(value))));
+    }
+    if !(lo..=hi).contains(&value) {
+        return Err(Error::invalid(format!(
+            "{key} = {} is outside {}..={}",
+            show(value),
+            show(lo),
+            show(hi)
+        )));
+    }
+    Ok(())
+}
+
+/// Serde for an `f64` where ±inf means something (`guidance_scale = inf`): written as the strings
+/// `"inf"`/`"-inf"` — JSON has no infinity, and serde_json writes it as `null`, which reads back
+/// as nothing (issue #47) — and read from a number or those strings.
+pub mod infinite_ok {
+    use serde::{de::Error as _, Deserialize};
+
+    pub fn serialize<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        match *v {
+            f64::INFINITY => s.serialize_str("inf"),
+            f64::NEG_INFINITY => s.serialize_str("-inf"),
+            x => s.serialize_f64(x),
+        }
+    }
+
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum V {
+            N(f64),
+            S(String),
+        }
+        match V::deserialize(d)? {
+            V::N(x) => Ok(x),
+            V::S(s) if s == "inf" => Ok(f64::INFINITY),
+            V::S(s) if s == "-inf" => Ok(f64::NEG_INFINITY),
+            V::S(s) => Err(D::Error::custom(format!(
+                "'{s}' is not a number (nor \"inf\")"
+            ))),
+        }
+    }
+}
+
+/// A video scale of 2..=1000 pixels per body length, checked whether or not a video is asked for
+/// (issue #47: 1e300 sized a frame that wrapped around and rendered for ever).
+pub fn check_px_per_bl(v: f64) -> Result<()> {
+    check_range("px_per_bl", v, 2.0, 1000.0, "pixels per body length")
 }
 
 /// `key` ≤ `max` (a count).
@@ -79,13 +180,16 @@ pub fn check_fps(key: &str, fps: f64) -> Result<()> {
     Ok(())
 }
 
-/// A finite value with |value| ≤ `max`.
+/// The words of every magnitude error: "1e300 is beyond ±1e9".
+pub fn beyond(v: f64, max: f64) -> String {
+    format!("{} is beyond ±{}", show(v), show(max))
+}
+
+/// A finite value with |value| ≤ `max` (the wordings of [`not_finite`] and [`beyond`]).
 pub fn check_magnitude(key: &str, value: f64, max: f64) -> Result<()> {
-    if !(value.is_finite() && value.abs() <= max) {
-        return Err(Error::config(
-            key,
-            format!("{} is not finite or beyond ±{max:e}", show(value)),
-        ));
+    check_finite(key, value)?;
+    if value.abs() > max {
+        return Err(Error::config(key, beyond(value, max)));
     }
     Ok(())
 }

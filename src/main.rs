@@ -1,5 +1,3 @@
-use clap::Parser;
-
 fn main() {
     // Die quietly on a closed pipe (`herdfit fields-info CLIP | head`), like other Unix tools,
     // instead of failing a print.
@@ -32,8 +30,8 @@ fn main() {
             .unwrap_or_default();
         eprintln!("error: internal error{loc}: {}", msg.replace('\n', " "));
     }));
-    let cli = match herdfit::cli::Cli::try_parse() {
-        Ok(cli) => cli,
+    let matches = match <herdfit::cli::Cli as clap::CommandFactory>::command().try_get_matches() {
+        Ok(m) => m,
         Err(e) => {
             use clap::error::ErrorKind::{DisplayHelp, DisplayVersion};
             if matches!(e.kind(), DisplayHelp | DisplayVersion)
@@ -52,7 +50,7 @@ fn main() {
             std::process::exit(2);
         }
     };
-    if let Err(e) = herdfit::cli::run(cli) {
+    if let Err(e) = herdfit::cli::execute(&matches) {
         // An error raised inside a temporary sibling names the output it stands for.
         let msg = herdfit::data::atomic::cleanup::user_facing(&e.to_string());
         eprintln!("error: {msg}");

@@ -1,10 +1,12 @@
 //! Flag parsing shared by the commands: value parsers (pairs, ranges, grids, colours) and the
 //! flag groups several verbs take.
 
+use crate::cli::paths::{InFile, OutFile};
 use crate::error::Error;
+use crate::herd::boundary::BoundaryChoice;
 use crate::herd::simulate::{HerdSource, RunFiles};
 use clap::Args;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Two values of type `T` from `s` cut in two by `split` (each trimmed); `form` names the
 /// expected shape and `what` one value in the messages.
@@ -44,6 +46,11 @@ pub fn parse_pair(s: &str) -> std::result::Result<(f64, f64), String> {
     if !(a.is_finite() && b.is_finite()) || (a == 0.0 && b == 0.0) {
         return Err("the direction must be finite and non-zero".into());
     }
+    for v in [a, b] {
+        if v.abs() > crate::limits::MAX_COORD {
+            return Err(crate::limits::beyond(v, crate::limits::MAX_COORD));
+        }
+    }
     Ok((a, b))
 }
 
@@ -69,7 +76,7 @@ pub fn parse_rgb(s: &str) -> std::result::Result<[u8; 3], String> {
 pub struct HerdArgs {
     /// Initial state: CSV with columns id,x,y,vx,vy (BL, BL/s).
     #[arg(long, value_name = "INIT.csv")]
-    pub init: Option<PathBuf>,
+    pub init: Option<InFile>,
     /// A built-in random herd of N agents (one per 2 BL², heading +x ± 20°) instead of --init.
     #[arg(long, value_name = "N")]
     pub agents: Option<usize>,
@@ -81,25 +88,25 @@ pub struct HerdArgs {
 pub struct RunArgs {
     /// Parameter set (herdfit.params/1 JSON); the built-in default set when omitted.
     #[arg(long, value_name = "P.json")]
-    pub params: Option<PathBuf>,
+    pub params: Option<InFile>,
     #[command(flatten)]
     pub herd: HerdArgs,
     /// Write the run's decisions (perception, roles, noise) to this file (JSON), to replay them.
     #[arg(long, value_name = "REC.json")]
-    pub record: Option<PathBuf>,
+    pub record: Option<OutFile>,
     /// Replay the decisions of a recorded run instead of computing them.
     #[arg(long, value_name = "REC.json", conflicts_with = "record")]
-    pub replay: Option<PathBuf>,
+    pub replay: Option<InFile>,
 }
 
 impl RunArgs {
     /// The library's [`RunFiles`].
     pub fn files(self) -> RunFiles {
         RunFiles {
-            params: self.params,
+            params: self.params.map(Into::into),
             herd: self.herd.source(),
-            record: self.record,
-            replay: self.replay,
+            record: self.record.map(Into::into),
+            replay: self.replay.map(Into::into),
         }
     }
 }
@@ -108,7 +115,7 @@ impl HerdArgs {
     /// The herd source given, if any.
     pub fn source(&self) -> Option<HerdSource> {
         match (&self.init, self.agents) {
-            (Some(p), _) => Some(HerdSource::Init(p.clone())),
+            (Some(p), _) => Some(HerdSource::Init(p.clone().into())),
             (None, Some(n)) => Some(HerdSource::Agents(n)),
             (None, None) => None,
         }
@@ -232,4 +239,12 @@ pub fn with_settings(
         }
         (e, _) => with_flags(e, renamed),
     }
+}
+
+/// `--boundary auto|closed|FILE` (issue #46) as the library's [`BoundaryChoice`]; a file named
+/// there is an input of the run's plan ([`InFileOrWord`]).
+pub fn boundary(b: &crate::cli::paths::InFileOrWord) -> Result<BoundaryChoice, Error> {
+    b.text()
+        .parse()
+        .map_err(|e: String| Error::invalid(format!("--boundary: {e}")))
 }

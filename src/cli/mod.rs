@@ -4,6 +4,8 @@
 
 pub mod args;
 pub mod commands;
+pub mod numbers;
+pub mod paths;
 pub mod progress;
 
 pub use progress::{progress_bar, Bars};
@@ -63,6 +65,30 @@ pub enum Command {
     Lift(lift::LiftCommand),
     /// Any tracks file as an animated glTF 2.0 binary (.glb) for Blender and game engines.
     ExportGltf(export_gltf::ExportGltfArgs),
+}
+
+/// Runs a parsed command line as one transaction (issue #47): every number checked finite
+/// ([`numbers`]), the output plan derived from the paths' roles ([`paths::plan_of`]) and opened,
+/// the verb run, and its outputs renamed into place together — or, on an error or a panic, all
+/// removed.
+pub fn execute(m: &clap::ArgMatches) -> Result<()> {
+    use crate::data::atomic::plan;
+    use clap::{CommandFactory, FromArgMatches};
+    let cmd = Cli::command();
+    numbers::check(&cmd, m)?;
+    let cli = Cli::from_arg_matches(m).map_err(|e| crate::Error::invalid(e.to_string()))?;
+    paths::plan_of(&cmd, m).begin()?;
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(cli))) {
+        Ok(Ok(())) => plan::finish(),
+        Ok(Err(e)) => {
+            plan::abort();
+            Err(e)
+        }
+        Err(p) => {
+            plan::abort();
+            std::panic::resume_unwind(p)
+        }
+    }
 }
 
 /// Runs the parsed command line.

@@ -121,6 +121,12 @@ impl ActionConfig {
         if !(self.attraction.is_finite() && self.attraction >= 0.0) {
             return bad("attraction", format!("= {} must be ≥ 0", self.attraction));
         }
+        // Standard deviations: beyond 100 the perturbation leaves any learnt range.
+        crate::limits::within("action.attraction", self.attraction, 0.0, 100.0)?;
+        crate::limits::within("action.bandwidth_scale", self.bandwidth_scale, 0.0, 1e6)?;
+        if self.k > 100_000 {
+            return bad("k", format!("= {} must be at most 100000", self.k));
+        }
         if !(self.bandwidth_scale.is_finite() && self.bandwidth_scale > 0.0) {
             return bad(
                 "bandwidth_scale",

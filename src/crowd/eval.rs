@@ -121,6 +121,7 @@ impl EvalConfig {
         if !(self.min_distance.is_finite() && self.min_distance >= 0.0) {
             return Err(Error::invalid("min_distance must be ≥ 0"));
         }
+        crate::limits::within("min_distance", self.min_distance, 0.0, 100.0)?;
         if !(self.collision_distance.is_finite() && self.collision_distance >= 0.0) {
             return Err(Error::invalid("collision_distance must be ≥ 0"));
         }

@@ -117,6 +117,16 @@ impl FeatureConfig {
             }
         };
         pos(self.radius, "features.radius")?;
+        // In the tracks' unit: a neighbourhood wider than the coordinate limit holds everyone
+        // and overflows the features (issue #47).
+        crate::limits::within(
+            "features.radius",
+            self.radius,
+            0.0,
+            crate::limits::MAX_COORD,
+        )?;
+        crate::limits::check_count("features.intent_window", self.intent_window, 10_000)
+            .map_err(|e| Error::invalid(e.to_string().replacen(": ", " = ", 1)))?;
         let w = &self.weights;
         for (v, k) in [
             (w.speed, "speed"),

@@ -60,13 +60,13 @@ impl HoldoutConfig {
         if !(self.split > 0.0 && self.split < 1.0) {
             return Err(Error::invalid(format!(
                 "split = {} must be in (0, 1)",
-                self.split
+                crate::limits::show(self.split)
             )));
         }
         if !(self.limit.is_finite() && self.limit > 0.0) {
             return Err(Error::invalid(format!(
                 "limit = {} must be > 0",
-                self.limit
+                crate::limits::show(self.limit)
             )));
         }
         Ok(())

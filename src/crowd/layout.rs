@@ -117,8 +117,11 @@ impl Default for Layout {
     }
 }
 
+/// Finite points within ±[`MAX_COORD`](crate::limits::MAX_COORD).
 fn finite(p: &[V2]) -> bool {
-    p.iter().flatten().all(|v| v.is_finite())
+    p.iter()
+        .flatten()
+        .all(|v| v.is_finite() && v.abs() <= crate::limits::MAX_COORD)
 }
 
 impl Layout {
@@ -165,7 +168,22 @@ impl Layout {
                 )));
             }
         }
+        use crate::limits::{check_count, within, MAX_AGENTS, MAX_COORD, MAX_SECONDS};
+        let mut agents = 0usize;
         for (i, s) in self.spawns.iter().enumerate() {
+            // Counted before anything is drawn (issue #47: a spawn of 10^9 aborted).
+            agents = agents.saturating_add(s.count);
+            check_count(&format!("spawns[{i}].count"), s.count, MAX_AGENTS)
+                .and_then(|_| check_count("spawns (all counts)", agents, MAX_AGENTS))
+                .map_err(|e| Error::invalid(e.to_string()))?;
+            within(&format!("spawns[{i}].spread"), s.spread, 0.0, MAX_COORD)?;
+            within(&format!("spawns[{i}].start"), s.start, 0.0, MAX_SECONDS)?;
+            within(
+                &format!("spawns[{i}].interval"),
+                s.interval,
+                0.0,
+                MAX_SECONDS,
+            )?;
             let ok = finite(&[s.position, s.goal])
                 && s.spread.is_finite()
                 && s.spread >= 0.0
@@ -183,6 +201,7 @@ impl Layout {
             if !(d.is_finite() && d > 0.0) {
                 return Err(Error::invalid(format!("duration = {d} must be > 0")));
             }
+            within("duration", d, 0.0, MAX_SECONDS)?;
         }
         Ok(())
     }

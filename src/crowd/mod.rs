@@ -146,8 +146,7 @@ pub fn demo_layout() -> layout::Layout {
 /// learnt, and the model drives a larger crowd in a new hall; writes tracks, the model, a PNG
 /// (and an AVI with the `video` feature) and a comparison into `out`.
 pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
-    std::fs::create_dir_all(out)
-        .map_err(|e| Error::file(out, format!("cannot create folder: {e}")))?;
+    crate::data::atomic::make_dir(out)?;
     let source = synth::corridor(&synth::SynthConfig::default())?;
     source.save(&out.join("corridor.csv"))?;
     let cfg = model::LearnConfig {

@@ -159,6 +159,12 @@ impl LearnConfig {
                 self.smoothing
             )));
         }
+        // σ in frames: its kernel spans 8σ frames (issue #47: 1e300 overflowed its length).
+        crate::limits::within("smoothing", self.smoothing, 0.0, 1e4)?;
+        let (lo, hi) = crate::limits::FPS_RANGE;
+        crate::limits::within("eth_fps", self.eth_fps, lo, hi)?;
+        crate::limits::check_count("max_samples", self.max_samples, 100_000_000)
+            .map_err(|e| Error::invalid(e.to_string().replacen(": ", " = ", 1)))?;
         if self.max_samples < 2 {
             return Err(Error::invalid("max_samples must be ≥ 2"));
         }
@@ -251,6 +257,11 @@ impl CrowdModel {
         f.config.check()?;
         if !(f.dt.is_finite() && f.dt > 0.0) {
             return Err(Error::invalid(format!("dt = {} must be > 0", f.dt)));
+        }
+        // A step of 1/fps within the frame rates herdfit accepts (issue #47: dt = 1e300 ran).
+        {
+            let (lo, hi) = crate::limits::FPS_RANGE;
+            crate::limits::within("dt", f.dt, 1.0 / hi, 1.0 / lo)?;
         }
         if f.behaviours.first().map(|b| b.name.as_str()) != Some(LOCOMOTION) {
             return Err(Error::invalid("behaviours[0] must be 'locomotion'"));

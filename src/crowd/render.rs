@@ -136,9 +136,8 @@ pub fn top_view_png(
 /// An MJPG AVI of every frame (agents as discs with short trails), `px` pixels per unit.
 #[cfg(feature = "video")]
 pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f64) -> Result<()> {
-    use opencv::core::{Mat, Point, Scalar, Size, CV_8UC3};
-    use opencv::prelude::*;
-    use opencv::{imgproc, videoio};
+    use opencv::core::{Mat, Point, Scalar, CV_8UC3};
+    use opencv::imgproc;
     let cv = |e: opencv::Error| Error::file(path, format!("OpenCV: {}", e.message));
     let b = extent(&[tracks], layout);
     let even = |v: f64| ((v * px).ceil() as usize).div_ceil(2) as i32 * 2;
@@ -157,18 +156,8 @@ pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f
             (h as f64 - (p[1] - b[0][1]) * px).round() as i32,
         )
     };
-    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
-    let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv)?;
-    let name = tmp.path().to_string_lossy().into_owned();
     let fps = tracks.meta.fps.clamp(1.0, 60.0);
-    let mut writer =
-        videoio::VideoWriter::new(&name, fourcc, fps, Size::new(w, h), true).map_err(cv)?;
-    if !writer.is_opened().map_err(cv)? {
-        return Err(Error::file(
-            path,
-            "OpenCV cannot open an MJPG AVI writer here",
-        ));
-    }
+    let mut writer = crate::video::AviWriter::create(path, fps, w, h)?;
     let bgr = |c: (u8, u8, u8)| Scalar::new(c.2 as f64, c.1 as f64, c.0 as f64, 0.0);
     let mut base =
         Mat::new_rows_cols_with_default(h, w, CV_8UC3, Scalar::all(245.0)).map_err(cv)?;
@@ -223,8 +212,7 @@ pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f
             )
             .map_err(cv)?;
         }
-        writer.write(&img).map_err(cv)?;
+        writer.write(&img)?;
     }
-    writer.release().map_err(cv)?;
-    crate::data::atomic::persist(tmp, path)
+    writer.commit()
 }

@@ -86,17 +86,49 @@ impl SimConfig {
         if !(self.goal_cone_deg.is_finite() && (0.0..=180.0).contains(&self.goal_cone_deg)) {
             return Err(Error::invalid(format!(
                 "goal_cone = {} must be in 0..=180 degrees",
-                self.goal_cone_deg
+                crate::limits::show(self.goal_cone_deg)
             )));
         }
-        if !(self.min_distance.is_finite() && self.min_distance >= 0.0) {
-            return Err(Error::invalid(format!(
-                "min_distance = {} must be ≥ 0",
-                self.min_distance
-            )));
-        }
+        // A distance in the tracks' unit: within the coordinate limit (issue #47).
+        crate::limits::within(
+            "min_distance",
+            self.min_distance,
+            0.0,
+            crate::limits::MAX_COORD,
+        )?;
         Ok(())
     }
+}
+
+/// The steps a run takes (given, the layout's duration, or until the last entry is done), checked
+/// against the limits before anything runs (issue #47: `--steps` and a layout's duration ran until
+/// killed).
+fn run_steps(
+    layout: Option<&Layout>,
+    entries: &[Entry],
+    cfg: &SimConfig,
+    dt: f64,
+) -> Result<usize> {
+    let steps = if cfg.steps > 0 {
+        cfg.steps
+    } else if let Some(d) = layout.and_then(|l| l.duration) {
+        (d / dt).round().max(1.0) as usize
+    } else {
+        let last = entries
+            .iter()
+            .filter(|e| e.goal.is_some() || e.leave.is_some());
+        let t = last.map(|e| deadline(e, cfg.timeout, dt)).max();
+        t.ok_or_else(|| {
+            Error::invalid("steps = 0 needs goals or a layout duration to know when to stop")
+        })?
+    };
+    crate::limits::check_count("steps", steps, crate::limits::MAX_STEPS)?;
+    crate::limits::check_memory(
+        "steps",
+        "the simulated tracks",
+        entries.len() as f64 * steps as f64 * 96.0,
+    )?;
+    Ok(steps)
 }
 
 /// What a simulation produced.
@@ -342,19 +374,7 @@ pub fn simulate(
         ));
     }
     let dt = model.dt;
-    let steps = if cfg.steps > 0 {
-        cfg.steps
-    } else if let Some(d) = layout.and_then(|l| l.duration) {
-        (d / dt).round().max(1.0) as usize
-    } else {
-        let last = entries
-            .iter()
-            .filter(|e| e.goal.is_some() || e.leave.is_some());
-        let t = last.map(|e| deadline(e, cfg.timeout, dt)).max();
-        t.ok_or_else(|| {
-            Error::invalid("steps = 0 needs goals or a layout duration to know when to stop")
-        })?
-    };
+    let steps = run_steps(layout, entries, cfg, dt)?;
     let segs = layout.map(|l| l.segments()).unwrap_or_default();
     let lines = layout
         .map(|l| {

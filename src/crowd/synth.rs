@@ -67,6 +67,26 @@ impl SynthConfig {
                 return Err(Error::invalid(format!("synth.{k} = {v} must be > 0")));
             }
         }
+        // Physical ranges (issue #47): metres, seconds, walkers per second.
+        use crate::limits::{within, FPS_RANGE, MAX_COORD, MAX_SECONDS, MAX_SPEED};
+        within("synth.length", self.length, 0.0, MAX_COORD)?;
+        within("synth.width", self.width, 0.0, MAX_COORD)?;
+        within("synth.rate", self.rate, 0.0, 1e3)?;
+        within("synth.duration", self.duration, 0.0, MAX_SECONDS)?;
+        within("synth.fps", self.fps, FPS_RANGE.0, FPS_RANGE.1)?;
+        within("synth.speed", self.speed, 0.0, MAX_SPEED)?;
+        within("synth.range", self.range, 0.0, MAX_COORD)?;
+        within("synth.tau", self.tau, 0.0, MAX_SECONDS)?;
+        crate::limits::check_memory(
+            "synth.duration",
+            "the synthetic crowd",
+            // rows ≈ frames × walkers in the corridor at once (rate × crossing time)
+            self.duration
+                * self.fps
+                * (self.rate * self.length / self.speed.max(0.1) + 1.0)
+                    .min(self.rate * self.duration + 1.0)
+                * 64.0,
+        )?;
         if !(self.speed_sd >= 0.0 && self.repulsion >= 0.0) {
             return Err(Error::invalid(
                 "synth.speed_sd and synth.repulsion must be ≥ 0",

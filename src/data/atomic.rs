@@ -1,9 +1,12 @@
 //! Atomic writes shared by every command: a file or a folder appears whole or not at all, through
 //! a temporary sibling renamed into place, under one output-path policy ([`check_target`]: no
 //! devices, FIFOs or symlinks replaced, no input overwritten) and with temporary siblings removed on
-//! SIGINT/SIGTERM and after a SIGKILL by the next run ([`cleanup`]).
+//! SIGINT/SIGTERM and after a SIGKILL by the next run ([`cleanup`]). Under the command line every
+//! writer here goes through the run's output [`plan`]: only declared outputs are written, and they
+//! are renamed into place together when the run succeeds.
 
 pub mod cleanup;
+pub mod plan;
 mod policy;
 pub mod stdout;
 
@@ -40,6 +43,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     if path.is_dir() {
         return Err(Error::file(path, "cannot write: is a directory"));
     }
+    let mode = plan::admit(path)?;
     let dir = prepare(path)?;
     let fail = |e: std::io::Error| Error::file(path, format!("cannot write: {e}"));
     let mut tmp = temp_builder(&cleanup::temp_prefix(path))
@@ -47,15 +51,36 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .map_err(fail)?;
     let name = tmp.path().to_path_buf();
     cleanup::register(&name, path);
-    let done = (|| {
-        // Through the plain file: NamedTempFile's own writes add "at path <hidden temp>" to
-        // their errors, and the user's error must name the output (issue #14).
-        tmp.as_file_mut().write_all(bytes)?;
-        tmp.as_file().sync_all()?;
-        tmp.persist(path).map(|_| ()).map_err(|e| e.error)
-    })();
-    cleanup::unregister(&name);
-    done.map_err(fail)
+    // Through the plain file: NamedTempFile's own writes add "at path <hidden temp>" to their
+    // errors, and the user's error must name the output (issue #14).
+    let written = tmp
+        .as_file_mut()
+        .write_all(bytes)
+        .and_then(|_| tmp.as_file().sync_all());
+    if let Err(e) = written {
+        cleanup::unregister(&name);
+        return Err(fail(e));
+    }
+    finish_file(tmp, path, mode)
+}
+
+/// Renames a finished temporary sibling into place, or hands it to the plan.
+fn finish_file(tmp: tempfile::NamedTempFile, path: &Path, mode: plan::Admit) -> Result<()> {
+    let name = tmp.path().to_path_buf();
+    let fail = |e: std::io::Error| Error::file(path, format!("cannot write: {e}"));
+    let done = match mode {
+        plan::Admit::Staged => tmp
+            .keep()
+            .map(|(_, p)| plan::stage(p, path, false))
+            .map_err(|e| fail(e.error)),
+        plan::Admit::Now => check_target(path)
+            .and_then(|_| tmp.persist(path).map(|_| ()).map_err(|e| fail(e.error))),
+    };
+    // A staged sibling stays registered (a signal removes it) until the plan renames it.
+    if mode == plan::Admit::Now || done.is_err() {
+        cleanup::unregister(&name);
+    }
+    done
 }
 
 /// Temporary siblings of output files: hidden names that say whose they are
@@ -78,6 +103,7 @@ pub fn temp_sibling(path: &Path, suffix: &str) -> Result<tempfile::NamedTempFile
     if is_stdout(path) {
         return Err(stdout::not_a_stream(path, &format!("a {suffix} file")));
     }
+    plan::admit(path)?;
     let dir = prepare(path)?;
     let t = temp_builder(&cleanup::temp_prefix(path))
         .suffix(suffix)
@@ -87,21 +113,37 @@ pub fn temp_sibling(path: &Path, suffix: &str) -> Result<tempfile::NamedTempFile
     Ok(t)
 }
 
-/// Renames a finished [`temp_sibling`] into place.
+/// Renames a finished [`temp_sibling`] into place (under a plan: stages it).
 pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
-    check_target(path)?;
-    let name = tmp.path().to_path_buf();
-    let r = tmp
-        .persist(path)
-        .map(|_| ())
-        .map_err(|e| Error::file(path, format!("cannot write: {}", e.error)));
-    cleanup::unregister(&name);
-    r
+    let mode = match plan::admit(path) {
+        Ok(m) => m,
+        Err(e) => {
+            cleanup::unregister(tmp.path());
+            return Err(e);
+        }
+    };
+    finish_file(tmp, path, mode)
+}
+
+/// Creates the folder `path` (and its missing parents) for a writer that fills it file by file: a
+/// folder inside a folder being written whole, a state folder, or a declared folder of files.
+/// Under a plan any other folder is an internal error, like an undeclared file.
+pub fn make_dir(path: &Path) -> Result<()> {
+    plan::admit_folder(path)?;
+    std::fs::create_dir_all(path)
+        .map_err(|e| Error::file(path, format!("cannot create folder: {e}")))
 }
 
 /// Checks early that `path` can be created (its folder exists and is writable, and the output-path
-/// policy allows it), so long runs fail before they start rather than at the end.
+/// policy allows it), so long runs fail before they start rather than at the end. Under a plan this
+/// declares `path` as an output ([`plan::declare`]): a verb's derived outputs (a default log name
+/// beside `--out`) are declared this way before the run writes anything.
 pub fn check_writable(path: &Path) -> Result<()> {
+    plan::declare(path)
+}
+
+/// [`check_writable`] without a plan.
+fn check_writable_now(path: &Path) -> Result<()> {
     if is_stdout(path) {
         return Ok(());
     }
@@ -155,6 +197,7 @@ impl AtomicFile {
         if path.is_dir() {
             return Err(Error::file(path, "cannot write: is a directory"));
         }
+        plan::admit(path)?;
         let dir = prepare(path)?;
         let tmp = temp_builder(&cleanup::temp_prefix(path))
             .tempfile_in(dir)
@@ -181,14 +224,11 @@ impl AtomicFile {
             Sink::Temp(t) => t,
             Sink::Stdout(mut s) => return s.flush().map_err(fail),
         };
-        let name = tmp.path().to_path_buf();
-        let done = (|| {
-            tmp.as_file().sync_all().map_err(fail)?;
-            check_target(&path)?;
-            tmp.persist(&path).map(|_| ()).map_err(|e| fail(e.error))
-        })();
-        cleanup::unregister(&name);
-        done
+        if let Err(e) = tmp.as_file().sync_all() {
+            cleanup::unregister(tmp.path());
+            return Err(fail(e));
+        }
+        persist(tmp, &path)
     }
 }
 
@@ -232,6 +272,7 @@ impl AtomicDir {
         if is_stdout(target) {
             return Err(stdout::not_a_stream(target, "a folder"));
         }
+        plan::admit(target)?;
         replaceable(target)?;
         let parent = parent_of(target);
         cleanup::remove_stale(parent, target);
@@ -240,10 +281,16 @@ impl AtomicDir {
             .tempdir_in(parent)
             .map_err(|e| Error::file(target, format!("cannot write: {e}")))?;
         cleanup::register(tmp.path(), target);
+        plan::private(tmp.path());
         Ok(AtomicDir {
             target: target.to_path_buf(),
             tmp,
         })
+    }
+
+    /// The (temporary) folder itself, for writers that make their own files and folders in it.
+    pub fn root(&self) -> &Path {
+        self.tmp.path()
     }
 
     /// Path of a file inside the (temporary) folder.
@@ -257,10 +304,15 @@ impl AtomicDir {
             .map_err(|e| Error::file(self.target.join(name), format!("cannot write: {e}")))
     }
 
-    /// Renames the finished folder into place (replacing a previous output).
+    /// Renames the finished folder into place (replacing a previous output); under a plan, stages
+    /// it.
     pub fn commit(self) -> Result<()> {
         let target = self.target;
         let fail = |e: std::io::Error| Error::file(&target, format!("cannot write: {e}"));
+        if plan::admit(&target)? == plan::Admit::Staged {
+            plan::stage(self.tmp.keep(), &target, true);
+            return Ok(());
+        }
         let replace = replaceable(&target)?;
         let tmp = self.tmp.keep();
         let done = commit_dir(&tmp, &target, replace).map_err(fail);

@@ -64,7 +64,10 @@ fn array_of(v: &Value, path: &Path, what: &str) -> Result<Array> {
     let Value::Bytes(raw) = &t[4] else {
         return Err(bad("no raw data"));
     };
-    let n: usize = shape.iter().product();
+    let n = shape
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d))
+        .ok_or_else(|| bad(&format!("shape {shape:?} overflows")))?;
     let data = decode_floats(raw, n).ok_or_else(|| {
         bad(&format!(
             "{} bytes for {n} elements: not float64 or float32",
@@ -131,6 +134,39 @@ fn header(bytes: &[u8], path: &Path) -> Result<(usize, String)> {
     ))
 }
 
+/// The shape a plain array's header declares, checked against the bytes that follow it before
+/// anything is allocated (issue #47: a header declaring 10^6 × 10^6 × 2 aborted the reader).
+fn check_declared(head: &str, body: usize, path: &Path) -> Result<()> {
+    let bad = |m: String| Error::file(path, m);
+    let shape_text = head
+        .split_once("'shape':")
+        .and_then(|(_, r)| r.split_once('(')?.1.split_once(')'))
+        .map(|(inside, _)| inside)
+        .ok_or_else(|| bad("the .npy header has no shape".into()))?;
+    let mut n: usize = 1;
+    let mut dims = Vec::new();
+    for d in shape_text
+        .split(',')
+        .map(str::trim)
+        .filter(|d| !d.is_empty())
+    {
+        let v: usize = d
+            .parse()
+            .map_err(|_| bad(format!("the .npy header's shape has '{d}'")))?;
+        dims.push(v);
+        n = n.checked_mul(v).unwrap_or(usize::MAX);
+    }
+    let item = if head.contains("f4") { 4 } else { 8 };
+    let need = n.saturating_mul(item);
+    if need != body {
+        return Err(bad(format!(
+            "the header declares shape {dims:?} ({need} bytes) but {body} bytes follow it"
+        )));
+    }
+    crate::limits::check_memory("trajectories", "reading the .npy array", need as f64 * 2.0)
+        .map_err(|e| e.in_file(path))
+}
+
 /// Reads a trajectories `.npy` (either layout, see the module docs). `fps` overrides the file's
 /// `frames_per_second` and is required for plain arrays.
 pub fn read_npy_trajectories(path: &Path, fps: Option<f64>) -> Result<NpyTrajectories> {
@@ -178,6 +214,7 @@ pub fn read_npy_trajectories(path: &Path, fps: Option<f64>) -> Result<NpyTraject
         };
         (traj, file_fps, body, border)
     } else {
+        check_declared(&head, bytes.len() - end, path)?;
         let arr: ndarray::ArrayD<f64> = match ndarray_npy::read_npy(path) {
             Ok(a) => a,
             Err(_) => {

@@ -82,6 +82,24 @@ impl TracksMeta {
             provenance: serde_json::Value::Null,
         }
     }
+
+    /// Checks the schema tag, the frame rate and the dimension; errors name the key.
+    pub fn check(&self) -> Result<()> {
+        crate::data::check_schema(&self.schema, TRACKS_SCHEMA).map_err(Error::invalid)?;
+        if !(self.fps.is_finite() && self.fps > 0.0 && self.fps <= 1e6) {
+            return Err(Error::invalid(format!(
+                "fps = {} must be in (0, 1e6]",
+                crate::limits::show(self.fps)
+            )));
+        }
+        if self.dimension != 2 && self.dimension != 3 {
+            return Err(Error::invalid(format!(
+                "dimension = {} must be 2 or 3",
+                self.dimension
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// One animal in one frame.
@@ -123,20 +141,16 @@ impl Tracks {
     /// Checks the sidecar and the rows: finite values, one row per `(frame, id)`, one time per
     /// frame, time increasing with frame, z = 0 in 2D. Errors name the key or row.
     pub fn check(&self) -> Result<()> {
+        self.meta.check()?;
+        self.check_rows()
+    }
+
+    /// Checks the rows (see [`Tracks::check`]): every value finite and within the limits of
+    /// [`crate::limits`] (positions ±[`MAX_COORD`](crate::limits::MAX_COORD), velocities
+    /// ±[`MAX_SPEED`](crate::limits::MAX_SPEED) per second, times ±1e9 s).
+    pub fn check_rows(&self) -> Result<()> {
+        use crate::limits::{beyond, not_finite, MAX_COORD, MAX_SPEED};
         let m = &self.meta;
-        crate::data::check_schema(&m.schema, TRACKS_SCHEMA).map_err(Error::invalid)?;
-        if !(m.fps.is_finite() && m.fps > 0.0 && m.fps <= 1e6) {
-            return Err(Error::invalid(format!(
-                "fps = {} must be in (0, 1e6]",
-                m.fps
-            )));
-        }
-        if m.dimension != 2 && m.dimension != 3 {
-            return Err(Error::invalid(format!(
-                "dimension = {} must be 2 or 3",
-                m.dimension
-            )));
-        }
         let has_vel = self.rows.first().is_some_and(|r| r.vel.is_some());
         let has_role = self.rows.first().is_some_and(|r| r.role.is_some());
         let mut prev: Option<&TrackRow> = None;
@@ -148,11 +162,18 @@ impl Tracks {
                     r.frame, r.id
                 ))
             };
-            if !r.time.is_finite() {
-                return Err(bad(&format!("time is {}", r.time)));
-            }
-            if r.pos.iter().any(|v| !v.is_finite()) {
-                return Err(bad("position is not finite"));
+            let value = |name: &str, v: f64, max: f64| {
+                if !v.is_finite() {
+                    Err(bad(&format!("{name} = {}", not_finite(v))))
+                } else if v.abs() > max {
+                    Err(bad(&format!("{name} = {}", beyond(v, max))))
+                } else {
+                    Ok(())
+                }
+            };
+            value("time", r.time, 1e9)?;
+            for (name, v) in ["x", "y", "z"].into_iter().zip(r.pos) {
+                value(name, v, MAX_COORD)?;
             }
             if m.dimension == 2 && r.pos[2] != 0.0 {
                 return Err(bad("z given in 2D tracks"));
@@ -161,8 +182,8 @@ impl Tracks {
                 return Err(bad("columns differ from the first row's"));
             }
             if let Some(v) = r.vel {
-                if v.iter().any(|c| !c.is_finite()) {
-                    return Err(bad("velocity is not finite"));
+                for (name, c) in ["vx", "vy", "vz"].into_iter().zip(v) {
+                    value(name, c, MAX_SPEED)?;
                 }
             }
             if let Some(p) = prev {
@@ -298,10 +319,13 @@ impl Tracks {
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let side = sidecar_path(path);
         let meta = if side != path && side.is_file() {
+            crate::data::atomic::note_input(&side);
             let s = std::fs::read_to_string(&side)
                 .map_err(|e| Error::file(&side, format!("cannot read: {e}")))?;
             let m: TracksMeta = serde_json::from_str(&s)
                 .map_err(|e| Error::file(&side, format!("not a tracks sidecar: {e}")))?;
+            // A bad sidecar value is the sidecar's error, not the CSV's (issue #47).
+            m.check().map_err(|e| e.in_file(&side))?;
             Some(m)
         } else {
             None

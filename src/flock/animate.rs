@@ -83,10 +83,12 @@ impl AnimateConfig {
             if !(b.is_finite() && b > 0.0) {
                 return Err(Error::invalid(format!("wingspan_m = {b} must be > 0")));
             }
+            // The largest bird's wingspan is under 4 m; 100 m leaves room for any model.
+            crate::limits::within("wingspan_m", b, 0.0, 100.0)?;
         }
-        if !self.altitude_m.is_finite() {
-            return Err(Error::invalid("altitude_m must be finite"));
-        }
+        // Up to the edge of the atmosphere (100 km), and jitter within it.
+        crate::limits::within("altitude_m", self.altitude_m, -1e5, 1e5)?;
+        crate::limits::within("altitude_jitter", self.altitude_jitter, 0.0, 1e5)?;
         if !(self.altitude_jitter.is_finite() && self.altitude_jitter >= 0.0) {
             return Err(Error::invalid(format!(
                 "altitude_jitter = {} must be ≥ 0",

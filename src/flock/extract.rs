@@ -102,16 +102,17 @@ impl Default for ExtractConfig {
 impl ExtractConfig {
     /// Checks the settings; errors name the config key.
     pub fn check(&self) -> Result<()> {
+        use crate::limits::{within, MAX_COORD};
         if let Some(b) = self.wingspan {
             if !(b.is_finite() && b > 0.0) {
                 return Err(Error::invalid(format!("wingspan = {b} must be > 0")));
             }
+            within("wingspan", b, 0.0, MAX_COORD)?;
         }
         if let Some(h) = self.heading_deg {
-            if !h.is_finite() {
-                return Err(Error::invalid(format!("heading_deg = {h} must be finite")));
-            }
+            within("heading_deg", h, -360.0, 360.0)?;
         }
+        within("inlier_threshold", self.inlier_threshold, 0.0, 1e3)?;
         if !(self.inlier_threshold.is_finite() && self.inlier_threshold > 0.0) {
             return Err(Error::invalid(format!(
                 "inlier_threshold = {} must be > 0",
@@ -221,56 +222,6 @@ pub struct ShapeParams {
 }
 
 impl ShapeParams {
-    /// Writes the JSON atomically.
-    pub fn save(&self, path: &Path) -> Result<()> {
-        let s = serde_json::to_string_pretty(self)
-            .map_err(|e| Error::Internal(format!("shape parameters: {e}")))?;
-        crate::data::atomic::write_atomic(path, format!("{s}\n").as_bytes())
-    }
-
-    /// Reads and checks a shape-parameter file.
-    pub fn load(path: &Path) -> Result<Self> {
-        let text = crate::data::atomic::read_input_text(path)?;
-        let p: ShapeParams = serde_json::from_str(&text)
-            .map_err(|e| Error::file(path, format!("not a flock shape file: {e}")))?;
-        p.check().map_err(|e| e.in_file(path))?;
-        Ok(p)
-    }
-
-    /// Checks the schema tag and the values the steady flight relies on.
-    pub fn check(&self) -> Result<()> {
-        if self.schema != SHAPE_SCHEMA {
-            return Err(Error::invalid(format!(
-                "schema is '{}', expected '{SHAPE_SCHEMA}'",
-                self.schema
-            )));
-        }
-        if self.frames.is_empty() {
-            return Err(Error::invalid("frames is empty"));
-        }
-        for f in &self.frames {
-            let bad = |m: &str| Error::invalid(format!("frame {}: {m}", f.frame));
-            if f.birds.len() < 3 {
-                return Err(bad("fewer than 3 birds"));
-            }
-            if !(f.mean_gap.is_finite() && f.mean_gap > 0.0 && f.std_gap.is_finite()) {
-                return Err(bad("mean_gap/std_gap not positive and finite"));
-            }
-            if !(f.mean_dev.is_finite() && f.std_dev.is_finite() && f.std_dev >= 0.0) {
-                return Err(bad("mean_dev/std_dev not finite"));
-            }
-            if f.left.is_none() && f.right.is_none() {
-                return Err(bad("no side fit"));
-            }
-            for s in [&f.left, &f.right].into_iter().flatten() {
-                if s.coef.len() != s.model.params() || s.coef.iter().any(|c| !c.is_finite()) {
-                    return Err(bad("side coefficients malformed"));
-                }
-            }
-        }
-        Ok(())
-    }
-
     /// Mean side angle over the frames (degrees), per side.
     pub fn mean_angle(&self, s: Side) -> Option<f64> {
         let v: Vec<f64> = self

@@ -22,6 +22,7 @@ pub mod power;
 pub mod ransac;
 #[cfg(feature = "video")]
 pub mod render;
+mod shape_file;
 pub mod solve;
 pub mod steady;
 pub mod synth;
@@ -91,8 +92,7 @@ impl std::fmt::Display for DemoSummary {
 pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
     let t0 = std::time::Instant::now();
     let dir = out.join("flock");
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| crate::Error::file(&dir, format!("cannot create folder: {e}")))?;
+    crate::data::atomic::make_dir(&dir)?;
     let scfg = synth::SynthConfig {
         seed: 1,
         ..synth::SynthConfig::default()

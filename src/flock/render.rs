@@ -5,9 +5,9 @@
 use super::animate::Animation;
 use crate::error::{Error, Result};
 use crate::progress::Progress;
-use opencv::core::{Mat, Point, Scalar, Size, Vector, CV_8UC3};
+use opencv::core::{Mat, Point, Scalar, Vector, CV_8UC3};
+use opencv::imgproc;
 use opencv::prelude::*;
-use opencv::{imgproc, videoio};
 use std::path::Path;
 
 fn cv(path: &Path) -> impl Fn(opencv::Error) -> Error + '_ {
@@ -43,23 +43,7 @@ pub fn render(path: &Path, anim: &Animation, progress: &mut dyn Progress) -> Res
         even((2.0 * ext[0] + 4.0) * s),
         even((2.0 * ext[1] + 4.0) * s),
     );
-    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
-    let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
-    let name = tmp.path().to_string_lossy().into_owned();
-    let mut writer = videoio::VideoWriter::new(
-        &name,
-        fourcc,
-        anim.report.fps,
-        Size::new(w as i32, h as i32),
-        true,
-    )
-    .map_err(cv(path))?;
-    if !writer.is_opened().map_err(cv(path))? {
-        return Err(Error::file(
-            path,
-            "OpenCV cannot open an MJPG AVI writer here",
-        ));
-    }
+    let mut writer = crate::video::AviWriter::create(path, anim.report.fps, w as i32, h as i32)?;
     // Sky: light blue at the top to paler at the bottom (BGR).
     let mut sky = Mat::new_rows_cols_with_default(h as i32, w as i32, CV_8UC3, Scalar::all(0.0))
         .map_err(cv(path))?;
@@ -120,10 +104,10 @@ pub fn render(path: &Path, anim: &Animation, progress: &mut dyn Progress) -> Res
             )
             .map_err(cv(path))?;
         }
-        writer.write(&frame).map_err(cv(path))?;
+        writer.write(&frame)?;
         progress.inc(1);
     }
-    writer.release().map_err(cv(path))?;
+    let video = writer.finish()?;
     progress.finish();
-    crate::data::atomic::persist(tmp, path)
+    video.commit()
 }

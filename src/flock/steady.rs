@@ -98,6 +98,21 @@ impl SteadyConfig {
         if !(self.max_key_step.is_finite() && self.max_key_step > 0.0) {
             return bad("max_key_step", self.max_key_step, "must be > 0");
         }
+        for (k, v) in [
+            ("c2", self.c2),
+            ("key_interval", self.key_interval),
+            ("max_accel", self.max_accel),
+            ("min_gap", self.min_gap),
+            ("max_key_step", self.max_key_step),
+        ] {
+            crate::limits::within(k, v, 0.0, 1e6)?;
+        }
+        crate::limits::check_count(
+            "solve_evaluations",
+            self.solve_evaluations,
+            crate::limits::MAX_ITERATIONS,
+        )
+        .map_err(|e| Error::invalid(e.to_string().replacen(": ", " = ", 1)))?;
         if self.solve_evaluations == 0 {
             return bad("solve_evaluations", 0.0, "must be ≥ 1");
         }

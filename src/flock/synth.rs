@@ -112,6 +112,16 @@ impl SynthConfig {
         nonneg(self.noise, "noise")?;
         nonneg(self.speed, "speed")?;
         nonneg(self.outlier_min, "outlier_min")?;
+        // Physical ranges (issue #47): in wingspans, a formation is a few wingspans across.
+        use crate::limits::{within, FPS_RANGE, MAX_COORD, MAX_SPEED};
+        within("fps", self.fps, FPS_RANGE.0, FPS_RANGE.1)?;
+        within("wingspan", self.wingspan, 0.0, MAX_COORD)?;
+        within("gap", self.gap, 0.0, 100.0)?;
+        within("curvature", self.curvature, 0.0, 1e3)?;
+        within("gap_std", self.gap_std, 0.0, 100.0)?;
+        within("noise", self.noise, 0.0, 100.0)?;
+        within("speed", self.speed, 0.0, MAX_SPEED)?;
+        within("outlier_min", self.outlier_min, 0.0, 100.0)?;
         if !(self.half_angle_deg > 1.0 && self.half_angle_deg < 89.0) {
             return Err(Error::invalid(format!(
                 "half_angle_deg = {} must be in (1, 89)",
@@ -347,8 +357,7 @@ pub fn shipped_examples() -> Vec<(&'static str, SynthConfig)> {
 /// Writes the shipped examples into `dir` (`<stem>.csv` + `<stem>.json` each); returns the CSV
 /// paths.
 pub fn write_examples(dir: &Path) -> Result<Vec<std::path::PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
+    crate::data::atomic::make_dir(dir)?;
     let mut out = Vec::new();
     for (stem, cfg) in shipped_examples() {
         let p = dir.join(format!("{stem}.csv"));

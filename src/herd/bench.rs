@@ -244,6 +244,10 @@ impl BenchConfig {
         if self.repeats == 0 && !self.sim_only {
             return Err(crate::Error::config("repeats", "0 must be ≥ 1"));
         }
+        use crate::limits::{check_count, MAX_AGENTS, MAX_RUNS, MAX_STEPS};
+        check_count("agents", self.agents, MAX_AGENTS)?;
+        check_count("steps", self.steps, MAX_STEPS)?;
+        check_count("repeats", self.repeats, MAX_RUNS)?;
         Ok(())
     }
 }

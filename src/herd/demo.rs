@@ -7,7 +7,7 @@
 
 use crate::backend::Precision;
 use crate::data::ClipFields;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::herd::fit::{
     fit, identify, write_log, FitConfig, LossKind, Optimizer, Settle, UncertaintyConfig,
     GUIDANCE_SCALE,
@@ -44,8 +44,7 @@ pub struct DemoSummary {
 
 /// Runs the demo into `out` (created if missing).
 pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
-    std::fs::create_dir_all(out)
-        .map_err(|e| Error::file(out, format!("cannot create folder: {e}")))?;
+    crate::data::atomic::make_dir(out)?;
     let t0 = std::time::Instant::now();
     let truth = Params::default();
     let truth_path = out.join("truth.json");

@@ -23,10 +23,15 @@ fn gauss_smooth(v: &[f64], nx: usize, ny: usize, sigma: f64) -> Vec<f64> {
 
 /// Checks a `guidance_scale` value: ≥ 0, ∞ allowed.
 pub fn check_guidance_scale(v: f64) -> Result<()> {
-    if v.is_nan() || v < 0.0 {
+    // A finite σ beyond a million cells is no scale (its kernel would not fit in memory, issue
+    // #47); inf says "the herd's mean direction everywhere".
+    if v.is_nan() || v < 0.0 || (v.is_finite() && v > 1e6) {
         return Err(Error::config(
             "guidance_scale",
-            format!("{v} is out of range: it must be ≥ 0 (or inf)"),
+            format!(
+                "{} is out of range: it must be in 0..=1e6 cells (or inf)",
+                crate::limits::show(v)
+            ),
         ));
     }
     Ok(())

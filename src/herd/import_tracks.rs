@@ -105,6 +105,21 @@ impl ImportTracksConfig {
         positive("body_length_px", self.body_length_px)?;
         positive("body_length_m", self.body_length_m)?;
         positive("cell_size", self.cell_size)?;
+        // Physical ranges (issue #47: 1e300 was accepted or divided densities into infinities).
+        use crate::limits::{check_fps, check_magnitude};
+        if let Some(f) = self.fps {
+            check_fps("fps", f)?;
+        }
+        if let Some(l) = self.body_length_px {
+            check_magnitude("body_length_px", l, 65536.0)?;
+        }
+        if let Some(l) = self.body_length_m {
+            // The longest animal is a blue whale (30 m); 1 km leaves room for any unit slip.
+            check_magnitude("body_length_m", l, 1e3)?;
+        }
+        if let Some(c) = self.cell_size {
+            check_magnitude("cell_size", c, 1e6)?;
+        }
         if self.grid == 0 || self.grid > 4096 {
             return Err(Error::config("grid", "must be in 1..=4096"));
         }

@@ -55,6 +55,7 @@ impl SimulateConfig {
             if !(s.is_finite() && s >= 0.0) {
                 return Err(Error::config("speed_noise", format!("{s} must be ≥ 0")));
             }
+            crate::limits::check_magnitude("speed_noise", s, crate::limits::MAX_SPEED)?;
         }
         if let Some([x, y]) = self.guidance {
             if !(x.is_finite() && y.is_finite()) || (x == 0.0 && y == 0.0) {
@@ -101,6 +102,16 @@ pub struct RunFiles {
     pub replay: Option<PathBuf>,
 }
 
+impl RunFiles {
+    /// A built-in herd within [`crate::limits::MAX_AGENTS`] (checked before it is drawn).
+    pub fn check(&self) -> Result<()> {
+        if let Some(HerdSource::Agents(n)) = &self.herd {
+            crate::limits::check_count("agents", *n, crate::limits::MAX_AGENTS)?;
+        }
+        Ok(())
+    }
+}
+
 /// A simulation with its files: the run's ([`RunFiles`], a herd required) and the trajectory
 /// CSV.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -115,9 +126,7 @@ impl SimulateJob {
     /// Checks the settings and that there is a herd; errors name the key.
     pub fn check(&self) -> Result<()> {
         self.config.check()?;
-        if let Some(HerdSource::Agents(n)) = &self.run.herd {
-            crate::limits::check_count("agents", *n, crate::limits::MAX_AGENTS)?;
-        }
+        self.run.check()?;
         if self.run.herd.is_none() {
             return Err(Error::config(
                 "herd",

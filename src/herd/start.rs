@@ -243,7 +243,8 @@ impl Settle {
                 return Err(Error::config(key, format!("{v} must be ≥ 0")));
             }
         }
-        Ok(())
+        // The CLI's `--settle N` sets the iterations: named `settle`.
+        crate::limits::check_count("settle", self.iterations, crate::limits::MAX_ITERATIONS)
     }
 
     /// `iterations` iterations with the default step sizes.

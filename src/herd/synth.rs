@@ -73,9 +73,7 @@ impl SynthConfig {
                 ),
             ));
         }
-        if !self.heading_deg.is_finite() {
-            return Err(Error::config("heading_deg", "must be finite"));
-        }
+        crate::limits::check_range("heading_deg", self.heading_deg, -360.0, 360.0, "degrees")?;
         if !(self.density.is_finite() && self.density > 0.0 && self.density <= 100.0) {
             return Err(Error::config(
                 "density",
@@ -308,6 +306,9 @@ impl SynthJob {
         crate::error::check_positive(&[("cell_size", self.cell_size)])?;
         crate::limits::check_grid("grid_size", self.grid_size.0, self.grid_size.1)?;
         crate::limits::check_count("agents", self.agents, crate::limits::MAX_AGENTS)?;
+        if let Some((_, v)) = &self.video {
+            crate::limits::check_px_per_bl(v.px_per_bl)?;
+        }
         let extent = self.cell_size * self.grid_size.0.max(self.grid_size.1) as f64;
         crate::limits::check_magnitude("cell_size", extent, crate::limits::MAX_COORD)
     }
@@ -337,10 +338,11 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         }
         None => Array2::zeros((ny, nx)),
     };
-    AtomicDir::create(&job.out)?; // fail early on an unusable output folder
     if let Some(img) = &job.image {
         crate::data::atomic::check_writable(img)?;
+        crate::data::atomic::check_writable(&ground_path(img))?;
     }
+    AtomicDir::create(&job.out)?; // fail early on an unusable output folder
     let device = cpu_device(job.precision)?;
     let cfg = SynthConfig {
         params: params.clone(),

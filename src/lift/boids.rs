@@ -105,8 +105,11 @@ impl BoidsConfig {
                 self.frames
             )));
         }
+        // Physical ranges (issue #47): metres, seconds and gains within the coordinate limit,
+        // every value finite (the one wording of crate::limits).
+        use crate::limits::{within, FPS_RANGE, MAX_COORD};
+        within("fps", self.fps, FPS_RANGE.0, FPS_RANGE.1)?;
         for (k, v) in [
-            ("fps", self.fps),
             ("cruise", self.cruise),
             ("r_sep", self.r_sep),
             ("r_neighbour", self.r_neighbour),
@@ -114,7 +117,8 @@ impl BoidsConfig {
             ("orbit_period", self.orbit_period),
             ("observer_distance", self.observer_distance),
         ] {
-            if !(v.is_finite() && v > 0.0) {
+            within(k, v, 0.0, MAX_COORD)?;
+            if v <= 0.0 {
                 return Err(Error::invalid(format!("{k} = {v} must be > 0")));
             }
         }
@@ -125,18 +129,21 @@ impl BoidsConfig {
             ("k_home", self.k_home),
             ("orbit_radius", self.orbit_radius),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(Error::invalid(format!("{k} = {v} must be ≥ 0")));
-            }
+            within(k, v, 0.0, MAX_COORD)?;
         }
         for (k, v) in [
             ("altitude", self.altitude),
             ("observer_height", self.observer_height),
         ] {
-            if !v.is_finite() {
-                return Err(Error::invalid(format!("{k} = {v} must be finite")));
-            }
+            within(k, v, -MAX_COORD, MAX_COORD)?;
         }
+        // Every bird in every frame is kept (3D truth, 2D tracks): ~200 bytes a point.
+        crate::limits::check_memory(
+            "frames",
+            "the flock's tracks",
+            self.birds as f64 * self.frames as f64 * 200.0,
+        )
+        .map_err(|e| Error::invalid(e.to_string().replacen(": ", " = ", 1)))?;
         Ok(())
     }
 

@@ -76,8 +76,7 @@ pub fn demo_config(boids: &BoidsConfig) -> LiftConfig {
 /// Runs the lift demo into `out` (a folder `lift/` is made there).
 pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
     let dir = out.join("lift");
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Error::file(&dir, format!("cannot create folder: {e}")))?;
+    crate::data::atomic::make_dir(&dir)?;
     // Small enough for the demo's time budget (RESULTS.md §5 has the timing); the 40° view makes
     // birds leave and enter it.
     let boids = BoidsConfig::demo();

@@ -137,6 +137,23 @@ impl LiftConfig {
                 self.w_sep
             )));
         }
+        // Distances within the coordinate limit; weights within ±1e6 (issue #47: --v-target
+        // 1e300 was accepted).
+        use crate::limits::{within, MAX_COORD};
+        for (k, v) in [
+            ("v_target", self.v_target),
+            ("d_sep", Some(self.d_sep)),
+            ("d_near", self.d_near),
+            ("d_far", self.d_far),
+        ] {
+            if let Some(v) = v {
+                within(k, v, 0.0, MAX_COORD)?;
+            }
+        }
+        for (k, v) in [("lambda_t", self.lambda_t), ("lambda_f", self.lambda_f)] {
+            within(k, v, 0.0, 1e6)?;
+        }
+        within("w_sep", self.w_sep, -1e6, 1e6)?;
         if let (Some(a), Some(b)) = (self.d_near, self.d_far) {
             if a >= b {
                 return Err(Error::invalid(format!(

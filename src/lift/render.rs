@@ -199,8 +199,7 @@ mod video {
     use crate::data::camera::Camera;
     use crate::error::{Error, Result};
     use opencv::core::{Mat, Point, Scalar, CV_8UC3};
-    use opencv::prelude::*;
-    use opencv::{imgproc, videoio};
+    use opencv::imgproc;
     use std::path::Path;
 
     fn cv(path: &Path) -> impl Fn(opencv::Error) -> Error + '_ {
@@ -266,18 +265,7 @@ mod video {
             f.dedup();
             f
         };
-        let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
-        let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
-        let name = tmp.path().to_string_lossy().into_owned();
-        let mut writer =
-            videoio::VideoWriter::new(&name, fourcc, fps, opencv::core::Size::new(2 * w, h), true)
-                .map_err(cv(path))?;
-        if !writer.is_opened().map_err(cv(path))? {
-            return Err(Error::file(
-                path,
-                "OpenCV cannot open an MJPG AVI writer here",
-            ));
-        }
+        let mut writer = crate::video::AviWriter::create(path, fps, 2 * w, h)?;
         let trail = fps.round().max(1.0) as u64;
         let per_layer: Vec<Vec<Vec<(u64, V3)>>> = layers
             .iter()
@@ -380,9 +368,8 @@ mod video {
                 )
                 .map_err(cv(path))?;
             }
-            writer.write(&m).map_err(cv(path))?;
+            writer.write(&m)?;
         }
-        writer.release().map_err(cv(path))?;
-        crate::data::atomic::persist(tmp, path)
+        writer.commit()
     }
 }

@@ -6,10 +6,11 @@
 use crate::data::agents::AgentRow;
 use crate::data::Grid;
 use crate::error::{Error, Result};
+use crate::video::avi::{AviWriter, PendingVideo};
 use ndarray::Array2;
 use opencv::core::{Mat, Point, Scalar, Size, CV_8UC3};
+use opencv::imgproc;
 use opencv::prelude::*;
-use opencv::{imgproc, videoio};
 use serde::Serialize;
 use std::path::Path;
 
@@ -29,13 +30,7 @@ pub struct RenderConfig {
 impl RenderConfig {
     /// Checks the scale (at least 2 pixels per body length); errors name the key.
     pub fn check(&self) -> Result<()> {
-        if !(self.px_per_bl.is_finite() && self.px_per_bl >= 2.0) {
-            return Err(Error::config(
-                "px_per_bl",
-                format!("{} must be ≥ 2", self.px_per_bl),
-            ));
-        }
-        Ok(())
+        crate::limits::check_px_per_bl(self.px_per_bl)
     }
 }
 
@@ -271,19 +266,6 @@ pub fn render_image(
     Ok(())
 }
 
-/// A rendered video waiting in a temporary sibling of its destination.
-pub struct PendingVideo {
-    path: std::path::PathBuf,
-    tmp: tempfile::NamedTempFile,
-}
-
-impl PendingVideo {
-    /// Renames the video into place.
-    pub fn commit(self) -> Result<()> {
-        crate::data::atomic::persist(self.tmp, &self.path)
-    }
-}
-
 /// Renders `frames` (positions and velocities per frame) as an MJPG AVI for `path`, into a
 /// temporary sibling that [`PendingVideo::commit`] renames into place. Returns the camera pose of
 /// every frame.
@@ -303,18 +285,7 @@ pub fn render_video(
             "a {w}×{h} video frame is too large"
         )));
     }
-    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
-    let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
-    let tmp_name = tmp.path().to_string_lossy().into_owned();
-    let mut writer =
-        videoio::VideoWriter::new(&tmp_name, fourcc, fps, Size::new(w as i32, h as i32), true)
-            .map_err(cv(path))?;
-    if !writer.is_opened().map_err(cv(path))? {
-        return Err(Error::file(
-            path,
-            "OpenCV cannot open an MJPG AVI writer here",
-        ));
-    }
+    let mut writer = AviWriter::create(path, fps, w as i32, h as i32)?;
     let base = base_layer(w, h, grid, obstacles, cfg, path)?;
     let mut cameras = Vec::with_capacity(frames.len());
     let mut frame = Mat::default();
@@ -340,22 +311,14 @@ pub fn render_video(
                 Scalar::all(0.0),
             )
             .map_err(cv(path))?;
-            writer.write(&out).map_err(cv(path))?;
+            writer.write(&out)?;
         } else {
-            writer.write(&frame).map_err(cv(path))?;
+            writer.write(&frame)?;
         }
         cameras.push(cam);
         progress();
     }
-    writer.release().map_err(cv(path))?;
-    verify_avi(tmp.path(), path, frames.len())?;
-    Ok((
-        cameras,
-        PendingVideo {
-            path: path.to_path_buf(),
-            tmp,
-        },
-    ))
+    Ok((cameras, writer.finish()?))
 }
 
 /// Side-by-side comparison video: the clip's fields (left: density as cell shading, mean velocity
@@ -372,23 +335,7 @@ pub fn render_comparison(
     let size = g.size();
     let s = (400.0 / size[0].max(size[1])).max(2.0);
     let (w, h) = frame_size(&g, s);
-    let tmp = crate::data::atomic::temp_sibling(path, ".avi")?;
-    let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').map_err(cv(path))?;
-    let name = tmp.path().to_string_lossy().into_owned();
-    let mut writer = videoio::VideoWriter::new(
-        &name,
-        fourcc,
-        clip.meta.fps,
-        Size::new(2 * w as i32 + 8, h as i32),
-        true,
-    )
-    .map_err(cv(path))?;
-    if !writer.is_opened().map_err(cv(path))? {
-        return Err(Error::file(
-            path,
-            "OpenCV cannot open an MJPG AVI writer here",
-        ));
-    }
+    let mut writer = AviWriter::create(path, clip.meta.fps, 2 * w as i32 + 8, h as i32)?;
     let max = (0..clip.frames())
         .map(|f| {
             clip.density
@@ -467,46 +414,9 @@ pub fn render_comparison(
             )
             .map_err(cv(path))?;
         }
-        writer.write(&img).map_err(cv(path))?;
+        writer.write(&img)?;
     }
-    writer.release().map_err(cv(path))?;
-    verify_avi(tmp.path(), path, sim_frames.len())?;
-    PendingVideo {
-        path: path.to_path_buf(),
-        tmp,
-    }
-    .commit()
-}
-
-/// OpenCV's writer reports no failed write (a full disk, a file-size limit): the finished
-/// temporary AVI is read back and must hold every frame, else the video is refused and its
-/// temporary sibling removed (issue #14).
-fn verify_avi(tmp: &Path, path: &Path, frames: usize) -> Result<()> {
-    let short = || Error::file(path, "cannot write: the video is incomplete (disk full?)");
-    let len =
-        std::fs::metadata(tmp).map_err(|e| Error::file(path, format!("cannot write: {e}")))?;
-    // The RIFF header's size (written last, by a seek back) must be covered by the file: a write
-    // that failed at the end (the index) leaves the file shorter than its header says.
-    let mut head = [0u8; 8];
-    let read = std::fs::File::open(tmp).and_then(|mut f| {
-        use std::io::Read;
-        f.read_exact(&mut head)
-    });
-    let riff = u32::from_le_bytes([head[4], head[5], head[6], head[7]]) as u64;
-    if read.is_err() || &head[..4] != b"RIFF" || riff + 8 > len.len() {
-        return Err(short());
-    }
-    let cap =
-        videoio::VideoCapture::from_file(tmp.as_os_str().to_str().unwrap_or(""), videoio::CAP_ANY)
-            .map_err(cv(path))?;
-    if !cap.is_opened().map_err(cv(path))? {
-        return Err(short());
-    }
-    let n = cap.get(videoio::CAP_PROP_FRAME_COUNT).map_err(cv(path))?;
-    if n.round() as usize != frames {
-        return Err(short());
-    }
-    Ok(())
+    writer.commit()
 }
 
 #[cfg(test)]

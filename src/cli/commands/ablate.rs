@@ -2,28 +2,28 @@
 
 use crate::cli::args::{choice, with_flags, LOSSES};
 use crate::cli::commands::fit::StepFlags;
+use crate::cli::paths::{InDir, InFile, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::ablate::{run, zoned, AblateConfig, AblateJob, Switch, SWITCHES};
 use crate::herd::fit::{FitConfig, LossKind, Settle, GUIDANCE_SCALE};
 use crate::herd::validate::ValidateConfig;
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct AblateArgs {
     #[arg(value_name = "CLIP/")]
-    pub clip: PathBuf,
+    pub clip: InDir,
     /// Output report folder (ablation.json, ablation.md, plots, params-VARIANT.json).
     #[arg(long, value_name = "REPORT/")]
-    pub out: PathBuf,
+    pub out: OutDir,
     /// One parameter set per zone in every variant (herdfit.zones/1, as `fit --zones`); each is
     /// validated zone by zone and written as a bundle.
     #[arg(long, value_name = "ZONES.json")]
-    pub zones: Option<PathBuf>,
+    pub zones: Option<InFile>,
     /// Starting parameters of every variant; a generic start (every value 0.5) when omitted.
     #[arg(long, value_name = "P.json")]
-    pub start: Option<PathBuf>,
+    pub start: Option<InFile>,
     /// The switches turned off in turn (comma-separated): occlusion, angular, density,
     /// dir-variance, speed-density. All when omitted.
     #[arg(long, value_name = "S,…", value_delimiter = ',')]
@@ -72,10 +72,10 @@ pub fn exec(a: AblateArgs) -> Result<()> {
     };
     let settle = Settle::with_iterations(a.settle);
     let job = AblateJob {
-        clip: a.clip,
-        start: a.start,
-        out: a.out,
-        zones: a.zones,
+        clip: a.clip.into(),
+        start: a.start.map(Into::into),
+        out: a.out.into(),
+        zones: a.zones.map(Into::into),
         config: AblateConfig {
             fit: a.steps.apply(FitConfig {
                 seed: a.seed,

@@ -1,19 +1,19 @@
 //! `herdfit author`: flags → [`AuthorJob`] → [`run`] → one line.
 
 use crate::cli::args::with_flags;
+use crate::cli::paths::{InFile, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::author::job::{run, AuthorJob};
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct AuthorArgs {
     #[arg(value_name = "SCENE.json")]
-    pub scene: PathBuf,
+    pub scene: InFile,
     /// Output folder: trajectories.csv, navigation.png, snapshots, report.json (+ herd.avi).
     #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
+    pub out: OutDir,
     /// Also render the herd over the scene as an MJPG AVI.
     #[arg(long)]
     pub video: bool,
@@ -24,8 +24,8 @@ pub struct AuthorArgs {
 
 pub fn exec(a: AuthorArgs) -> Result<()> {
     let job = AuthorJob {
-        scene: a.scene,
-        out: a.out,
+        scene: a.scene.into(),
+        out: a.out.into(),
         video: a.video,
         px_per_bl: a.px_per_bl,
     };

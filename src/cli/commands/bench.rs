@@ -1,12 +1,12 @@
 //! `herdfit bench`: flags → [`BenchConfig`] → [`run`] → one line.
 
 use crate::cli::args::with_flags;
+use crate::cli::paths::OutFile;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::bench::{run, BenchConfig};
 use crate::herd::sim::ForceKernel;
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -30,7 +30,7 @@ pub struct BenchArgs {
     pub reference_forces: bool,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
-    pub json: PathBuf,
+    pub json: OutFile,
 }
 
 pub fn exec(a: BenchArgs) -> Result<()> {

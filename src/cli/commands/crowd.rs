@@ -1,6 +1,8 @@
 //! `herdfit crowd …`: learn a crowd model from tracks, simulate it, evaluate it on ETH/UCY,
 //! compare crowds. Each verb: flags → config → one library call → print.
 
+use super::crowd_flags::{flagged, over, read_json, write_json};
+use crate::cli::paths::{InDir, InFile, OutFile, OutTracks};
 use crate::crowd::eval::{evaluate, EvalConfig};
 use crate::crowd::features::{IntentWindow, Scene};
 use crate::crowd::holdout::{holdout, HoldoutConfig};
@@ -57,7 +59,7 @@ impl Preset {
 pub struct LearnFlags {
     /// Configuration (LearnConfig JSON); the flags below override it.
     #[arg(long, value_name = "learn.json")]
-    pub config: Option<PathBuf>,
+    pub config: Option<InFile>,
     /// Neighbourhood radius r of eq. 1 (tracks' unit).
     #[arg(long, value_name = "R")]
     pub radius: Option<f64>,
@@ -118,40 +120,11 @@ impl LearnFlags {
     }
 }
 
-/// `base` with the keys of the JSON file `p` put over it (objects key by key, anything else
-/// replaced), so a `--config` file changes only what it names, whichever preset it starts from.
-fn over<T: serde::Serialize + serde::de::DeserializeOwned>(base: &T, p: &Path) -> Result<T> {
-    fn put(b: &mut serde_json::Value, o: serde_json::Value) {
-        match (b, o) {
-            (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
-                for (k, v) in o {
-                    put(b.entry(k).or_insert(serde_json::Value::Null), v);
-                }
-            }
-            (b, o) => *b = o,
-        }
-    }
-    let mut v = serde_json::to_value(base).map_err(|e| Error::Internal(e.to_string()))?;
-    put(&mut v, read_json(p)?);
-    serde_json::from_value(v).map_err(|e| Error::file(p, format!("bad configuration: {e}")))
-}
-
-fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
-    crate::data::atomic::note_input(p);
-    let s = std::fs::read_to_string(p).map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
-    serde_json::from_str(&s).map_err(|e| Error::file(p, format!("bad configuration: {e}")))
-}
-
-fn write_json<T: serde::Serialize>(p: &Path, v: &T) -> Result<()> {
-    let s = serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()))?;
-    crate::data::atomic::write_atomic(p, format!("{s}\n").as_bytes())
-}
-
 #[derive(Args, Debug)]
 pub struct LearnArgs {
     /// Training tracks (several allowed, same units and frame rate).
     #[arg(value_name = "TRACKS", num_args = 1.., required = true)]
-    pub inputs: Vec<PathBuf>,
+    pub inputs: Vec<InFile>,
     /// Starting configuration (--config and the flags override it).
     #[arg(long, value_enum, default_value = "paper")]
     pub preset: Preset,
@@ -159,20 +132,20 @@ pub struct LearnArgs {
     pub flags: LearnFlags,
     /// Output model.
     #[arg(long, value_name = "MODEL.json")]
-    pub out: PathBuf,
+    pub out: OutFile,
 }
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
     #[arg(value_name = "MODEL.json")]
-    pub model: PathBuf,
+    pub model: InFile,
     /// Layout with walls, obstacles, pivots, regions and spawns.
     #[arg(long, value_name = "LAYOUT.json")]
-    pub layout: Option<PathBuf>,
+    pub layout: Option<InFile>,
     /// Agents enter where and when those of these tracks did, heading to where they left, and
     /// leave when they did.
     #[arg(long, value_name = "TRACKS", required_unless_present = "layout")]
-    pub entries: Option<PathBuf>,
+    pub entries: Option<InFile>,
     /// Steps (0: the layout's duration or until the last entry is done).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub steps: usize,
@@ -198,16 +171,16 @@ pub struct SimulateArgs {
     pub min_distance: f64,
     /// Top-view PNG of the middle frame.
     #[arg(long, value_name = "OUT.png")]
-    pub png: Option<PathBuf>,
+    pub png: Option<OutFile>,
     /// Top-view MJPG AVI (needs the `video` feature).
     #[arg(long, value_name = "OUT.avi")]
-    pub video: Option<PathBuf>,
+    pub video: Option<OutFile>,
     /// Comparison with the --entries tracks (JSON).
     #[arg(long, value_name = "OUT.json", requires = "entries")]
-    pub compare: Option<PathBuf>,
+    pub compare: Option<OutFile>,
     /// Output tracks (herdfit.tracks/1 CSV + sidecar).
     #[arg(long, value_name = "TRACKS.csv")]
-    pub out: PathBuf,
+    pub out: OutTracks,
 }
 
 #[derive(Args, Debug)]
@@ -215,7 +188,7 @@ pub struct EvaluateArgs {
     /// Folder of the ETH/UCY text files (default: $HERDFIT_SHARED_DATA/pedestrians/eth-ucy or
     /// ../shared/data/pedestrians/eth-ucy).
     #[arg(long, value_name = "DIR")]
-    pub data: Option<PathBuf>,
+    pub data: Option<InDir>,
     /// Test scene (repeat; default all five).
     #[arg(long, value_name = "NAME")]
     pub scene: Vec<String>,
@@ -232,21 +205,21 @@ pub struct EvaluateArgs {
     /// Hyper-parameter candidates chosen inside each test scene's training scenes (TuningConfig
     /// JSON file: smoothing, bandwidth_scale, formation, inertia lists, frame_stride).
     #[arg(long, value_name = "TUNING.json")]
-    pub tuning: Option<PathBuf>,
+    pub tuning: Option<InFile>,
     /// Hard minimum distance (m) between rolled-out pedestrians (0: off).
     #[arg(long, value_name = "M")]
     pub min_distance: Option<f64>,
     /// Report (herdfit.crowd-eval/1 JSON).
     #[arg(long, value_name = "OUT.json")]
-    pub json: Option<PathBuf>,
+    pub json: Option<OutFile>,
 }
 
 #[derive(Args, Debug)]
 pub struct CompareArgs {
     #[arg(value_name = "A")]
-    pub a: PathBuf,
+    pub a: InFile,
     #[arg(value_name = "B")]
-    pub b: PathBuf,
+    pub b: InFile,
     /// Density-map cell (tracks' unit).
     #[arg(long, value_name = "C", default_value_t = 1.0)]
     pub cell: f64,
@@ -255,17 +228,17 @@ pub struct CompareArgs {
     pub eth_fps: f64,
     /// Report (herdfit.crowd-compare/1 JSON).
     #[arg(long, value_name = "OUT.json")]
-    pub json: Option<PathBuf>,
+    pub json: Option<OutFile>,
 }
 
 #[derive(Args, Debug)]
 pub struct HoldoutArgs {
     /// Tracks: herdfit.tracks/1 CSV or ETH/UCY .txt.
     #[arg(value_name = "TRACKS")]
-    pub tracks: PathBuf,
+    pub tracks: InFile,
     /// Walls and obstacles the simulated agents keep to (its spawns are not used).
     #[arg(long, value_name = "LAYOUT.json")]
-    pub layout: Option<PathBuf>,
+    pub layout: Option<InFile>,
     /// Starting learn configuration (--config and the flags override it).
     #[arg(long, value_enum, default_value = "pedestrians")]
     pub preset: Preset,
@@ -287,10 +260,10 @@ pub struct HoldoutArgs {
     pub min_distance: f64,
     /// The simulated second part (herdfit.tracks/1 CSV + sidecar).
     #[arg(long, value_name = "SIM.csv")]
-    pub out: Option<PathBuf>,
+    pub out: Option<OutTracks>,
     /// Report (herdfit.crowd-holdout/1 JSON).
     #[arg(long, value_name = "OUT.json")]
-    pub json: Option<PathBuf>,
+    pub json: Option<OutFile>,
 }
 
 #[derive(Args, Debug)]
@@ -301,7 +274,7 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[arg(long, value_name = "TRACKS.csv")]
-    pub out: PathBuf,
+    pub out: OutTracks,
 }
 
 /// Runs a crowd verb.
@@ -318,7 +291,7 @@ pub fn run(c: CrowdCommand) -> Result<()> {
 
 fn learn_cmd(a: LearnArgs) -> Result<()> {
     let cfg = a.flags.config(a.preset.config())?;
-    cfg.check()?;
+    cfg.check().map_err(|e| a.flags.name(e))?;
     crate::data::atomic::check_writable(&a.out)?;
     let inputs = a
         .inputs
@@ -353,17 +326,6 @@ fn learn_cmd(a: LearnArgs) -> Result<()> {
 fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     let model = CrowdModel::load(&a.model)?;
     let layout = a.layout.as_deref().map(Layout::load).transpose()?;
-    for p in [
-        Some(&a.out),
-        a.png.as_ref(),
-        a.video.as_ref(),
-        a.compare.as_ref(),
-    ]
-    .into_iter()
-    .flatten()
-    {
-        crate::data::atomic::check_writable(p)?;
-    }
     let real = match &a.entries {
         Some(p) => {
             let t = read_tracks(p, 1.0 / model.dt)?;
@@ -399,7 +361,17 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     };
     let mut bars = crate::cli::Bars::default();
     let t0 = std::time::Instant::now();
-    let run = simulate(&model, layout.as_ref(), &entries, &cfg, &mut bars)?;
+    let run = simulate(&model, layout.as_ref(), &entries, &cfg, &mut bars).map_err(|e| {
+        let from_layout = a.steps == 0 && a.layout.is_some();
+        let e = flagged(e, &|k| k != "steps" || !from_layout, None);
+        match (&a.layout, e) {
+            // Steps drawn from the layout's duration: the layout is to blame.
+            (Some(l), Error::Config { file: None, err }) if from_layout => {
+                Error::file(l, format!("duration: {}", err.msg))
+            }
+            (_, e) => e,
+        }
+    })?;
     let secs = t0.elapsed().as_secs_f64();
     if let Some(p) = &a.png {
         let mid = run.tracks.rows.last().map_or(0, |r| r.frame) / 2;
@@ -461,7 +433,7 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
     let base = EvalConfig::default();
     let mut cfg = EvalConfig {
         learn: a.flags.config(base.learn.clone())?,
-        data: a.data.clone().unwrap_or_else(default_eth_ucy),
+        data: a.data.clone().map_or_else(default_eth_ucy, Into::into),
         scenes: a.scene.clone(),
         seed: a.seed,
         ..base
@@ -482,7 +454,13 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
         crate::data::atomic::check_writable(p)?;
     }
     let mut bars = crate::cli::Bars::default();
-    let rep = evaluate(&cfg, &mut bars)?;
+    let given = |k: &str| match k {
+        "action.attraction" => a.attraction.is_some(),
+        "min_distance" => a.min_distance.is_some(),
+        k => a.flags.given(k),
+    };
+    let rep =
+        evaluate(&cfg, &mut bars).map_err(|e| flagged(e, &given, a.flags.config.as_deref()))?;
     print!("{rep}");
     if let Some(p) = &a.json {
         write_json(p, &rep)?;
@@ -491,6 +469,10 @@ fn evaluate_cmd(a: EvaluateArgs) -> Result<()> {
 }
 
 fn compare_cmd(a: CompareArgs) -> Result<()> {
+    let flag = |e| flagged(e, &|_| true, None);
+    crate::limits::within("cell", a.cell, 1e-9, crate::limits::MAX_COORD).map_err(flag)?;
+    let (lo, hi) = crate::limits::FPS_RANGE;
+    crate::limits::within("eth_fps", a.eth_fps, lo, hi).map_err(flag)?;
     let load = |p: &Path| -> Result<(Scene, String)> {
         let t = read_tracks(p, a.eth_fps)?;
         let u = t.meta.units.as_str().to_string();
@@ -550,10 +532,13 @@ fn holdout_cmd(a: HoldoutArgs) -> Result<()> {
         leave_at_goal: a.leave_at_goal,
         ..base
     };
-    cfg.check()?;
-    for p in [a.out.as_ref(), a.json.as_ref()].into_iter().flatten() {
-        crate::data::atomic::check_writable(p)?;
-    }
+    // --split, --goal-cone and --min-distance always set their keys (they have defaults).
+    let given = |k: &str| match k {
+        "split" | "goal_cone" | "min_distance" => true,
+        k => a.flags.given(k),
+    };
+    cfg.check()
+        .map_err(|e| flagged(e, &given, a.flags.config.as_deref()))?;
     let layout = a.layout.as_deref().map(Layout::load).transpose()?;
     let t = read_tracks(&a.tracks, cfg.learn.eth_fps)?;
     let mut bars = crate::cli::Bars::default();
@@ -583,7 +568,7 @@ fn synth_cmd(a: SynthArgs) -> Result<()> {
     if let Some(d) = a.duration {
         cfg.duration = d;
     }
-    let t = synth::corridor(&cfg)?;
+    let t = synth::corridor(&cfg).map_err(|e| flagged(e, &|_| true, None))?;
     t.save(&a.out)?;
     println!(
         "crowd synth: {} walkers, {} rows; wrote {}",

@@ -1,21 +1,21 @@
 //! `herdfit export-gltf TRACKS --out flock.glb`: any tracks file (2D on the ground plane, 3D as
 //! is) as an animated glTF 2.0 binary, optionally with a rendered preview frame.
 
+use crate::cli::paths::{InFile, OutFile};
 use crate::data::atomic::check_writable;
 use crate::data::camera::Camera;
 use crate::data::gltf::{export_glb, GltfConfig};
 use crate::data::jackdaw::load_tracks;
 use crate::error::{Error, Result};
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ExportGltfArgs {
     /// Tracks (herdfit.tracks/1, 2D or 3D, or a jackdaw CSV).
     #[arg(value_name = "TRACKS.csv")]
-    pub tracks: PathBuf,
+    pub tracks: InFile,
     #[arg(long, value_name = "OUT.glb")]
-    pub out: PathBuf,
+    pub out: OutFile,
     /// glTF metres per track unit.
     #[arg(long, value_name = "S", default_value_t = 1.0)]
     pub scale: f64,
@@ -30,10 +30,10 @@ pub struct ExportGltfArgs {
     pub turn_rate: f64,
     /// Also render one frame of the exported file to this PNG (needs --preview-camera).
     #[arg(long, value_name = "PREVIEW.png", requires = "preview_camera")]
-    pub preview: Option<PathBuf>,
+    pub preview: Option<OutFile>,
     /// Camera of the preview (herdfit.camera/1, in the tracks' world coordinates).
     #[arg(long, value_name = "CAMERA.json")]
-    pub preview_camera: Option<PathBuf>,
+    pub preview_camera: Option<InFile>,
     /// Time of the preview frame (s from the first key; the middle by default).
     #[arg(long, value_name = "T")]
     pub preview_time: Option<f64>,
@@ -64,7 +64,11 @@ pub fn run(a: ExportGltfArgs) -> Result<()> {
     if let Some(p) = &a.preview {
         check_writable(p)?;
     }
-    let s = export_glb(&tracks, &cfg, &a.out).map_err(|e| e.in_file(&a.tracks))?;
+    let s = export_glb(&tracks, &cfg, &a.out).map_err(|e| match e {
+        // The tracks are fine; the scale takes them out of range.
+        Error::Invalid(m) if m.starts_with("scale = ") => Error::Invalid(format!("--scale: {m}")),
+        e => e.in_file(&a.tracks),
+    })?;
     println!(
         "export-gltf: {} nodes, {} keyframes over {:.2} s, {} bytes; wrote {}",
         s.nodes,
@@ -75,7 +79,21 @@ pub fn run(a: ExportGltfArgs) -> Result<()> {
     );
     if let (Some(p), Some(cam)) = (&a.preview, &camera) {
         let t = a.preview_time.unwrap_or(0.5 * s.duration);
-        let n = crate::lift::render::render_glb(&a.out, t, cam, p)?;
+        if !(0.0..=s.duration).contains(&t) {
+            return Err(Error::invalid(format!(
+                "--preview-time: {} s is outside the animation's 0..={} s",
+                crate::limits::show(t),
+                crate::limits::show(s.duration)
+            )));
+        }
+        // The .glb just written waits for the end of the run in a temporary sibling.
+        let glb = crate::data::atomic::plan::current(&a.out);
+        let n = crate::lift::render::render_glb(&glb, t, cam, p).map_err(|e| {
+            let msg = e
+                .to_string()
+                .replace(&glb.display().to_string(), &a.out.display().to_string());
+            crate::error::Error::invalid(msg)
+        })?;
         println!("  preview: {n} birds at t = {t:.2} s → {}", p.display());
     }
     Ok(())

@@ -1,6 +1,7 @@
 //! `herdfit extract`: a settings file and flags → `ExtractJob` → `video::extract::run` → one line.
 
 use crate::cli::args::{parse_range, parse_rgb};
+use crate::cli::paths::{InFile, InFileOrWord, OutDir};
 use crate::error::{Error, Result};
 use clap::Args;
 
@@ -14,21 +15,20 @@ pub struct UserCount {
     pub animals: usize,
     pub frame: usize,
 }
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ExtractArgs {
     /// The overhead video, or a still image (.png, .jpg, …: a one-frame clip, needs
     /// --dir-variance).
     #[arg(value_name = "VIDEO|IMAGE")]
-    pub video: PathBuf,
+    pub video: InFile,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
-    pub out: PathBuf,
+    pub out: OutDir,
     /// Settings file (the `settings` object a previous extraction recorded in clip.json); flags
     /// given on the command line override it.
     #[arg(long, value_name = "extract.json")]
-    pub config: Option<PathBuf>,
+    pub config: Option<InFile>,
     /// Cells along the longer side of the frame (default: cells of 3 body lengths).
     #[arg(long, value_name = "N")]
     pub grid: Option<usize>,
@@ -61,12 +61,12 @@ pub struct ExtractArgs {
     pub anchor: Vec<String>,
     /// `auto` (temporal median of stabilised frames) or a background image.
     #[arg(long, value_name = "auto|IMAGE")]
-    pub background: Option<String>,
+    pub background: Option<InFileOrWord>,
     /// Obstacles: a mask image the size of the video frame (non-zero = obstacle), or a JSON
     /// file of polygons in video pixels of the first frame (x right, y down):
     /// {"schema": "herdfit.obstacle-polygons/1", "polygons": [[[x, y], …], …]}.
     #[arg(long, value_name = "MASK.png|POLYGONS.json")]
-    pub obstacles: Option<PathBuf>,
+    pub obstacles: Option<InFile>,
     /// Frames used, a..b (b exclusive).
     #[arg(long, value_name = "a..b", value_parser = parse_range)]
     pub frames: Option<(usize, usize)>,
@@ -75,7 +75,7 @@ pub struct ExtractArgs {
     pub smooth: Option<usize>,
     /// Write preview PNGs (density and velocity over the stabilised frame) into DIR.
     #[arg(long, value_name = "DIR")]
-    pub preview: Option<PathBuf>,
+    pub preview: Option<OutDir>,
     /// One preview every N frames.
     #[arg(long, value_name = "N", default_value_t = 25)]
     pub preview_every: usize,
@@ -151,12 +151,12 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
     cfg.body_pixels = a.body_pixels.or(cfg.body_pixels);
     cfg.smooth = a.smooth.unwrap_or(cfg.smooth);
     cfg.frames = a.frames.map(|(x, y)| [x, y]).or(cfg.frames);
-    cfg.obstacles = a.obstacles.clone().or(cfg.obstacles);
+    cfg.obstacles = a.obstacles.clone().map(Into::into).or(cfg.obstacles);
     cfg.dir_variance = a.dir_variance.or(cfg.dir_variance);
-    match a.background.as_deref() {
+    match a.background.as_ref() {
         None => {}
-        Some("auto") => cfg.background = None,
-        Some(p) => cfg.background = Some(PathBuf::from(p)),
+        Some(b) if b.text() == "auto" => cfg.background = None,
+        Some(p) => cfg.background = Some(p.path()),
     }
     if !a.anchor.is_empty() {
         cfg.anchors = a
@@ -166,9 +166,9 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
             .collect::<Result<_>>()?;
     }
     let job = ExtractJob {
-        video: a.video,
-        out: a.out,
-        preview: a.preview,
+        video: a.video.into(),
+        out: a.out.into(),
+        preview: a.preview.map(Into::into),
         preview_every: a.preview_every,
         config: cfg,
     };
@@ -190,7 +190,7 @@ pub fn exec(a: ExtractArgs) -> Result<()> {
         "stabilise" => a.static_camera,
         _ => false,
     };
-    let settings = settings.as_ref().map(|(p, j)| (p.as_path(), j));
+    let settings = settings.as_ref().map(|(p, j)| (&**p, j));
     let ex = run(&job, &mut crate::cli::Bars::default()).map_err(|e| {
         with_settings(
             e,

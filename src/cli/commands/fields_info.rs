@@ -1,19 +1,19 @@
 //! `herdfit fields-info`: a clip → [`FieldsInfo`] → its table (and JSON).
 
+use crate::cli::paths::{InDir, OutFile};
 use crate::data::atomic::check_writable;
 use crate::data::ClipFields;
 use crate::error::Result;
 use crate::measure::info::FieldsInfo;
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct FieldsInfoArgs {
     #[arg(value_name = "CLIP/")]
-    pub clip: PathBuf,
+    pub clip: InDir,
     /// Also write the summary and per-frame measures as JSON.
     #[arg(long, value_name = "OUT.json")]
-    pub json: Option<PathBuf>,
+    pub json: Option<OutFile>,
 }
 
 pub fn exec(a: FieldsInfoArgs) -> Result<()> {

@@ -2,15 +2,14 @@
 
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
+use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
 use crate::cli::Bars;
 use crate::error::Result;
-use crate::herd::boundary::BoundaryChoice;
 use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
 };
 use clap::Args;
-use std::path::PathBuf;
 
 /// The gradient descent's flags, shared by `fit` and `ablate`.
 #[derive(Args, Debug)]
@@ -51,13 +50,13 @@ impl StepFlags {
 pub struct FitArgs {
     /// One clip, or several clips of the same kind of herd fitted jointly (paper §7.6).
     #[arg(value_name = "CLIP/", num_args = 1.., required = true)]
-    pub clips: Vec<PathBuf>,
+    pub clips: Vec<InDir>,
     /// Output parameter set (herdfit.params/1).
     #[arg(long, value_name = "PARAMS.json")]
-    pub out: PathBuf,
+    pub out: OutFile,
     /// Starting parameters; a generic start (every value 0.5) when omitted.
     #[arg(long, alias = "init", value_name = "P.json")]
-    pub start: Option<PathBuf>,
+    pub start: Option<InFile>,
     #[command(flatten)]
     pub steps: StepFlags,
     /// Frames used, a..b (b exclusive); all frames when omitted.
@@ -86,12 +85,12 @@ pub struct FitArgs {
     /// window then starts from the animals tracked at its first frame instead of the herd drawn
     /// from the fields, so the objective scores the model's steps from where the animals were
     #[arg(long, value_name = "TRACKS.csv")]
-    pub tracks: Vec<PathBuf>,
+    pub tracks: Vec<InFile>,
     /// The clip's open boundary: `auto` (entry and exit cells from the video's flux across the
     /// grid's edge; closed when nothing crosses it), `closed`, or a herdfit.boundary/1 file.
     /// Agents leaving the grid are removed and the count's shortfall enters at the entry cells
     #[arg(long, value_name = "auto|closed|FILE", default_value = "auto")]
-    pub boundary: BoundaryChoice,
+    pub boundary: InFileOrWord,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
@@ -127,16 +126,16 @@ pub struct FitArgs {
     pub holdout: f64,
     /// Write a checkpoint into DIR after every epoch.
     #[arg(long, value_name = "DIR")]
-    pub checkpoint: Option<PathBuf>,
+    pub checkpoint: Option<StateDir>,
     /// Continue from DIR/checkpoint.json (same flags required).
     #[arg(long, requires = "checkpoint")]
     pub resume: bool,
     /// Training log CSV (default: next to --out, .log.csv).
     #[arg(long, value_name = "LOG.csv")]
-    pub log: Option<PathBuf>,
+    pub log: Option<OutFile>,
     /// Loss-curve PNG (default: next to --out, .loss.png).
     #[arg(long, value_name = "LOSS.png")]
-    pub plot: Option<PathBuf>,
+    pub plot: Option<OutFile>,
     /// Skip the identifiability estimate at the fitted point (standard errors and determined
     /// directions, written as the set's `uncertainty`).
     #[arg(long)]
@@ -154,7 +153,7 @@ pub struct FitArgs {
     /// covering every accessible cell once), learnt jointly; --out is then a parameter-set
     /// bundle (herdfit.param-sets/1) that author scenes' regions name sets of.
     #[arg(long, value_name = "ZONES.json")]
-    pub zones: Option<PathBuf>,
+    pub zones: Option<InFile>,
     /// A still (one-frame clip, §7.2.4): steps simulated from the image before the objective is
     /// averaged.
     #[arg(long, value_name = "N", default_value_t = crate::herd::fit::still::StillConfig::default().settle)]
@@ -168,9 +167,10 @@ pub struct FitArgs {
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
+    let boundary = crate::cli::args::boundary(&a.boundary)?;
     let job = FitJob {
-        clips: a.clips,
-        start: a.start,
+        clips: a.clips.into_iter().map(Into::into).collect(),
+        start: a.start.map(Into::into),
         frames: a.frames.map(|(x, y)| x..y),
         config: a.steps.apply(FitConfig {
             frames: 0..0,
@@ -192,23 +192,23 @@ pub fn exec(a: FitArgs) -> Result<()> {
             },
             frozen: a.freeze,
             density_weight: a.density_weight,
-            tracks: a.tracks,
-            boundary: a.boundary,
+            tracks: a.tracks.into_iter().map(Into::into).collect(),
+            boundary,
             ..FitConfig::default()
         }),
         eval_seeds: a.eval_seeds,
-        checkpoint: a.checkpoint,
+        checkpoint: a.checkpoint.map(Into::into),
         resume: a.resume,
-        out: a.out,
-        log: a.log,
-        plot: a.plot,
+        out: a.out.into(),
+        log: a.log.map(Into::into),
+        plot: a.plot.map(Into::into),
         uncertainty: UncertaintyConfig {
             enabled: !a.no_uncertainty,
             seeds: a.uncertainty_seeds,
             step: a.uncertainty_step,
             ..UncertaintyConfig::default()
         },
-        zones: a.zones,
+        zones: a.zones.map(Into::into),
         still: crate::herd::fit::still::StillConfig {
             settle: a.still_settle,
             average: a.still_average,

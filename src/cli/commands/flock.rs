@@ -1,10 +1,10 @@
 //! `herdfit flock …`: line-formation flocks (Klotsman & Tal). Each verb parses its flags into the
 //! library's config, makes one library call and prints.
 
+use crate::cli::paths::{InFile, OutDir, OutFile, OutFilesIn, OutTracks};
 use crate::error::{Error, Result};
 use crate::flock::{animate, extract, synth, write};
 use clap::{Args, Subcommand};
-use std::path::PathBuf;
 
 /// The flock verbs.
 #[derive(Subcommand, Debug)]
@@ -43,20 +43,20 @@ pub struct SynthArgs {
     pub seed: u64,
     /// All settings as JSON (keys of SynthConfig); flags override nothing in it.
     #[arg(long, value_name = "CFG.json", conflicts_with_all = ["shape", "birds", "frames", "outliers", "noise", "half_angle", "seed"])]
-    pub config: Option<PathBuf>,
+    pub config: Option<InFile>,
     /// Write the shipped examples into this folder instead.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["out", "config"])]
-    pub examples: Option<PathBuf>,
+    pub examples: Option<OutFilesIn>,
     /// Output tracks CSV (its sidecar gets the same stem).
     #[arg(long, value_name = "OUT.csv", required_unless_present = "examples")]
-    pub out: Option<PathBuf>,
+    pub out: Option<OutTracks>,
 }
 
 #[derive(Args, Debug)]
 pub struct ExtractArgs {
     /// Marked example, herdfit.tracks/1 (2D).
     #[arg(value_name = "TRACKS.csv")]
-    pub tracks: PathBuf,
+    pub tracks: InFile,
     /// Wingspan in the tracks' units (default: provenance.wingspan of the sidecar).
     #[arg(long, value_name = "B", allow_hyphen_values = true)]
     pub wingspan: Option<f64>,
@@ -76,14 +76,14 @@ pub struct ExtractArgs {
     pub seed: Option<u64>,
     /// Output shape parameters (herdfit.flock-shape/1 JSON).
     #[arg(long, value_name = "SHAPE.json")]
-    pub out: PathBuf,
+    pub out: OutFile,
 }
 
 #[derive(Args, Debug)]
 pub struct AnimateArgs {
     /// Shape parameters from `herdfit flock extract`.
     #[arg(value_name = "SHAPE.json")]
-    pub shape: PathBuf,
+    pub shape: InFile,
     /// Birds N (default: as many as the example).
     #[arg(long, value_name = "N")]
     pub birds: Option<usize>,
@@ -100,13 +100,13 @@ pub struct AnimateArgs {
     pub no_video: bool,
     /// Settings as JSON (keys of AnimateConfig: steady.*, init.*, …); flags override it.
     #[arg(long, value_name = "CFG.json")]
-    pub config: Option<PathBuf>,
+    pub config: Option<InFile>,
     /// Output folder.
     #[arg(long, value_name = "DIR/")]
-    pub out: PathBuf,
+    pub out: OutDir,
 }
 
-fn read_json<T: serde::de::DeserializeOwned>(p: &PathBuf) -> Result<T> {
+fn read_json<T: serde::de::DeserializeOwned>(p: &std::path::Path) -> Result<T> {
     crate::data::atomic::note_input(p);
     let s = std::fs::read_to_string(p).map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
     serde_json::from_str(&s).map_err(|e| Error::file(p, format!("bad settings: {e}")))

@@ -2,12 +2,12 @@
 
 use crate::backend::Precision;
 use crate::cli::args::{choice, with_flags, RunArgs, LOSSES, OBJECTIVES, PRECISIONS};
+use crate::cli::paths::{InDir, OutFile};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::LossKind;
 use crate::herd::gradcheck::{run, GradcheckConfig, GradcheckJob, Objective};
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct GradcheckArgs {
@@ -28,7 +28,7 @@ pub struct GradcheckArgs {
     pub objective: Objective,
     /// Clip for `--objective loss` (the herd starts from its first frame's fields).
     #[arg(long, value_name = "CLIP/", required_if_eq("objective", "loss"))]
-    pub clip: Option<PathBuf>,
+    pub clip: Option<InDir>,
     /// Which of the fit's losses `--objective loss` checks.
     #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Paper)]
     pub loss: LossKind,
@@ -37,14 +37,14 @@ pub struct GradcheckArgs {
     pub replicas: usize,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
-    pub json: PathBuf,
+    pub json: OutFile,
 }
 
 pub fn exec(a: GradcheckArgs) -> Result<()> {
     let job = GradcheckJob {
         run: a.run.files(),
-        clip: a.clip,
-        json: a.json,
+        clip: a.clip.map(Into::into),
+        json: a.json.into(),
         config: GradcheckConfig {
             steps: a.steps,
             precision: a.precision,

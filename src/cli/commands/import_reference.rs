@@ -1,18 +1,18 @@
 //! `herdfit import-reference`: the public extractor's text files → a clip folder.
 
+use crate::cli::paths::{InPrefix, OutDir};
 use crate::data::reference::import_reference;
 use crate::error::Result;
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ImportArgs {
     /// Prefix of the three files: PREFIX_data_meta.txt, PREFIX_data_frame.txt, PREFIX_data_cell.txt.
     #[arg(value_name = "PREFIX")]
-    pub prefix: PathBuf,
+    pub prefix: InPrefix,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
-    pub out: PathBuf,
+    pub out: OutDir,
 }
 
 pub fn exec(a: ImportArgs) -> Result<()> {

@@ -1,6 +1,7 @@
 //! `herdfit import-tracks`: tracked trajectories → a clip folder ([`import_tracks`]).
 
 use crate::cli::args::{choice, parse_range, with_flags};
+use crate::cli::paths::{InFile, InFileOrWord, OutDir};
 use crate::error::{Error, Result};
 use crate::herd::import_tracks::{
     import_tracks, Arena, ImportTracksConfig, ImportTracksJob, TracksFormat,
@@ -31,10 +32,10 @@ const FORMATS: &[(&str, &str)] = &[
 pub struct ImportTracksArgs {
     /// Tracks file: herdfit.tracks/1 CSV, ETH/UCY text, or idtracker.ai/trajectorytools .npy.
     #[arg(value_name = "TRACKS")]
-    pub input: PathBuf,
+    pub input: InFile,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
-    pub out: PathBuf,
+    pub out: OutDir,
     #[arg(long, value_parser = choice::<TracksFormat>(FORMATS), default_value_t = TracksFormat::Auto)]
     pub format: TracksFormat,
     /// Frames per second (required for ETH/UCY text and plain .npy arrays; overrides the file's).
@@ -65,7 +66,7 @@ pub struct ImportTracksArgs {
         value_name = "open|unvisited|border|POLY.json",
         default_value = "open"
     )]
-    pub arena: String,
+    pub arena: InFileOrWord,
 }
 
 fn arena(s: &str) -> Result<Arena> {
@@ -86,8 +87,8 @@ fn arena(s: &str) -> Result<Arena> {
 
 pub fn exec(a: ImportTracksArgs) -> Result<()> {
     let job = ImportTracksJob {
-        input: a.input,
-        out: a.out,
+        input: a.input.into(),
+        out: a.out.into(),
         config: ImportTracksConfig {
             format: a.format,
             fps: a.fps,
@@ -97,7 +98,7 @@ pub fn exec(a: ImportTracksArgs) -> Result<()> {
             cell_size: a.cell_size,
             frames: a.frames,
             smooth: a.smooth,
-            arena: arena(&a.arena)?,
+            arena: arena(&a.arena.text())?,
         },
     };
     let s = import_tracks(&job).map_err(|e| with_flags(e, &[]))?;

@@ -2,6 +2,7 @@
 //! library's config, makes one library call and prints.
 
 use super::lift_print;
+use crate::cli::paths::{InFile, OutDir, OutFile, OutFilesIn, OutTracks};
 use crate::cli::Bars;
 use crate::data::atomic::{check_writable, write_atomic, AtomicDir};
 use crate::data::camera::Camera;
@@ -13,7 +14,6 @@ use crate::lift::eval::evaluate;
 use crate::lift::render::{views_png, Layer, COLOURS};
 use crate::lift::{lift, project_tracks, LiftConfig, Method};
 use clap::{Args, Subcommand};
-use std::path::PathBuf;
 
 #[derive(Subcommand, Debug)]
 pub enum LiftCommand {
@@ -35,7 +35,7 @@ pub enum LiftCommand {
 pub struct LiftFlags {
     /// Lift settings (herdfit lift config JSON; flags override its values).
     #[arg(long, value_name = "LIFT.json")]
-    pub config: Option<PathBuf>,
+    pub config: Option<InFile>,
     /// frame: the thesis's frame-by-frame method; sequence: then the whole-sequence optimisation.
     #[arg(long, value_parser = ["frame", "sequence"])]
     pub method: Option<String>,
@@ -149,21 +149,21 @@ fn flagged(e: Error, keys: &[(&str, &str)]) -> Error {
 pub struct RunArgs {
     /// 2D tracks in pixels (herdfit.tracks/1, units px).
     #[arg(value_name = "TRACKS.csv")]
-    pub tracks: PathBuf,
+    pub tracks: InFile,
     #[arg(long, value_name = "CAMERA.json")]
-    pub camera: PathBuf,
+    pub camera: InFile,
     /// Output 3D tracks (herdfit.tracks/1 CSV; its sidecar beside it).
     #[arg(long, value_name = "OUT.csv")]
-    pub out: PathBuf,
+    pub out: OutTracks,
     /// Report (herdfit.lift-report/2); OUT.report.json when omitted.
     #[arg(long, value_name = "REPORT.json")]
-    pub report: Option<PathBuf>,
+    pub report: Option<OutFile>,
     /// Folder for top.png and side.png.
     #[arg(long, value_name = "DIR")]
-    pub plots: Option<PathBuf>,
+    pub plots: Option<OutFilesIn>,
     /// Top and side views animated (MJPG AVI; feature `video`).
     #[arg(long, value_name = "OUT.avi")]
-    pub video: Option<PathBuf>,
+    pub video: Option<OutFile>,
     #[command(flatten)]
     pub lift: LiftFlags,
 }
@@ -172,10 +172,10 @@ pub struct RunArgs {
 pub struct SynthArgs {
     /// Output folder: tracks2d.csv, truth3d.csv, camera.json, report.json.
     #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
+    pub out: OutDir,
     /// Flock settings (JSON; flags override).
     #[arg(long, value_name = "BOIDS.json")]
-    pub config: Option<PathBuf>,
+    pub config: Option<InFile>,
     #[arg(long, value_name = "N")]
     pub birds: Option<usize>,
     #[arg(long, value_name = "F")]
@@ -194,11 +194,11 @@ pub struct SynthArgs {
 pub struct ProjectArgs {
     /// 3D tracks (herdfit.tracks/1 or a jackdaw CSV).
     #[arg(value_name = "TRACKS3D.csv")]
-    pub tracks: PathBuf,
+    pub tracks: InFile,
     #[arg(long, value_name = "CAMERA.json")]
-    pub camera: PathBuf,
+    pub camera: InFile,
     #[arg(long, value_name = "OUT.csv")]
-    pub out: PathBuf,
+    pub out: OutTracks,
     /// Drop points outside the image instead of failing.
     #[arg(long)]
     pub crop: bool,
@@ -208,12 +208,12 @@ pub struct ProjectArgs {
 pub struct EvaluateArgs {
     /// True 3D tracks (herdfit.tracks/1 or a jackdaw CSV).
     #[arg(value_name = "TRUTH3D.csv")]
-    pub truth: PathBuf,
+    pub truth: InFile,
     #[arg(long, value_name = "CAMERA.json")]
-    pub camera: PathBuf,
+    pub camera: InFile,
     /// Output folder: report.json, tracks2d.csv, the lifted tracks, top.png, side.png.
     #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
+    pub out: OutDir,
     /// Drop points out of view (birds leave and enter) instead of failing.
     #[arg(long)]
     pub crop: bool,
@@ -224,7 +224,7 @@ pub struct EvaluateArgs {
 #[derive(Args, Debug)]
 pub struct CameraArgs {
     #[arg(long, value_name = "CAMERA.json")]
-    pub out: PathBuf,
+    pub out: OutFile,
     /// Camera centre, world coordinates.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_v3, allow_hyphen_values = true)]
     pub position: [f64; 3],
@@ -258,6 +258,9 @@ fn parse_v3(s: &str) -> std::result::Result<[f64; 3], String> {
             .ok()
             .filter(|x| x.is_finite())
             .ok_or_else(|| format!("'{t}' is not a finite number"))?;
+        if o.abs() > crate::limits::MAX_COORD {
+            return Err(crate::limits::beyond(*o, crate::limits::MAX_COORD));
+        }
     }
     Ok(out)
 }
@@ -298,14 +301,10 @@ fn run_cmd(a: RunArgs) -> Result<()> {
     let tracks = Tracks::load(&a.tracks)?;
     let report_path = a
         .report
-        .clone()
-        .unwrap_or_else(|| a.out.with_extension("report.json"));
-    for p in [Some(&a.out), Some(&report_path), a.video.as_ref()]
-        .into_iter()
-        .flatten()
-    {
-        check_writable(p)?;
-    }
+        .as_ref()
+        .map_or_else(|| a.out.with_extension("report.json"), |r| r.path());
+    // The default report beside --out is this verb's own output: declared here, before writing.
+    check_writable(&report_path)?;
     #[cfg(not(feature = "video"))]
     if a.video.is_some() {
         return Err(Error::invalid(
@@ -317,8 +316,7 @@ fn run_cmd(a: RunArgs) -> Result<()> {
         lift(&tracks, &camera, &cfg, &mut Bars::default()).map_err(|e| e.in_file(&a.tracks))?;
     let secs = t0.elapsed().as_secs_f64();
     if let Some(dir) = &a.plots {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
+        crate::data::atomic::make_dir(dir)?;
         views_png(
             &dir.join("top.png"),
             &dir.join("side.png"),

@@ -5,6 +5,7 @@ pub mod ablate;
 pub mod author;
 pub mod bench;
 pub mod crowd;
+mod crowd_flags;
 pub mod demo;
 pub mod export_gltf;
 pub mod extract;

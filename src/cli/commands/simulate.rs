@@ -2,11 +2,11 @@
 
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_pair, with_flags, RunArgs, PRECISIONS};
+use crate::cli::paths::OutFile;
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::simulate::{simulate, SimulateConfig, SimulateJob};
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
@@ -31,13 +31,13 @@ pub struct SimulateArgs {
     pub seed: u64,
     /// Output trajectories: frame,time,id,x,y,vx,vy,role.
     #[arg(long, value_name = "TRAJ.csv")]
-    pub out: PathBuf,
+    pub out: OutFile,
 }
 
 pub fn exec(a: SimulateArgs) -> Result<()> {
     let job = SimulateJob {
         run: a.run.files(),
-        out: a.out,
+        out: a.out.into(),
         config: SimulateConfig {
             steps: a.steps,
             fps: a.fps,

@@ -2,17 +2,17 @@
 
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_grid, parse_rgb, with_flags, PRECISIONS};
+use crate::cli::paths::{InFile, OutDir, OutFile};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::synth::{write_clip, SynthJob, SynthVideo};
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct SynthArgs {
     /// Parameter set (the truth); the built-in default set when omitted.
     #[arg(long, value_name = "P.json")]
-    pub params: Option<PathBuf>,
+    pub params: Option<InFile>,
     #[arg(long, value_name = "N")]
     pub agents: usize,
     /// Number of frames (frame 0 included).
@@ -28,7 +28,7 @@ pub struct SynthArgs {
     pub cell_size: f64,
     /// Obstacle cells: {"cells": [[ix, iy], …]} (row 0 at the bottom).
     #[arg(long, value_name = "CELLS.json")]
-    pub obstacles: Option<PathBuf>,
+    pub obstacles: Option<InFile>,
     /// Direction of travel of the herd and its guidance, degrees from +x.
     #[arg(
         long,
@@ -43,7 +43,7 @@ pub struct SynthArgs {
     pub precision: Precision,
     /// Also render the overhead view as an MJPG AVI (needs the `video` feature).
     #[arg(long, alias = "video", value_name = "OUT.avi")]
-    pub video_file: Option<PathBuf>,
+    pub video_file: Option<OutFile>,
     /// Video scale: pixels per body length.
     #[arg(long, value_name = "PX", default_value_t = 12.0)]
     pub px_per_bl: f64,
@@ -56,7 +56,7 @@ pub struct SynthArgs {
     /// One parameter set per zone: a parameter-set bundle (herdfit.param-sets/1) whose sets'
     /// polygons cover the grid; each agent takes its zone's set every step.
     #[arg(long, value_name = "SETS.json")]
-    pub zone_sets: Option<PathBuf>,
+    pub zone_sets: Option<InFile>,
     /// Agents per BL² of the herd's starting square.
     #[arg(long, value_name = "D", default_value_t = 0.5)]
     pub density: f64,
@@ -67,10 +67,10 @@ pub struct SynthArgs {
     /// Also render frame 0 as a PNG (a still's image for `extract`), and the bare ground as
     /// IMG-ground.png beside it (needs the `video` feature).
     #[arg(long, value_name = "IMG.png")]
-    pub image: Option<PathBuf>,
+    pub image: Option<OutFile>,
     /// Output clip folder.
     #[arg(long, value_name = "CLIP/")]
-    pub out: PathBuf,
+    pub out: OutDir,
 }
 
 pub fn exec(a: SynthArgs) -> Result<()> {
@@ -80,28 +80,30 @@ pub fn exec(a: SynthArgs) -> Result<()> {
         camera_motion: a.camera_motion,
     };
     let job = SynthJob {
-        params: a.params,
+        params: a.params.map(Into::into),
         agents: a.agents,
         frame_count: a.frame_count,
         fps: a.fps,
         grid_size: a.grid_size,
         cell_size: a.cell_size,
-        obstacles: a.obstacles,
+        obstacles: a.obstacles.map(Into::into),
         heading_deg: a.heading,
         seed: a.seed,
         precision: a.precision,
-        out: a.out,
-        video: a.video_file.map(|p| (p, video)),
-        zone_sets: a.zone_sets,
+        out: a.out.into(),
+        video: a.video_file.map(|p| (p.into(), video)),
+        zone_sets: a.zone_sets.map(Into::into),
         density: a.density,
         random_headings: a.random_headings,
-        image: a.image,
+        image: a.image.map(Into::into),
     };
     let renamed = [
         ("heading_deg", "--heading"),
         ("grid", "--grid-size"),
         ("density", "--density"),
     ];
+    // The scale is judged whether or not a video or image is asked for (issue #47).
+    crate::limits::check_px_per_bl(a.px_per_bl).map_err(|e| with_flags(e, &renamed))?;
     let syn = write_clip(&job, &mut Bars::default()).map_err(|e| with_flags(e, &renamed))?;
     println!("{}", syn.summary(&job));
     Ok(())

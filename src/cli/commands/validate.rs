@@ -1,26 +1,25 @@
 //! `herdfit validate`: flags → [`ValidateJob`] → [`run`] → the report's Markdown.
 
 use crate::cli::args::{choice, parse_range, with_flags, MEASURES};
+use crate::cli::paths::{InDir, InFile, InFileOrWord, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
-use crate::herd::boundary::BoundaryChoice;
 use crate::herd::fit::{Settle, GUIDANCE_SCALE};
 use crate::herd::validate::{run, zone_report, Measures, ValidateConfig, ValidateJob};
 use clap::Args;
-use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ValidateArgs {
     #[arg(value_name = "CLIP/")]
-    pub clip: PathBuf,
+    pub clip: InDir,
     /// The parameter set to validate (e.g. the fit's output), or a zone fit's parameter-set
     /// bundle (validated zone by zone, each agent with its zone's set and speed).
     #[arg(long, value_name = "P.json")]
-    pub params: PathBuf,
+    pub params: InFile,
     /// A baseline to compare with (e.g. the fit's starting parameters); with a bundle, another
     /// bundle of the same zones or one set played in every zone.
     #[arg(long, value_name = "P0.json")]
-    pub baseline: Option<PathBuf>,
+    pub baseline: Option<InFile>,
     /// Fraction of the clip before the held-out part.
     #[arg(long, value_name = "S", default_value_t = 0.5)]
     pub split: f64,
@@ -54,12 +53,12 @@ pub struct ValidateArgs {
     /// `fit --tracks`): each run (each piece, with --horizon) starts from the animals tracked at
     /// its first frame instead of a herd drawn from the fields.
     #[arg(long, value_name = "TRACKS.csv")]
-    pub tracks: Option<PathBuf>,
+    pub tracks: Option<InFile>,
     /// The clip's open boundary: `auto` (entry and exit cells from the video's flux across the
     /// grid's edge; closed when nothing crosses it), `closed`, or a herdfit.boundary/1 file.
     /// Agents leaving the grid are removed and the count's shortfall enters at the entry cells
     #[arg(long, value_name = "auto|closed|FILE", default_value = "auto")]
-    pub boundary: BoundaryChoice,
+    pub boundary: InFileOrWord,
     /// Held-out frames a..b (b exclusive) instead of --split to the end (e.g. the reference's
     /// logging protocol: 0..101, 100 frames after the clip's first)
     #[arg(long, value_name = "a..b", value_parser = parse_range)]
@@ -72,15 +71,16 @@ pub struct ValidateArgs {
     pub no_video: bool,
     /// Output report folder.
     #[arg(long, value_name = "REPORT/")]
-    pub out: PathBuf,
+    pub out: OutDir,
 }
 
 pub fn exec(a: ValidateArgs) -> Result<()> {
+    let boundary = crate::cli::args::boundary(&a.boundary)?;
     let job = ValidateJob {
-        clip: a.clip,
-        params: a.params,
-        baseline: a.baseline,
-        out: a.out,
+        clip: a.clip.into(),
+        params: a.params.into(),
+        baseline: a.baseline.map(Into::into),
+        out: a.out.into(),
         video: !a.no_video,
         config: ValidateConfig {
             split: a.split,
@@ -91,8 +91,8 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             guidance_scale: a.guidance_scale,
             ensemble_mean: a.ensemble_mean,
             horizon: a.horizon,
-            tracks: a.tracks,
-            boundary: a.boundary,
+            tracks: a.tracks.map(Into::into),
+            boundary,
             frames: a.frames.map(|(x, y)| [x, y]),
             measures: a.measures,
         },

@@ -67,6 +67,7 @@ pub fn unregister(path: &Path) {
 
 /// Removes every recorded temporary sibling (files and folders).
 pub fn remove_live() {
+    super::plan::abort_on_signal();
     let live = std::mem::take(&mut *LIVE.lock().unwrap_or_else(|e| e.into_inner()));
     for p in live {
         if p.is_dir() {

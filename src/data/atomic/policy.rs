@@ -45,7 +45,7 @@ pub fn read_input_text(path: &Path) -> crate::error::Result<String> {
 
 /// The canonical form of an output path that may not exist yet: its folder resolved, its name
 /// kept.
-fn canonical_target(path: &Path) -> Option<PathBuf> {
+pub(super) fn canonical_target(path: &Path) -> Option<PathBuf> {
     if let Ok(c) = std::fs::canonicalize(path) {
         return Some(c);
     }

@@ -62,10 +62,15 @@ impl GltfConfig {
                 self.scale
             )));
         }
+        // glTF positions are f32 metres: within ±MAX_COORD after scaling (issue #47: --scale
+        // 1e300 wrote infinities).
+        use crate::limits::{within, MAX_COORD};
+        within("scale", self.scale, 0.0, MAX_COORD)?;
         if let Some(b) = self.body_length {
             if !(b.is_finite() && b > 0.0) {
                 return Err(Error::invalid(format!("body_length = {b} must be > 0")));
             }
+            within("body_length", b, 0.0, MAX_COORD)?;
         }
         if !(self.turn_rate > 0.0 && self.turn_rate <= 1.0) {
             return Err(Error::invalid(format!(
@@ -336,6 +341,21 @@ fn keys_of(tracks: &Tracks, cfg: &GltfConfig) -> Result<Vec<Keys>> {
 pub fn to_glb(tracks: &Tracks, cfg: &GltfConfig) -> Result<(Vec<u8>, GltfSummary)> {
     cfg.check()?;
     tracks.check()?;
+    // Every scaled coordinate within the limit, so that no f32 of the file overflows.
+    let reach = tracks
+        .rows
+        .iter()
+        .flat_map(|r| r.pos)
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    if reach * cfg.scale > crate::limits::MAX_COORD {
+        return Err(Error::invalid(format!(
+            "scale = {}: the tracks reach {} units, {} glTF metres; at most {} fit",
+            crate::limits::show(cfg.scale),
+            crate::limits::show(reach),
+            crate::limits::show(reach * cfg.scale),
+            crate::limits::show(crate::limits::MAX_COORD)
+        )));
+    }
     let keys = keys_of(tracks, cfg)?;
     let mut b = Builder::default();
     let length = cfg

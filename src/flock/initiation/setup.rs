@@ -106,6 +106,8 @@ impl InitiationConfig {
             if !(v.is_finite() && v > 0.0) {
                 return Err(Error::invalid(format!("{k} = {v} must be > 0")));
             }
+            // Wingspans, seconds, degrees and their rates: beyond a million none is physical.
+            crate::limits::within(k, v, 0.0, 1e6)?;
         }
         if !(self.k.is_finite() && self.k >= 0.0) {
             return Err(Error::invalid(format!("k = {} must be ≥ 0", self.k)));

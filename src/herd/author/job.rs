@@ -43,13 +43,7 @@ impl Default for AuthorJob {
 impl AuthorJob {
     /// Checks the video scale when a video is asked for (at least 2 pixels per body length).
     pub fn check(&self) -> Result<()> {
-        if self.video && !(self.px_per_bl.is_finite() && self.px_per_bl >= 2.0) {
-            return Err(Error::config(
-                "px_per_bl",
-                format!("{} must be ≥ 2", self.px_per_bl),
-            ));
-        }
-        Ok(())
+        crate::limits::check_px_per_bl(self.px_per_bl)
     }
 }
 

@@ -51,7 +51,10 @@ pub struct FitConfig {
     pub replicas: usize,
     /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
     /// ([`crate::herd::guidance::guidance_field`]).
-    #[serde(default = "default_guidance_scale")]
+    #[serde(
+        default = "default_guidance_scale",
+        with = "crate::limits::infinite_ok"
+    )]
     pub guidance_scale: f64,
     /// How the forces of eq. 3–5 are computed in the training loop (the fused op by default; not
     /// written when it is the default, so checkpoints keep their bytes).
@@ -261,20 +264,23 @@ impl FitConfig {
             ));
         }
         check_counts(&[("window", self.window), ("epochs", self.epochs)])?;
+        crate::limits::check_count("window", self.window, crate::limits::MAX_STEPS)?;
+        crate::limits::check_count("epochs", self.epochs, crate::limits::MAX_ITERATIONS)?;
         check_guidance_scale(self.guidance_scale)?;
         self.global.check()?;
         for (key, v, lo, hi) in [
             ("beta", self.beta, 0.0, 1.0),
-            ("var_weight", self.var_weight, 0.0, f64::INFINITY),
+            // Weights of a loss term: beyond 1e6 the others vanish in round-off (issue #47).
+            ("var_weight", self.var_weight, 0.0, 1e6),
             ("lr", self.lr, 1e-12, 1.0),
             (
                 "density_threshold",
                 self.density_threshold,
                 0.0,
-                f64::INFINITY,
+                crate::limits::MAX_DENSITY,
             ),
-            ("zero_grad_step", self.zero_grad_step, 0.0, f64::INFINITY),
-            ("density_weight", self.density_weight, 0.0, f64::INFINITY),
+            ("zero_grad_step", self.zero_grad_step, 0.0, 1e6),
+            ("density_weight", self.density_weight, 0.0, 1e6),
         ] {
             if !(v.is_finite() && v >= lo && v <= hi) {
                 return Err(Error::config(key, format!("{v} is out of range")));

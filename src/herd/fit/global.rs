@@ -247,8 +247,7 @@ fn candidate_dir(c: Option<&CheckpointDir>, k: usize) -> Result<Option<Checkpoin
         return Ok(None);
     };
     let dir = c.dir.join(format!("start-{k}"));
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| Error::file(&dir, format!("cannot create folder: {e}")))?;
+    crate::data::atomic::make_dir(&dir)?;
     Ok(Some(CheckpointDir {
         dir,
         resume: c.resume,

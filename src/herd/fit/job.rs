@@ -114,9 +114,8 @@ impl FitJob {
         if self.clips.is_empty() {
             return Err(Error::config("clips", "give at least one clip"));
         }
-        if self.uncertainty.enabled && self.zones.is_none() {
-            self.uncertainty.check()?;
-        }
+        // Checked even when switched off: a value given is a value judged (issue #47).
+        self.uncertainty.check()?;
         if self.zones.is_some() {
             let refuse = |key: &str, why: &str| Err(Error::config(key, why.to_string()));
             if self.clips.len() != 1 {
@@ -245,9 +244,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     };
     out.uncertainty = uncertainty.as_ref().map(|(u, _)| u.clone());
     write_log(&log_path, &res.log)?;
-    let plot_warning = loss_plot(&plot_path, &res.log, cfg.epochs)
-        .err()
-        .map(|e| e.to_string());
+    let plot_warning = plot_or_warn(&plot_path, &res.log, cfg.epochs)?;
     out.save(&job.out)?;
     Ok(FitSummary {
         clips: names,
@@ -416,6 +413,16 @@ fn provenance(
     })
 }
 
+/// The loss curve, or why it cannot be drawn on this machine (no usable font: the fit is written
+/// without it). A curve that can be drawn but not written (a full disk) fails the run, so that no
+/// summary claims a file that is not there (issue #47).
+pub(super) fn plot_or_warn(path: &Path, log: &[LogRow], epochs: usize) -> Result<Option<String>> {
+    match crate::plot::font_ready() {
+        Ok(()) => loss_plot(path, log, epochs).map(|_| None),
+        Err(e) => Ok(Some(e.in_file(path).to_string())),
+    }
+}
+
 /// The loss curve: per epoch, the mean E_mean, E_var, density and velocity errors of its windows.
 pub(super) fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
     let per_epoch = |f: &dyn Fn(&LogRow) -> f64| -> Vec<(f64, f64)> {
@@ -564,8 +571,7 @@ fn checkpoint_dir(job: &FitJob, first: &std::path::Path) -> Result<Option<Checkp
     }
     match &job.checkpoint {
         Some(d) => {
-            std::fs::create_dir_all(d)
-                .map_err(|e| Error::file(d, format!("cannot create folder: {e}")))?;
+            crate::data::atomic::make_dir(d)?;
             Ok(Some(CheckpointDir {
                 dir: d.clone(),
                 resume: job.resume,

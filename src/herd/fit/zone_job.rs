@@ -3,7 +3,7 @@
 //! written as a parameter-set bundle (`herdfit.param-sets/1`) with the log and the loss curve.
 
 use super::global::fit_zones_global;
-use super::job::{loss_plot, FitJob};
+use super::job::{plot_or_warn, FitJob};
 use super::log::write_log;
 use super::still::{stationary_clip, still_measures_in, StillConfig, StillMeasures, StillRun};
 use crate::backend::cpu_device;
@@ -35,6 +35,8 @@ pub struct ZoneFitSummary {
     pub out: PathBuf,
     pub log: PathBuf,
     pub plot: PathBuf,
+    /// Why the loss curve could not be drawn, if it could not (the bundle is written anyway).
+    pub plot_warning: Option<String>,
     /// The global phase's candidates and choice, when it ran.
     pub global: Option<super::global::GlobalReport>,
     /// A still's measures (the clip was one frame).
@@ -152,8 +154,8 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         })?;
     }
     write_log(&log_path, &res.log)?;
-    // The curve is zone 0's θ; a plot that cannot be drawn does not stop the fit.
-    let _ = loss_plot(&plot_path, &res.log, cfg.epochs);
+    // The curve is zone 0's θ.
+    let plot_warning = plot_or_warn(&plot_path, &res.log, cfg.epochs)?;
     fitted.bundle(Some(prov)).save(&job.out)?;
     Ok(ZoneFitSummary {
         frames,
@@ -165,6 +167,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         out: job.out.clone(),
         log: log_path,
         plot: plot_path,
+        plot_warning,
         global,
         still,
     })
@@ -300,12 +303,20 @@ impl std::fmt::Display for ZoneFitSummary {
                 b.0, a.0, b.1, a.1
             )?,
         }
-        writeln!(
-            f,
-            "wrote {}, {}, {}",
-            self.out.display(),
-            self.log.display(),
-            self.plot.display()
-        )
+        match &self.plot_warning {
+            None => writeln!(
+                f,
+                "wrote {}, {}, {}",
+                self.out.display(),
+                self.log.display(),
+                self.plot.display()
+            ),
+            Some(w) => writeln!(
+                f,
+                "wrote {}, {} (no loss curve: {w})",
+                self.out.display(),
+                self.log.display()
+            ),
+        }
     }
 }

@@ -71,8 +71,11 @@ impl GradcheckConfig {
     /// Checks the steps, the finite-difference step and the replicas; errors name the key.
     pub fn check(&self) -> Result<()> {
         crate::error::check_counts(&[("steps", self.steps)])?;
+        crate::limits::check_count("steps", self.steps, crate::limits::MAX_STEPS)?;
         if let Some(h) = self.fd_step {
             crate::error::check_positive(&[("fd_step", h)])?;
+            // An absolute step on θ: beyond 1 it measures no derivative (issue #47: 1e300 ran).
+            crate::limits::check_range("fd_step", h, 0.0, 1.0, "")?;
         }
         if self.replicas == 0 || self.replicas > 64 {
             return Err(Error::config(
@@ -100,6 +103,7 @@ impl GradcheckJob {
     /// Checks the settings, and that the loss objective has a clip; errors name the key.
     pub fn check(&self) -> Result<()> {
         self.config.check()?;
+        self.run.check()?;
         if self.config.objective == Objective::Loss && self.clip.is_none() {
             return Err(Error::config("clip", "{objective} loss needs a clip"));
         }

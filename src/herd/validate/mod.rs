@@ -289,6 +289,7 @@ pub struct ValidateConfig {
     pub warmup: usize,
     /// σ (cells) of the smoothing that turns the clip's momentum into leader guidance
     /// ([`crate::herd::guidance::guidance_field`]).
+    #[serde(with = "crate::limits::infinite_ok")]
     pub guidance_scale: f64,
     /// Compare the seeds' mean prediction (coarse counts and momenta, each measure averaged over
     /// the seeds frame by frame) with the clip, instead of averaging each seed's own errors. A
@@ -415,6 +416,11 @@ impl ValidateConfig {
             ));
         }
         crate::error::check_counts(&[("coarse_grid", self.coarse_grid), ("seeds", self.seeds)])?;
+        // Up front (issue #47: --seeds 10^9 ran until killed, --coarse-grid 10^9 was accepted).
+        crate::limits::check_grid("coarse_grid", self.coarse_grid, self.coarse_grid)?;
+        crate::limits::check_count("seeds", self.seeds, crate::limits::MAX_RUNS)?;
+        crate::limits::check_count("warmup", self.warmup, crate::limits::MAX_STEPS)?;
+        crate::limits::check_count("horizon", self.horizon, crate::limits::MAX_STEPS)?;
         crate::herd::guidance::check_guidance_scale(self.guidance_scale)?;
         if self.horizon == 1 {
             return Err(Error::config(

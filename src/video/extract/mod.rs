@@ -131,8 +131,11 @@ impl ExtractConfig {
             crate::error::check_counts(&[("grid", g)])?;
             crate::limits::check_grid("grid", g, g)?;
         }
+        // Pixels: a body within a frame of at most 65536 pixels a side (issue #47: 1e300
+        // divided the density into infinities).
         if let Some(l) = self.body_length_px {
             crate::error::check_positive(&[("body_length_px", l)])?;
+            crate::limits::check_magnitude("body_length_px", l, 65536.0)?;
         }
         if let Some([a, b]) = self.frames {
             if a >= b {
@@ -143,6 +146,7 @@ impl ExtractConfig {
             if !(n.is_finite() && n > 0.0) {
                 return Err(Error::config("body_pixels", format!("{n} must be > 0")));
             }
+            crate::limits::check_magnitude("body_pixels", n, 65536.0 * 65536.0)?;
         }
         if let Some(c) = &self.count {
             if c.animals == 0 {
@@ -166,6 +170,8 @@ impl ExtractConfig {
                 if !(v.is_finite() && v >= 0.0) {
                     return Err(Error::config(key, format!("{v} must be ≥ 0")));
                 }
+                // Differences of 8-bit channels: at most √3 · 255 ≈ 441.7 between two colours.
+                crate::limits::check_magnitude(key, v, 442.0)?;
             }
         }
         if let Some(v) = self.dir_variance {
