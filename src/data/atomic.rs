@@ -10,13 +10,18 @@ pub mod plan;
 mod policy;
 pub mod stdout;
 
-pub use cleanup::install_signal_cleanup;
 pub use policy::{check_target, guard_inputs, note_input, read_input_text};
 pub use stdout::{is_stdout, take_stdout};
 
 use crate::error::{Error, Result};
 use std::io::Write;
 use std::path::Path;
+
+/// On SIGINT or SIGTERM: the run's output plan is discarded, then every temporary sibling removed
+/// ([`cleanup::install_signal_cleanup`]). Call first thing in `main`.
+pub fn install_signal_cleanup() {
+    cleanup::install_signal_cleanup(plan::abort_on_signal);
+}
 
 fn parent_of(path: &Path) -> &Path {
     match path.parent() {

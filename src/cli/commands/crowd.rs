@@ -1,10 +1,10 @@
 //! `herdfit crowd …`: learn a crowd model from tracks, simulate it, evaluate it on ETH/UCY,
 //! compare crowds. Each verb: flags → config → one library call → print.
 
-use super::crowd_flags::{flagged, over, read_json, write_json};
+use super::crowd_flags::{flagged, read_json, write_json, LearnFlags};
 use crate::cli::paths::{InDir, InFile, OutFile, OutTracks};
 use crate::crowd::eval::{evaluate, EvalConfig};
-use crate::crowd::features::{IntentWindow, Scene};
+use crate::crowd::features::Scene;
 use crate::crowd::holdout::{holdout, HoldoutConfig};
 use crate::crowd::layout::Layout;
 use crate::crowd::measure::compare;
@@ -51,72 +51,6 @@ impl Preset {
             Preset::Paper => LearnConfig::default(),
             Preset::Pedestrians => LearnConfig::pedestrians(),
         }
-    }
-}
-
-/// Flags that override a learn configuration.
-#[derive(Args, Debug, Clone)]
-pub struct LearnFlags {
-    /// Configuration (LearnConfig JSON); the flags below override it.
-    #[arg(long, value_name = "learn.json")]
-    pub config: Option<InFile>,
-    /// Neighbourhood radius r of eq. 1 (tracks' unit).
-    #[arg(long, value_name = "R")]
-    pub radius: Option<f64>,
-    /// Nearest samples per query.
-    #[arg(long, value_name = "K")]
-    pub k: Option<usize>,
-    /// PCA dimensions.
-    #[arg(long, value_name = "D")]
-    pub pca_dims: Option<usize>,
-    /// σ (frames) of the Gaussian smoothing of the training tracks.
-    #[arg(long, value_name = "S")]
-    pub smoothing: Option<f64>,
-    /// At most this many samples per behaviour.
-    #[arg(long, value_name = "N")]
-    pub max_samples: Option<usize>,
-    /// Frames in the intended-direction window.
-    #[arg(long, value_name = "W")]
-    pub intent_window: Option<usize>,
-    /// Intended direction of training samples from past frames only (default: past and future).
-    #[arg(long)]
-    pub past_intent: bool,
-    /// Frame rate of ETH/UCY .txt inputs.
-    #[arg(long, value_name = "FPS")]
-    pub eth_fps: Option<f64>,
-}
-
-impl LearnFlags {
-    fn config(&self, base: LearnConfig) -> Result<LearnConfig> {
-        let mut c = match &self.config {
-            Some(p) => over(&base, p)?,
-            None => base,
-        };
-        if let Some(v) = self.radius {
-            c.features.radius = v;
-        }
-        if let Some(v) = self.k {
-            c.action.k = v;
-        }
-        if let Some(v) = self.pca_dims {
-            c.pca_dims = v;
-        }
-        if let Some(v) = self.smoothing {
-            c.smoothing = v;
-        }
-        if let Some(v) = self.max_samples {
-            c.max_samples = v;
-        }
-        if let Some(v) = self.intent_window {
-            c.features.intent_window = v;
-        }
-        if self.past_intent {
-            c.features.intent = IntentWindow::Past;
-        }
-        if let Some(v) = self.eth_fps {
-            c.eth_fps = v;
-        }
-        Ok(c)
     }
 }
 

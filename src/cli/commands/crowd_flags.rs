@@ -3,8 +3,11 @@
 //! (`features.radius = -1 …`); the command line renames them to the flag that set the key, or
 //! to the settings file (`--config`) when no flag did.
 
-use super::crowd::LearnFlags;
+use crate::cli::paths::InFile;
+use crate::crowd::features::IntentWindow;
+use crate::crowd::model::LearnConfig;
 use crate::error::{Error, Result};
+use clap::Args;
 use std::path::Path;
 
 /// Config keys (as the library's messages start) and the flags that set them.
@@ -113,4 +116,70 @@ pub(super) fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
 pub(super) fn write_json<T: serde::Serialize>(p: &Path, v: &T) -> Result<()> {
     let s = serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()))?;
     crate::data::atomic::write_atomic(p, format!("{s}\n").as_bytes())
+}
+
+/// Flags that override a learn configuration.
+#[derive(Args, Debug, Clone)]
+pub struct LearnFlags {
+    /// Configuration (LearnConfig JSON); the flags below override it.
+    #[arg(long, value_name = "learn.json")]
+    pub config: Option<InFile>,
+    /// Neighbourhood radius r of eq. 1 (tracks' unit).
+    #[arg(long, value_name = "R")]
+    pub radius: Option<f64>,
+    /// Nearest samples per query.
+    #[arg(long, value_name = "K")]
+    pub k: Option<usize>,
+    /// PCA dimensions.
+    #[arg(long, value_name = "D")]
+    pub pca_dims: Option<usize>,
+    /// σ (frames) of the Gaussian smoothing of the training tracks.
+    #[arg(long, value_name = "S")]
+    pub smoothing: Option<f64>,
+    /// At most this many samples per behaviour.
+    #[arg(long, value_name = "N")]
+    pub max_samples: Option<usize>,
+    /// Frames in the intended-direction window.
+    #[arg(long, value_name = "W")]
+    pub intent_window: Option<usize>,
+    /// Intended direction of training samples from past frames only (default: past and future).
+    #[arg(long)]
+    pub past_intent: bool,
+    /// Frame rate of ETH/UCY .txt inputs.
+    #[arg(long, value_name = "FPS")]
+    pub eth_fps: Option<f64>,
+}
+
+impl LearnFlags {
+    pub fn config(&self, base: LearnConfig) -> Result<LearnConfig> {
+        let mut c = match &self.config {
+            Some(p) => over(&base, p)?,
+            None => base,
+        };
+        if let Some(v) = self.radius {
+            c.features.radius = v;
+        }
+        if let Some(v) = self.k {
+            c.action.k = v;
+        }
+        if let Some(v) = self.pca_dims {
+            c.pca_dims = v;
+        }
+        if let Some(v) = self.smoothing {
+            c.smoothing = v;
+        }
+        if let Some(v) = self.max_samples {
+            c.max_samples = v;
+        }
+        if let Some(v) = self.intent_window {
+            c.features.intent_window = v;
+        }
+        if self.past_intent {
+            c.features.intent = IntentWindow::Past;
+        }
+        if let Some(v) = self.eth_fps {
+            c.eth_fps = v;
+        }
+        Ok(c)
+    }
 }

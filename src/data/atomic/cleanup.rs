@@ -67,7 +67,6 @@ pub fn unregister(path: &Path) {
 
 /// Removes every recorded temporary sibling (files and folders).
 pub fn remove_live() {
-    super::plan::abort_on_signal();
     let live = std::mem::take(&mut *LIVE.lock().unwrap_or_else(|e| e.into_inner()));
     for p in live {
         if p.is_dir() {
@@ -142,9 +141,10 @@ pub fn remove_stale(dir: &Path, target: &Path) {
 
 /// Blocks SIGINT and SIGTERM in this thread (and the threads it starts later) and starts the thread
 /// that, on either, removes the recorded temporary siblings and exits with 128 + the signal
-/// number, as a shell reports a death by that signal. Call first thing in `main`.
+/// number, as a shell reports a death by that signal; `first` runs before the removal (the output
+/// plan's discard, which lives above this module). Call first thing in `main`.
 #[cfg(unix)]
-pub fn install_signal_cleanup() {
+pub fn install_signal_cleanup(first: fn()) {
     // SAFETY: plain libc calls on a locally owned, initialised signal set.
     unsafe {
         let mut set: libc::sigset_t = std::mem::zeroed();
@@ -161,6 +161,7 @@ pub fn install_signal_cleanup() {
                 let set = set;
                 let mut sig: libc::c_int = 0;
                 if libc::sigwait(&set.0, &mut sig) == 0 {
+                    first();
                     remove_live();
                     eprintln!("error: interrupted by signal {sig}; temporary files removed");
                     std::process::exit(128 + sig);
@@ -170,7 +171,7 @@ pub fn install_signal_cleanup() {
 }
 
 #[cfg(not(unix))]
-pub fn install_signal_cleanup() {}
+pub fn install_signal_cleanup(_first: fn()) {}
 
 #[cfg(unix)]
 struct SigSet(libc::sigset_t);
