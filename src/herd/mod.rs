@@ -22,5 +22,6 @@ pub mod sim;
 pub mod simulate;
 pub mod start;
 pub mod synth;
+pub mod track_fit;
 pub mod validate;
 pub mod zoned;

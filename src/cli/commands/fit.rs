@@ -1,5 +1,6 @@
 //! `herdfit fit`: flags → [`FitJob`] → [`run`] → the summary.
 
+use super::track_fit::{default_rollout, Objective, OBJECTIVES, ROLLOUTS, SPEEDS};
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::Bars;
@@ -8,6 +9,7 @@ use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
 };
+use crate::herd::track_fit::{Rollout, Speeds, TrackFitConfig};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -159,9 +161,33 @@ pub struct FitArgs {
     /// Finite-difference step of the identifiability estimate.
     #[arg(long, value_name = "H", default_value_t = UncertaintyConfig::default().step)]
     pub uncertainty_step: f64,
+    /// What the fit scores: the clip's fields, or each tracked animal's motion (the clip's
+    /// tracks.csv or trajectories.csv, --tracks, or a tracks CSV in body lengths given as CLIP)
+    #[arg(long, value_parser = choice::<Objective>(OBJECTIVES), default_value_t = Objective::Fields)]
+    pub objective: Objective,
+    /// --objective tracks: how a window's animals are rolled out
+    #[arg(long, value_parser = choice::<Rollout>(ROLLOUTS), default_value_t = default_rollout())]
+    pub rollout: Rollout,
+    /// --objective tracks: window length (s) from the tracked animals
+    #[arg(long, value_name = "S", default_value_t = TrackFitConfig::default().horizon)]
+    pub horizon: f64,
+    /// --objective tracks: the animals' speeds in the training windows
+    #[arg(long, value_parser = choice::<Speeds>(SPEEDS), default_value_t = TrackFitConfig::default().speeds)]
+    pub train_speeds: Speeds,
+    /// --objective tracks: seconds between window starts (windows overlap below --horizon; 0:
+    /// a window from every frame)
+    #[arg(long, value_name = "S", default_value_t = TrackFitConfig::default().stride)]
+    pub stride: f64,
+    /// --objective tracks: weight (BL²) of the squared heading error beside the squared position
+    /// error
+    #[arg(long, value_name = "W", default_value_t = TrackFitConfig::default().heading_weight)]
+    pub heading_weight: f64,
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
+    if a.objective == Objective::Tracks {
+        return super::track_fit::exec(a);
+    }
     let job = FitJob {
         clips: a.clips,
         start: a.start,

@@ -17,4 +17,6 @@ pub mod import_tracks;
 pub mod lift;
 pub mod simulate;
 pub mod synth;
+pub mod track_fit;
 pub mod validate;
+pub mod validate_tracks;
