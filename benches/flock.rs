@@ -25,6 +25,7 @@ struct Setup {
     nr: usize,
     range: Vec<[f64; 2]>,
     gaps: [f64; 2],
+    family: herdfit::flock::family::Family,
     target: Vec<[f64; 2]>,
 }
 
@@ -50,6 +51,7 @@ fn setup(n: usize) -> Setup {
             m.iter().cloned().fold(f64::INFINITY, f64::min),
             m.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
         ],
+        family: herdfit::flock::family::Family::of_example(&p, &init),
         target: init.shapes[0].clone(),
     }
 }
@@ -98,7 +100,9 @@ fn key_shape(c: &mut Criterion) {
     g.bench_function("analytic_jacobian", |b| {
         b.iter(|| {
             let mut rng = ChaCha8Rng::seed_from_u64(7);
-            steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng)
+            steady::next_key(
+                &s.first, s.nl, s.nr, &s.range, s.gaps, &s.family, &cfg, &mut rng,
+            )
         })
     });
     let old = steady::SteadyConfig {
@@ -108,17 +112,21 @@ fn key_shape(c: &mut Criterion) {
     g.bench_function("analytic_jacobian_budget_400n", |b| {
         b.iter(|| {
             let mut rng = ChaCha8Rng::seed_from_u64(7);
-            steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &old, &mut rng)
+            steady::next_key(
+                &s.first, s.nl, s.nr, &s.range, s.gaps, &s.family, &old, &mut rng,
+            )
         })
     });
     // One solve of the key shape's final equations from the previous positions.
     let mut rng = ChaCha8Rng::seed_from_u64(7);
-    let k = steady::next_key(&s.first, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng);
+    let k = steady::next_key(
+        &s.first, s.nl, s.nr, &s.range, s.gaps, &s.family, &cfg, &mut rng,
+    );
     // The key shape after it (from a key shape on a uniform layout, as every later one is).
     g.bench_function("second_key_shape", |b| {
         b.iter(|| {
             let mut rng = ChaCha8Rng::seed_from_u64(8);
-            steady::next_key(&k, s.nl, s.nr, &s.range, s.gaps, &cfg, &mut rng)
+            steady::next_key(&k, s.nl, s.nr, &s.range, s.gaps, &s.family, &cfg, &mut rng)
         })
     });
     let x: Vec<f64> = k.pos.iter().map(|p| p[0]).collect();

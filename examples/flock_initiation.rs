@@ -4,8 +4,9 @@
 //! `cargo run --release --example flock_initiation -- [N] [RUNS] [TRACE_SEED]`
 //! (defaults 14, 100; with TRACE_SEED, one run's mean distance to the target over time).
 //!
-//! The target is the first initial shape of the shipped 9-bird V (`examples/flocks/v.csv`)
-//! corresponded to N birds (Algorithm 1 Step 1, seed N), as in `tests/flock.rs`; start seeds are
+//! The target is the first key shape of the shipped 9-bird V (`examples/flocks/v.csv`) carried
+//! to N birds (Algorithm 1 Step 1, seed N, brought into the example's shape family:
+//! `animate::steady_setup`), as in `tests/flock.rs` and as `flock animate` does; start seeds are
 //! 1000 + k, k < RUNS.
 
 use herdfit::flock::extract::{self, ExtractConfig};
@@ -27,10 +28,12 @@ fn main() {
     )
     .expect("examples/flocks/v.csv");
     let mut rng = ChaCha8Rng::seed_from_u64(n as u64);
-    let init = steady::initial_shapes(&p, n, &steady::SteadyConfig::default(), &mut rng)
-        .expect("initial shapes");
+    let setup =
+        herdfit::flock::animate::steady_setup(&p, n, &steady::SteadyConfig::default(), &mut rng)
+            .expect("initial shapes");
+    let init = &setup.init;
     let target = Target {
-        pos: init.shapes[0].clone(),
+        pos: setup.first.pos.clone(),
         nl: init.nl,
         nr: init.nr,
     };

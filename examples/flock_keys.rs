@@ -41,7 +41,7 @@ fn main() {
         .map(|(ex, n)| {
             let cfg = steady::SteadyConfig::default();
             let mut rng = ChaCha8Rng::seed_from_u64(11 + *n as u64);
-            let (init, range, gr) =
+            let (init, range, gr, fam) =
                 synth::key_shape_setup(ex, *n, &cfg, &mut rng).expect("key-shape set-up");
             let mut prev = steady::first_key(&init.shapes[0]).expect("first key");
             let mut r = Row {
@@ -61,7 +61,7 @@ fn main() {
             for _ in 0..nkeys {
                 let bx = keys::eq2_box(&prev.xi_target, &range, &cfg);
                 let t0 = Instant::now();
-                let k = steady::next_key(&prev, init.nl, init.nr, &range, gr, &cfg, &mut rng);
+                let k = steady::next_key(&prev, init.nl, init.nr, &range, gr, &fam, &cfg, &mut rng);
                 r.seconds += t0.elapsed().as_secs_f64();
                 for (a, b) in k.xi.iter().zip(&k.xi_draw) {
                     r.worst = r.worst.max((a - b).abs() / b);

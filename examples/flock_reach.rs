@@ -24,7 +24,7 @@ fn main() {
         .map(|(ex, n)| {
             let cfg = steady::SteadyConfig::default();
             let mut rng = ChaCha8Rng::seed_from_u64(11 + *n as u64);
-            let (init, range, _) =
+            let (init, range, _, _) =
                 synth::key_shape_setup(ex, *n, &cfg, &mut rng).expect("key-shape set-up");
             let prev = steady::first_key(&init.shapes[0]).expect("first key");
             let x: Vec<f64> = prev.pos.iter().map(|p| p[0] - prev.pos[0][0]).collect();

@@ -272,3 +272,107 @@ fn same_scene_same_bytes() {
         );
     }
 }
+
+/// A corridor scene 40 × 10 BL (2-BL cells) with an arrow along it, sources at the left edge
+/// and sinks at the right edge: a stream of animals through an authored valley.
+fn stream_scene(boundary: serde_json::Value) -> serde_json::Value {
+    let gates = |ix: usize, side: &str| -> Vec<serde_json::Value> {
+        (1..4)
+            .map(|iy| serde_json::json!({"cell": [ix, iy], "side": side}))
+            .collect()
+    };
+    let mut b = boundary;
+    b["entries"] = serde_json::Value::Array(gates(0, "left"));
+    b["exits"] = serde_json::Value::Array(gates(19, "right"));
+    serde_json::json!({
+        "schema": "herdfit.scene/1",
+        "world": {"width": 40, "height": 10, "cell_size": 2},
+        "arrows": [[[0, 5], [40, 5]]],
+        "spawn": {"count": 60, "centre": [20, 5], "size": [36, 4], "heading_deg": 0},
+        "boundary": b,
+        "duration": 20, "fps": 25, "seed": 4
+    })
+}
+
+#[test]
+fn a_stream_through_an_authored_corridor_keeps_its_count_over_500_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(
+        dir.path(),
+        "stream.json",
+        &stream_scene(serde_json::json!({"count": 60})),
+    );
+    let out = dir.path().join("stream");
+    ok(&["author", s(&scene), "--out", s(&out)]);
+    let frames = trajectories(&out);
+    assert_eq!(frames.len(), 501);
+    let x_max = frames
+        .iter()
+        .flatten()
+        .map(|p| p[0])
+        .fold(f64::MIN, f64::max);
+    // The herd (1 BL/s) crosses the 40-BL corridor in about 40 s: over the 20-s run a third of
+    // it leaves at the right and is replaced at the left.
+    let inside = |f: &Vec<[f64; 2]>| f.iter().filter(|p| (0.0..=40.0).contains(&p[0])).count();
+    for (k, f) in frames.iter().enumerate() {
+        let n = inside(f) as f64;
+        assert!(
+            (n - 60.0).abs() <= 6.0,
+            "frame {k}: {n} agents in the world"
+        );
+    }
+    assert!(
+        x_max <= 40.0,
+        "an agent was written outside the world at x = {x_max}"
+    );
+    // Entrants walk in from outside the left edge, never appear inside the world.
+    assert!(frames.iter().flatten().any(|p| p[0] < 0.0));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let left = report["boundary"]["left"][1].as_u64().unwrap();
+    let entered = report["boundary"]["entered"].as_u64().unwrap();
+    assert!(left >= 10, "only {left} left through the exits");
+    assert!(
+        entered.abs_diff(left) <= 6,
+        "entered {entered}, left {left}"
+    );
+}
+
+#[test]
+fn a_scene_without_exits_keeps_its_walls_and_a_rate_source_adds_agents() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut v = stream_scene(serde_json::json!({"rate": 2.0}));
+    v["boundary"]["exits"] = serde_json::json!([]);
+    let scene = write_scene(dir.path(), "rate.json", &v);
+    let out = dir.path().join("rate");
+    ok(&["author", s(&scene), "--out", s(&out)]);
+    let frames = trajectories(&out);
+    // 2 agents/s over 20 s: 40 more, nobody leaves (the right edge is a wall).
+    assert_eq!(frames[500].len(), 100);
+    assert!(frames[500].iter().all(|p| p[0] <= 40.0));
+}
+
+#[test]
+fn scene_boundaries_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    for (boundary, want) in [
+        (serde_json::json!({}), "entries need a count"),
+        (serde_json::json!({"count": 5, "rate": 1.0}), "not both"),
+        (serde_json::json!({"rate": -1.0}), "boundary.rate"),
+    ] {
+        let p = write_scene(dir.path(), "b.json", &stream_scene(boundary));
+        let o = herdfit(&["author", s(&p), "--out", s(&dir.path().join("o"))]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && e.contains("b.json") && e.contains(want),
+            "{e}"
+        );
+    }
+    let mut v = stream_scene(serde_json::json!({"count": 5}));
+    v["boundary"]["entries"][0]["cell"] = serde_json::json!([3, 1]);
+    let p = write_scene(dir.path(), "side.json", &v);
+    let o = herdfit(&["author", s(&p), "--out", s(&dir.path().join("o"))]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("entries[0]"), "{e}");
+    assert!(!dir.path().join("o").exists());
+}

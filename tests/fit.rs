@@ -111,6 +111,7 @@ fn line_clip(density: [f32; 5], vel: [f32; 2]) -> ClipFields {
                 density_table: vec![],
             },
             dir_spread: None,
+            frame_measures: None,
             provenance: serde_json::Value::Null,
         },
         density: d,

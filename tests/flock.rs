@@ -181,13 +181,14 @@ fn shipped_examples_regenerate_byte_for_byte_and_classify() {
 fn check_keys(example: &synth::SynthConfig, n: usize, keys: usize, seed: u64) -> (f64, usize) {
     let cfg = steady::SteadyConfig::default();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (init, range, gr) = synth::key_shape_setup(example, n, &cfg, &mut rng).unwrap();
+    let (init, range, gr, fam) = synth::key_shape_setup(example, n, &cfg, &mut rng).unwrap();
     assert_eq!(init.shapes[0].len(), n);
     assert_eq!(init.nl + init.nr + 1, n);
-    let mut prev = steady::first_key(&init.shapes[0]).unwrap();
+    let first = steady::first_key(&init.shapes[0]).unwrap();
+    let mut prev = steady::settle(first, &range, &fam, &cfg, &mut rng);
     let (mut worst, mut rejected) = (0.0f64, 0);
     for key in 0..keys {
-        let k = steady::next_key(&prev, init.nl, init.nr, &range, gr, &cfg, &mut rng);
+        let k = steady::next_key(&prev, init.nl, init.nr, &range, gr, &fam, &cfg, &mut rng);
         assert!(k.reproduced, "N = {n} key {key}: no draw reproduced");
         assert_eq!(k.xi_target, k.xi_draw, "N = {n} key {key}");
         // ξ of the solved positions against the drawn targets.
@@ -309,9 +310,10 @@ fn initiation_runs(n: usize, runs: u64) -> usize {
     .unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(n as u64);
     let scfg = steady::SteadyConfig::default();
-    let init = steady::initial_shapes(&p, n, &scfg, &mut rng).unwrap();
+    let setup = animate::steady_setup(&p, n, &scfg, &mut rng).unwrap();
+    let init = &setup.init;
     let target = Target {
-        pos: init.shapes[0].clone(),
+        pos: setup.first.pos.clone(),
         nl: init.nl,
         nr: init.nr,
     };
@@ -367,6 +369,66 @@ fn initiation_converges_from_random_starts() {
     assert!(ok >= 19, "N = 14: {ok} of 20 converged");
     let ok = initiation_runs(41, 4);
     assert!(ok >= 4, "N = 41: {ok} of 4 converged");
+}
+
+#[test]
+fn animated_flocks_keep_the_examples_shape_family_and_the_hand_over_its_bound() {
+    // Issue #50: before, a 14-bird V's key shapes put the last bird 36–43 b behind the leader
+    // (worst bird 9.0 b off its side's line against the example's own 2.6 b) and the hand-over
+    // peaked at 0.649 b/s² against its bound of 0.5. The sweep over 4 examples × N = 14, 41 × 5
+    // seeds is `cargo run --release --example flock_family` (RESULTS).
+    let cases = [
+        ("v", 14usize),
+        ("u", 14),
+        ("j", 14),
+        ("line", 14),
+        ("v", 41),
+    ];
+    let reports: Vec<_> = cases
+        .par_iter()
+        .map(|&(stem, n)| {
+            let p = extract::extract_file(
+                &repo().join(format!("examples/flocks/{stem}.csv")),
+                &ExtractConfig::default(),
+            )
+            .unwrap();
+            let cfg = animate::AnimateConfig {
+                birds: Some(n),
+                frames: 250,
+                seed: 1,
+                video: false,
+                ..animate::AnimateConfig::default()
+            };
+            (
+                stem,
+                n,
+                animate::animate(&p, stem, &cfg, &mut NoProgress)
+                    .unwrap()
+                    .report,
+            )
+        })
+        .collect();
+    for (stem, n, r) in reports {
+        let f = &r.shape_family;
+        println!(
+            "{stem} N = {n}: worst bird {:.3} b off its side's curve over the steady frames, \
+             example's own {:.3} b ({:.2}×); hand-over peak {:.3} b/s²; ξ in range {:.4}",
+            f.steady_worst, f.example_worst, f.ratio, r.max_accel_hand_over, r.xi_in_range_steady
+        );
+        assert!(f.example_worst > 0.5, "{stem}: the example has outliers");
+        assert!(f.ratio <= 1.5, "{stem} N = {n}: {f:?}");
+        assert!(
+            f.keys_worst <= 1.5 * f.example_worst,
+            "{stem} N = {n}: {f:?}"
+        );
+        assert!(r.max_accel_hand_over <= r.accel_bound, "{stem} N = {n}");
+        assert!(r.max_accel_steady <= r.accel_bound * 1.01, "{stem} N = {n}");
+        assert_eq!(r.xi_in_range_steady, 1.0, "{stem} N = {n}");
+        assert!(
+            r.initiation.as_ref().unwrap().converged_after.is_some(),
+            "{stem} N = {n}"
+        );
+    }
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -475,6 +537,17 @@ fn animate_writes_tracks_savings_report_and_plots_deterministically() {
         let side: serde_json::Value =
             serde_json::from_slice(&std::fs::read(o.join("savings.json")).unwrap()).unwrap();
         assert_eq!(side["schema"], "herdfit.flock-savings/1");
+        // e is named for what it is (issue #50): induced power, in units of a lone bird's, not a
+        // fraction of the flight power (it exceeds 1 where wing tips overlap).
+        let e = side["columns"]["e"].as_str().unwrap();
+        assert!(e.starts_with("induced-power saving"), "{e}");
+        assert!(
+            e.contains("no ceiling") && e.contains("not the fraction"),
+            "{e}"
+        );
+        // The flock-level figure to compare with field estimates, and the wing-tip spacing.
+        assert!(rep["flock_mean_saving"].as_f64().unwrap() > 0.0);
+        assert!(rep["mean_wing_tip_spacing"].as_f64().unwrap().abs() < 0.5);
     }
     assert!(bytes[0] == bytes[1], "same seed, same bytes");
 }

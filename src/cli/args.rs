@@ -151,6 +151,15 @@ pub const OPTIMIZERS: &[(&str, &str)] = &[
     ),
 ];
 
+/// `--measures` of validate.
+pub const MEASURES: &[(&str, &str)] = &[
+    ("herdfit", "herdfit's own (paper §7.1.2 on the fields, coarse-grid errors)"),
+    (
+        "reference",
+        "herdfit's own and, beside them, the reference implementation's (HerdFromVideo's HerdController.cs), with per-frame logs in its format",
+    ),
+];
+
 /// `--loss`.
 pub const LOSSES: &[(&str, &str)] = &[
     (

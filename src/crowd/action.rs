@@ -26,6 +26,23 @@ pub enum ClusterChoice {
     Nearest,
 }
 
+/// What the action model outputs within the chosen cluster.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionOutput {
+    #[default]
+    /// Eq. 3's regression, kept within the cluster's spread and attracted toward the nearest
+    /// sample (§5.2–5.3; the paper).
+    Regression,
+    /// The action of one of the cluster's samples, drawn with eq. 3's Gaussian weights
+    /// exp(−d²/2h²) of its state distance: the output is always a step some real individual
+    /// took in a state like this one, so the learnt crowd walks straight, stands still and turns
+    /// as often as the real one did (a regression's average of many steps does none of these).
+    Sample,
+    /// The action of the cluster's nearest sample.
+    Nearest,
+}
+
 /// Settings of the action model (§5, §7: k = 100, 3 clusters, bandwidth = 5th neighbour).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -57,6 +74,13 @@ pub struct ActionConfig {
     /// default, not written) is §5's action as it is; 1 is constant velocity.
     #[serde(skip_serializing_if = "super::features::is_zero")]
     pub inertia: f64,
+    /// The output within the chosen cluster (default: eq. 3's regression).
+    #[serde(skip_serializing_if = "is_regression")]
+    pub output: ActionOutput,
+}
+
+fn is_regression(o: &ActionOutput) -> bool {
+    *o == ActionOutput::Regression
 }
 
 impl Default for ActionConfig {
@@ -73,6 +97,7 @@ impl Default for ActionConfig {
             choice: ClusterChoice::Sample,
             kmeans_iterations: 20,
             inertia: 0.0,
+            output: ActionOutput::Regression,
         }
     }
 }
@@ -280,6 +305,13 @@ impl ActionModel {
         sc.members
             .extend((0..sc.nn.len()).filter(|&j| sc.assign[j] == c));
         let h2 = bandwidth2(&sc.nn, cfg.bandwidth_neighbour) * cfg.bandwidth_scale.powi(2);
+        if cfg.output != ActionOutput::Regression {
+            let (action, _) = pick_sample(&sc.nn, &sc.acts, &sc.members, h2, cfg.output, rng);
+            return Decision {
+                action,
+                cluster_mean: sc.centres[c],
+            };
+        }
         let (nn, acts, members) = (&sc.nn, &sc.acts, &sc.members);
         let (points, dims) = (self.tree.points(), self.samples.dims);
         let row = |r: usize| {
@@ -311,6 +343,38 @@ impl ActionModel {
             cluster_mean: sc.centres[c],
         }
     }
+}
+
+/// The action of one member of the chosen cluster ([`ActionOutput::Sample`], `Nearest`):
+/// `nn` holds (squared state distance, index) nearest first, `acts` their actions.
+fn pick_sample(
+    nn: &[(f64, u32)],
+    acts: &[V2],
+    members: &[usize],
+    h2: f64,
+    output: ActionOutput,
+    rng: &mut impl Rng,
+) -> (V2, usize) {
+    let Some(&first) = members.first() else {
+        return ([0.0, 0.0], 0);
+    };
+    if output == ActionOutput::Nearest {
+        return (acts[first], first);
+    }
+    let h2 = if h2.is_finite() && h2 > 0.0 { h2 } else { 1.0 };
+    // Weights relative to the nearest member's, so the nearest always weighs 1.
+    let d0 = nn[first].0;
+    let w = |j: usize| (-(nn[j].0 - d0) / (2.0 * h2)).exp();
+    let total: f64 = members.iter().map(|&j| w(j)).sum();
+    let mut u = rng.gen::<f64>() * total;
+    for &j in members {
+        u -= w(j);
+        if u < 0.0 {
+            return (acts[j], j);
+        }
+    }
+    let j = *members.last().expect("members");
+    (acts[j], j)
 }
 
 #[inline(always)]

@@ -83,6 +83,10 @@ impl Default for EvalConfig {
         learn.features.weights.formation = 0.0;
         learn.pca_dims = 4;
         learn.smoothing = 3.0;
+        // A forecast has no goal or time to leave: the paper's intent and eq. 3, whatever
+        // `LearnConfig`'s defaults become.
+        learn.features.intent = super::features::IntentWindow::Centred;
+        learn.action.output = super::action::ActionOutput::Regression;
         EvalConfig {
             learn,
             data: PathBuf::from("../shared/data/pedestrians/eth-ucy"),

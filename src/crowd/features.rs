@@ -21,6 +21,14 @@ pub enum IntentWindow {
     Centred,
     /// The `intent_window` frames up to the sample, as at prediction time.
     Past,
+    /// Not the paper's: the velocity that takes the individual from where it is to where it leaves
+    /// the scene when it leaves it, (exit − p)/(time left), in its own frame (units/s). In
+    /// simulation the agent's goal and its time to leave (`crowd simulate --entries`: where and
+    /// when the real one left) give the same vector, so the feature means the same when learnt
+    /// and when used, where the paper's one-second window of past and future frames is replaced
+    /// by the direction to the goal; and an agent that stands until it leaves (goal at hand,
+    /// much time left) sees a small vector, as the standing people it learnt from did.
+    Exit,
 }
 
 /// Feature weights of Table 1. A weight scales the squared distance between two states in that
@@ -436,6 +444,14 @@ pub fn intent_at(p: &[V2], j: usize, w: usize, centred: bool, heading: V2) -> V2
         (j.saturating_sub(w), j)
     };
     mean_direction(p, a, b).unwrap_or(heading)
+}
+
+/// The exit intent ([`IntentWindow::Exit`]) of a path at index `j` (< its last index): the
+/// velocity from `p[j]` to the last position over the time left, `dt` per index.
+pub fn exit_intent(p: &[V2], j: usize, dt: f64) -> V2 {
+    let last = p.len() - 1;
+    let t = (last - j) as f64 * dt;
+    [(p[last][0] - p[j][0]) / t, (p[last][1] - p[j][1]) / t]
 }
 
 /// The pivot's position and orientation in the frame of an agent at `p` heading `h` (§4).

@@ -13,16 +13,21 @@
 //! - [`behaviour`]: rule-based labels and the behaviour machine's statistics (§6.1);
 //! - [`model`]: learning and the `herdfit.crowd-model/1` file;
 //! - [`layout`]: walls, obstacles, pivots, regions, spawns (`herdfit.crowd-layout/1`);
-//! - [`step`], [`sim`]: perception → decision → move, groups and lines (§6);
+//! - [`step`], [`sim`]: perception → decision → move, groups and lines (§6); [`entries`]: who
+//!   enters, where and when, and when they leave;
 //! - [`eval`]: ETH/UCY leave-one-scene-out forecasting against constant velocity;
+//! - [`holdout`]: real tracks split in time, the second part's entries simulated by a model
+//!   learnt from the first, compared with both;
 //! - [`measure`]: distributions, Wasserstein distances, density maps; [`render`]: PNG/AVI;
 //! - [`synth`]: a social-force corridor crowd as a stand-in for video-tracked data.
 
 pub mod action;
 pub mod attract;
 pub mod behaviour;
+pub mod entries;
 pub mod eval;
 pub mod features;
+pub mod holdout;
 pub mod kmeans;
 pub mod knn;
 pub mod layout;

@@ -5,7 +5,9 @@
 //! leave at their goals. Output: `herdfit.tracks/1` rows with the behaviour as role.
 
 use super::behaviour::{INTERACTION, LINE, LOCOMOTION};
-use super::features::{unit, Scene, V2};
+use super::entries::deadline;
+pub use super::entries::{entries_from_layout, entries_from_tracks, typical_speed, Entry};
+use super::features::{unit, V2};
 use super::layout::Layout;
 use super::model::{toward, CrowdModel};
 pub use super::steer::steer_to_goals;
@@ -97,72 +99,6 @@ impl SimConfig {
     }
 }
 
-/// An agent entering the scene.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Entry {
-    pub id: u64,
-    /// Step at which it appears.
-    pub step: usize,
-    pub position: V2,
-    /// Velocity at entry (units/s).
-    pub velocity: V2,
-    /// Where it heads for; `None`: it keeps the mean direction of its own past steps and stays
-    /// to the end.
-    pub goal: Option<V2>,
-}
-
-/// Entries of real tracks: each individual enters where and when it first appeared, moving as it
-/// did, and heads for where it was last seen.
-pub fn entries_from_tracks(scene: &Scene) -> Vec<Entry> {
-    let mut out: Vec<Entry> = scene
-        .segments
-        .iter()
-        .filter(|s| s.pos.len() >= 2)
-        .map(|s| Entry {
-            id: s.id,
-            step: s.start,
-            position: s.pos[0],
-            velocity: [
-                (s.pos[1][0] - s.pos[0][0]) / scene.dt,
-                (s.pos[1][1] - s.pos[0][1]) / scene.dt,
-            ],
-            goal: Some(*s.pos.last().expect("two positions")),
-        })
-        .collect();
-    // A track split by a gap keeps its id for the first part only.
-    out.sort_by_key(|e| (e.id, e.step));
-    out.dedup_by_key(|e| e.id);
-    out.sort_by_key(|e| (e.step, e.id));
-    out
-}
-
-/// Entries of a layout's spawns: `count` agents per spawn every `interval` s from `start`,
-/// uniformly within `spread` of the entry point, walking toward the goal at `speed`.
-pub fn entries_from_layout(layout: &Layout, dt: f64, speed: f64, seed: u64) -> Vec<Entry> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5a5a_0001);
-    let mut out = Vec::new();
-    for s in &layout.spawns {
-        for c in 0..s.count {
-            let t = s.start + c as f64 * s.interval;
-            let (r, a) = (
-                s.spread * rng.gen::<f64>().sqrt(),
-                rng.gen::<f64>() * std::f64::consts::TAU,
-            );
-            let p = [s.position[0] + r * a.cos(), s.position[1] + r * a.sin()];
-            let d = toward(p, Some(s.goal));
-            out.push(Entry {
-                id: out.len() as u64,
-                step: (t / dt).round() as usize,
-                position: p,
-                velocity: [d[0] * speed, d[1] * speed],
-                goal: Some(s.goal),
-            });
-        }
-    }
-    out.sort_by_key(|e| (e.step, e.id));
-    out
-}
-
 /// What a simulation produced.
 pub struct SimResult {
     pub tracks: Tracks,
@@ -191,6 +127,9 @@ struct Mind {
     /// Lines it decided not to join (`join` < 1).
     declined: Vec<usize>,
     deadline: usize,
+    /// It leaves at its deadline, not at its goal, grouped or queueing or not (an entry's
+    /// `leave`).
+    leaves_on_time: bool,
 }
 
 struct Machine<'a> {
@@ -408,8 +347,10 @@ pub fn simulate(
     } else if let Some(d) = layout.and_then(|l| l.duration) {
         (d / dt).round().max(1.0) as usize
     } else {
-        let last = entries.iter().filter(|e| e.goal.is_some());
-        let t = last.map(|e| e.step + expected(e, cfg, dt)).max();
+        let last = entries
+            .iter()
+            .filter(|e| e.goal.is_some() || e.leave.is_some());
+        let t = last.map(|e| deadline(e, cfg.timeout, dt)).max();
         t.ok_or_else(|| {
             Error::invalid("steps = 0 needs goals or a layout duration to know when to stop")
         })?
@@ -450,17 +391,13 @@ pub fn simulate(
                 e.position[0] - e.velocity[0] * dt,
                 e.position[1] - e.velocity[1] * dt,
             ];
-            agents.push(Agent::new(
-                e.id,
-                vec![back, e.position],
-                h,
-                e.goal,
-                cfg.seed,
-                dt,
-            ));
+            let mut a = Agent::new(e.id, vec![back, e.position], h, e.goal, cfg.seed, dt);
+            a.due = e.leave.map(|l| l.saturating_sub(t));
+            agents.push(a);
             minds.push(Mind {
                 goal: e.goal,
-                deadline: t + expected(e, cfg, dt),
+                deadline: deadline(e, cfg.timeout, dt).max(t + 1),
+                leaves_on_time: e.leave.is_some(),
                 ..Mind::default()
             });
             next += 1;
@@ -479,7 +416,20 @@ pub fn simulate(
         } else {
             plan(model, &mut agents)
         };
-        steer_to_goals(&agents, &mut plans, cfg.goal_cone_deg, not_grouped(&minds));
+        // Near its goal an agent that leaves on time waits there as the model has it (standing
+        // or milling about): turned back toward a goal it has overshot, it would zig-zag.
+        let near = if entries.iter().any(|e| e.leave.is_some()) {
+            cfg.arrive
+        } else {
+            0.0
+        };
+        steer_to_goals(
+            &agents,
+            &mut plans,
+            cfg.goal_cone_deg,
+            near,
+            not_grouped(&minds),
+        );
         stop_at_places(&agents, &mut plans, &in_line(&minds), dt);
         for ((a, p), role) in agents.iter().zip(&plans).zip(&roles) {
             rows.push(TrackRow {
@@ -498,27 +448,9 @@ pub fn simulate(
         advance(model, &mut agents, &plans, walls, keep);
         separate(&mut agents, cfg.min_distance, SEPARATION_PASSES, walls);
         agent_steps += agents.len() as u64;
-        // Leave at the goal (unless queueing or grouped) or at the deadline.
-        let mut i = 0;
-        while i < agents.len() {
-            let m = &minds[i];
-            let home = m.goal.is_some_and(|g| {
-                (agents[i].pos[0] - g[0]).hypot(agents[i].pos[1] - g[1]) < cfg.arrive
-            }) && m.group.is_none()
-                && m.line.is_none();
-            let late = t + 1 >= m.deadline && m.group.is_none() && m.line.is_none();
-            if home || late {
-                if home {
-                    arrived += 1;
-                } else {
-                    timed_out += 1;
-                }
-                agents.remove(i);
-                minds.remove(i);
-            } else {
-                i += 1;
-            }
-        }
+        let (home, late) = depart(t, &mut agents, &mut minds, &mut machine, cfg);
+        arrived += home;
+        timed_out += late;
         progress.inc(1);
     }
     progress.finish();
@@ -538,6 +470,46 @@ pub fn simulate(
     })
 }
 
+/// Removes the agents that leave after step `t`: at their goal (unless queueing, grouped or
+/// leaving on time) or at their deadline. Returns (arrived, timed out).
+fn depart(
+    t: usize,
+    agents: &mut Vec<Agent>,
+    minds: &mut Vec<Mind>,
+    machine: &mut Machine,
+    cfg: &SimConfig,
+) -> (usize, usize) {
+    let (mut arrived, mut timed_out) = (0, 0);
+    let mut i = 0;
+    while i < agents.len() {
+        let m = &minds[i];
+        let free = m.group.is_none() && m.line.is_none();
+        let at_goal = m
+            .goal
+            .is_some_and(|g| (agents[i].pos[0] - g[0]).hypot(agents[i].pos[1] - g[1]) < cfg.arrive);
+        let home = at_goal && free && !m.leaves_on_time;
+        let late = t + 1 >= m.deadline && (free || m.leaves_on_time);
+        if !(home || late) {
+            i += 1;
+            continue;
+        }
+        if let Some(g) = m.group {
+            machine.groups[g].retain(|&id| id != agents[i].id);
+        }
+        if let Some(li) = m.line {
+            machine.lines[li].1.retain(|&id| id != agents[i].id);
+        }
+        if at_goal {
+            arrived += 1;
+        } else {
+            timed_out += 1;
+        }
+        agents.remove(i);
+        minds.remove(i);
+    }
+    (arrived, timed_out)
+}
+
 /// Per agent: whether goal steering applies (walking to its goal or to its place in a line;
 /// not while in a group).
 fn not_grouped(minds: &[Mind]) -> Vec<bool> {
@@ -547,27 +519,4 @@ fn not_grouped(minds: &[Mind]) -> Vec<bool> {
 /// Per agent: whether it queues in a line.
 fn in_line(minds: &[Mind]) -> Vec<bool> {
     minds.iter().map(|m| m.line.is_some()).collect()
-}
-
-/// Steps an entry may walk before it times out.
-fn expected(e: &Entry, cfg: &SimConfig, dt: f64) -> usize {
-    let Some(g) = e.goal else {
-        return usize::MAX / 4;
-    };
-    let d = (g[0] - e.position[0]).hypot(g[1] - e.position[1]);
-    let v = e.velocity[0].hypot(e.velocity[1]).max(0.3);
-    ((cfg.timeout * d / v / dt).ceil() as usize).max(10)
-}
-
-/// The median step speed of a model's locomotion samples (units/s), for spawned agents.
-pub fn typical_speed(model: &CrowdModel) -> f64 {
-    let mut v: Vec<f64> = model.behaviours[0]
-        .model
-        .samples
-        .actions
-        .iter()
-        .map(|a| a[0].hypot(a[1]))
-        .collect();
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(1.0)
 }

@@ -31,9 +31,15 @@ pub fn stop_at_places(agents: &[Agent], plans: &mut [Planned], queueing: &[bool]
 }
 
 /// Turns each steered agent's planned velocity into the cone of half-angle `cone_deg` about the
-/// direction to its goal (keeping its speed); agents without a goal, or with `steer` false, keep
-/// theirs. `cone_deg` ≥ 180 does nothing.
-pub fn steer_to_goals(agents: &[Agent], plans: &mut [Planned], cone_deg: f64, steer: Vec<bool>) {
+/// direction to its goal (keeping its speed); agents without a goal, within `near` of it, or
+/// with `steer` false, keep theirs. `cone_deg` ≥ 180 does nothing.
+pub fn steer_to_goals(
+    agents: &[Agent],
+    plans: &mut [Planned],
+    cone_deg: f64,
+    near: f64,
+    steer: Vec<bool>,
+) {
     if cone_deg >= 180.0 {
         return;
     }
@@ -42,7 +48,11 @@ pub fn steer_to_goals(agents: &[Agent], plans: &mut [Planned], cone_deg: f64, st
         let Some(g) = a.goal.filter(|_| on) else {
             continue;
         };
-        let Some(u) = unit([g[0] - a.pos[0], g[1] - a.pos[1]]) else {
+        let d = [g[0] - a.pos[0], g[1] - a.pos[1]];
+        if d[0].hypot(d[1]) < near {
+            continue;
+        }
+        let Some(u) = unit(d) else {
             continue;
         };
         let v = p.velocity;

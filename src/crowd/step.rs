@@ -5,8 +5,8 @@
 
 use super::action::{Decision, Scratch};
 use super::features::{
-    alignment, formation, mean_direction, pivot_parts, to_local, to_world, unit, StateParts,
-    SECTORS, V2,
+    alignment, formation, mean_direction, pivot_parts, to_local, to_world, unit, IntentWindow,
+    StateParts, SECTORS, V2,
 };
 use super::layout::Layout;
 use super::model::{CrowdModel, Pivot};
@@ -34,6 +34,9 @@ pub struct Agent {
     /// Where the agent heads for (the intended direction points there); `None`: it keeps the
     /// mean direction of its own past steps.
     pub goal: Option<V2>,
+    /// Steps left until it means to leave at its goal (the exit intent's time left,
+    /// [`super::features::IntentWindow::Exit`]); `None`: no time is set.
+    pub due: Option<usize>,
     /// Seeded per agent.
     pub rng: ChaCha8Rng,
 }
@@ -66,6 +69,7 @@ impl Agent {
             behaviour: 0,
             pivot: None,
             goal,
+            due: None,
             rng,
         }
     }
@@ -183,14 +187,18 @@ pub fn perceive(
         [.., p, q] => (q[0] - p[0]).hypot(q[1] - p[1]) / model.dt,
         _ => 0.0,
     };
-    let intent = match a.goal {
-        Some(g) => unit([g[0] - a.pos[0], g[1] - a.pos[1]]),
-        None => {
-            let n = a.history.len();
-            mean_direction(&a.history, n.saturating_sub(f.intent_window + 1), n - 1)
-        }
-    }
-    .unwrap_or(a.heading);
+    let intent = if f.intent == IntentWindow::Exit {
+        exit_velocity(a, f.intent_window, model.dt)
+    } else {
+        let dir = match a.goal {
+            Some(g) => unit([g[0] - a.pos[0], g[1] - a.pos[1]]),
+            None => {
+                let n = a.history.len();
+                mean_direction(&a.history, n.saturating_sub(f.intent_window + 1), n - 1)
+            }
+        };
+        dir.unwrap_or(a.heading)
+    };
     StateParts {
         speed,
         now,
@@ -201,6 +209,32 @@ pub fn perceive(
             .map(|p| pivot_parts(a.pos, a.heading, p.position, p.dir())),
         intent: to_local(intent, a.heading),
         align: align.then(|| neighbour_headings(a, i, (pos, heads), grid, f.radius)),
+    }
+}
+
+/// The exit intent of a simulated agent ([`IntentWindow::Exit`]): toward its goal over the steps
+/// it has left (at least one); with a goal but no time set, toward the goal at the speed of its
+/// last `window` steps; with no goal, its mean velocity over those steps.
+fn exit_velocity(a: &Agent, window: usize, dt: f64) -> V2 {
+    let h = &a.history;
+    let n = h.len();
+    let back = n.saturating_sub(window + 1);
+    let steps = (n - 1 - back).max(1) as f64;
+    let past = [
+        (h[n - 1][0] - h[back][0]) / (steps * dt),
+        (h[n - 1][1] - h[back][1]) / (steps * dt),
+    ];
+    let Some(g) = a.goal else { return past };
+    let d = [g[0] - a.pos[0], g[1] - a.pos[1]];
+    match a.due {
+        Some(k) => {
+            let t = k.max(1) as f64 * dt;
+            [d[0] / t, d[1] / t]
+        }
+        None => {
+            let v = past[0].hypot(past[1]);
+            unit(d).map_or([0.0, 0.0], |u| [u[0] * v, u[1] * v])
+        }
     }
 }
 
@@ -310,6 +344,7 @@ pub fn advance(
         }
         a.prev_formation = p.formation;
         a.m_prev = p.decision.cluster_mean;
+        a.due = a.due.map(|k| k.saturating_sub(1));
     }
 }
 

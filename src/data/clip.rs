@@ -105,9 +105,28 @@ pub struct ClipMeta {
     /// ([`crate::measure::dir_variance::SampleVariance`]), not the value for the image's count.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dir_spread: Option<f64>,
+    /// The video's own per-frame measures, when its extractor computed them (the public
+    /// Herds-From-Video extractor's frame headers, kept by `import-reference`): the targets of
+    /// the reference's polarization and angular momentum ([`crate::measure::reference`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_measures: Option<FrameMeasures>,
     /// Where the clip came from (command, source files, settings).
     #[serde(default)]
     pub provenance: serde_json::Value,
+}
+
+/// Measures an extractor computed for every frame of a clip (from the body pixels' flow).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameMeasures {
+    /// The extractor's frame numbers.
+    pub frame: Vec<u64>,
+    /// Mean speed of the body pixels (BL/s).
+    pub average_speed: Vec<f64>,
+    /// Polarization (eq. 12) of the body pixels' flow.
+    pub polarization: Vec<f64>,
+    /// Angular momentum (eq. 13) of the body pixels' flow about their centroid.
+    pub angular_momentum: Vec<f64>,
 }
 
 impl ClipMeta {
@@ -226,6 +245,36 @@ impl ClipFields {
                 return Err(Error::invalid(format!(
                     "clip.json: dir_spread = {v} (rad², finite and ≥ 0)"
                 )));
+            }
+        }
+        if let Some(fm) = &m.frame_measures {
+            for (k, len) in [
+                ("frame", fm.frame.len()),
+                ("average_speed", fm.average_speed.len()),
+                ("polarization", fm.polarization.len()),
+                ("angular_momentum", fm.angular_momentum.len()),
+            ] {
+                if len != m.frames {
+                    return Err(Error::invalid(format!(
+                        "clip.json: frame_measures.{k} holds {len} values for {} frames",
+                        m.frames
+                    )));
+                }
+            }
+            for (k, v) in [
+                ("average_speed", &fm.average_speed),
+                ("polarization", &fm.polarization),
+                ("angular_momentum", &fm.angular_momentum),
+            ] {
+                if let Some((i, x)) = v
+                    .iter()
+                    .enumerate()
+                    .find(|(_, x)| !(x.is_finite() && **x >= 0.0))
+                {
+                    return Err(Error::invalid(format!(
+                        "clip.json: frame_measures.{k}[{i}] = {x} (finite, ≥ 0)"
+                    )));
+                }
             }
         }
         let (f, ny, nx) = (m.frames, m.ny, m.nx);

@@ -3,6 +3,7 @@
 
 pub mod agents;
 pub mod atomic;
+pub mod boundary;
 pub mod camera;
 pub mod cells;
 pub mod clip;
@@ -25,4 +26,4 @@ pub fn check_schema(found: &str, expected: &str) -> Result<(), String> {
         Err(format!("schema is '{found}', expected '{expected}'"))
     }
 }
-pub use clip::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
+pub use clip::{ClipFields, ClipMeta, ClipSpeed, FrameMeasures, Grid, CLIP_SCHEMA};

@@ -11,7 +11,7 @@
 //! [L − 1, L) (only cells with n ≥ 0.5 are written), so we place it at n = L − 0.5 (0.75 for L = 1)
 //! animals per cell. Rows `0 0` mark empty bins and are skipped.
 
-use super::clip::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
+use super::clip::{ClipFields, ClipMeta, ClipSpeed, FrameMeasures, CLIP_SCHEMA};
 use crate::error::{Error, Result};
 use ndarray::{Array2, Array3, Array4};
 use std::path::{Path, PathBuf};
@@ -165,9 +165,39 @@ fn parse_meta(path: &Path) -> Result<Meta> {
 /// Per-frame sparse rows: (x, y, n, optional (vx, vy, angVar)).
 type Row = (usize, usize, f64, Option<(f64, f64, f64)>);
 
-fn parse_frames(path: &Path, res: usize) -> Result<Vec<Vec<Row>>> {
+/// A frame header: the frame number and, when given, `AverageSpeed`, `Polarization` and
+/// `AngularMomentum`.
+type Header = (u64, Option<[f64; 3]>);
+
+/// The measures of a `Frame` line after its number (`AverageSpeed a Polarization p
+/// AngularMomentum m`), when all three are there.
+fn header_measures(path: &Path, ln: usize, tok: &[&str]) -> Result<Option<[f64; 3]>> {
+    let mut out = [None; 3];
+    for pair in tok[2..].chunks(2) {
+        let k = match pair[0] {
+            "AverageSpeed" => 0,
+            "Polarization" => 1,
+            "AngularMomentum" => 2,
+            other => {
+                return Err(Error::file(
+                    path,
+                    format!("line {ln}: unknown frame measure '{other}'"),
+                ))
+            }
+        };
+        let v: f64 = num(path, ln, pair.get(1).copied(), pair[0])?;
+        out[k] = Some(finite(path, ln, v, pair[0])?);
+    }
+    Ok(match out {
+        [Some(a), Some(p), Some(m)] => Some([a, p, m]),
+        _ => None,
+    })
+}
+
+fn parse_frames(path: &Path, res: usize) -> Result<(Vec<Vec<Row>>, Vec<Header>)> {
     let text = read(path)?;
     let mut frames: Vec<Vec<Row>> = Vec::new();
+    let mut headers: Vec<Header> = Vec::new();
     let mut last: Option<(u64, usize)> = None;
     for (i, raw) in text.lines().enumerate() {
         let ln = i + 1;
@@ -187,6 +217,7 @@ fn parse_frames(path: &Path, res: usize) -> Result<Vec<Vec<Row>>> {
                 }
                 last = Some((f, ln));
                 frames.push(Vec::new());
+                headers.push((f, header_measures(path, ln, &tok)?));
             }
             "Data" => {
                 let Some(frame) = frames.last_mut() else {
@@ -242,7 +273,7 @@ fn parse_frames(path: &Path, res: usize) -> Result<Vec<Vec<Row>>> {
     if frames.is_empty() {
         return Err(Error::file(path, "no Frame lines: the clip is empty"));
     }
-    Ok(frames)
+    Ok((frames, headers))
 }
 
 fn parse_cells(path: &Path, res: usize) -> Result<Array2<u8>> {
@@ -309,7 +340,17 @@ pub fn import_reference(prefix: &Path) -> Result<ClipFields> {
     let cell_path = with_suffix(prefix, "_data_cell.txt");
     let meta = parse_meta(&meta_path)?;
     let res = meta.resolution;
-    let frames = parse_frames(&frame_path, res)?;
+    let (frames, headers) = parse_frames(&frame_path, res)?;
+    // The extractor's own per-frame measures, when every frame states them.
+    let frame_measures = headers
+        .iter()
+        .all(|h| h.1.is_some())
+        .then(|| FrameMeasures {
+            frame: headers.iter().map(|h| h.0).collect(),
+            average_speed: headers.iter().filter_map(|h| h.1.map(|m| m[0])).collect(),
+            polarization: headers.iter().filter_map(|h| h.1.map(|m| m[1])).collect(),
+            angular_momentum: headers.iter().filter_map(|h| h.1.map(|m| m[2])).collect(),
+        });
     // Density, two velocity components and direction variance per cell and frame (f32), before
     // any of them is allocated: a Resolution within the grid limit can still ask for more memory
     // than there is over many frames.
@@ -365,6 +406,7 @@ pub fn import_reference(prefix: &Path) -> Result<ClipFields> {
                 density_table,
             },
             dir_spread: None,
+            frame_measures,
             provenance: serde_json::json!({
                 "source": "import-reference",
                 "prefix": prefix.display().to_string(),
@@ -400,6 +442,41 @@ mod tests {
     /// The message of the error importing `prefix`.
     fn error_of(prefix: &Path) -> String {
         import_reference(prefix).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn crlf_files_import_as_the_lf_ones_with_the_frame_measures() {
+        let dir = tempfile::tempdir().unwrap();
+        let frame = "Frame 11 AverageSpeed 1.5 Polarization 0.97 AngularMomentum 0.01 \nData 1 0 2.0 1.0 0.1 -0.5 0.1 3.0 4.0\nData 2 3 0.0 0.5 0.1 0.0 0.1 1.0 1.0\nFrame 12 AverageSpeed 1.6 Polarization 0.98 AngularMomentum 0.02 \nData 1 1 1.0 1.0 0.1 0.0 0.1 0.0 2.0\n";
+        let cell = "NonAccessibleGrid \nNAG 3 3\nNAGEND\nGuidanceField\nGF 1 0 1.0 0.0\nGFEND\n";
+        let lf_dir = dir.path().join("lf");
+        let crlf_dir = dir.path().join("crlf");
+        std::fs::create_dir_all(&lf_dir).unwrap();
+        std::fs::create_dir_all(&crlf_dir).unwrap();
+        let crlf = |t: &str| t.replace('\n', "\r\n");
+        let a = import_reference(&write_set(&lf_dir, META, frame, Some(cell))).unwrap();
+        let b = import_reference(&write_set(
+            &crlf_dir,
+            &crlf(META),
+            &crlf(frame),
+            Some(&crlf(cell)),
+        ))
+        .unwrap();
+        let strip = |mut c: ClipFields| {
+            c.meta.provenance = serde_json::Value::Null;
+            c
+        };
+        let (a, b) = (strip(a), strip(b));
+        assert_eq!(a, b);
+        // Row y = 0 is the top of the image: the bottom row of the clip, vy flipped.
+        assert_eq!(a.density[[0, 3, 1]], 2.0 / 4.0);
+        assert_eq!(a.velocity[[0, 3, 1, 1]], 0.5);
+        assert_eq!(a.obstacles[[0, 3]], 1);
+        let fm = a.meta.frame_measures.unwrap();
+        assert_eq!(fm.frame, vec![11, 12]);
+        assert_eq!(fm.polarization, vec![0.97, 0.98]);
+        assert_eq!(fm.angular_momentum, vec![0.01, 0.02]);
+        assert_eq!(fm.average_speed, vec![1.5, 1.6]);
     }
 
     #[test]

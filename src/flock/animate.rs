@@ -4,7 +4,10 @@
 //! shapes and checks in `report.json`, two PNG plots and (feature `video`) an AVI from above.
 
 use super::extract::ShapeParams;
-use super::frames::{initiation_frames, max_accel, rows_and_savings, steady_frames, Frames};
+use super::family::{self, Family};
+use super::frames::{
+    hand_over_time, initiation_frames, max_accel, rows_and_savings, steady_frames, Frames,
+};
 use super::initiation::{self, Initiation, InitiationConfig, InitiationRun, Target};
 use super::steady::{self, KeyShape, SteadyConfig, Timeline};
 use crate::data::tracks::{Tracks, TracksMeta, Units};
@@ -139,10 +142,73 @@ pub struct AnimationReport {
     pub max_accel_steady: f64,
     pub accel_bound: f64,
     pub max_accel_hand_over: f64,
-    /// Mean power reduction e of each bird over the steady frames, and of the flock.
+    /// Mean induced-power saving e of each bird over the steady frames (eq. 1 with C = 1: the
+    /// fraction of a lone bird's induced power that the others' upwash removes), and of the flock:
+    /// the figure field studies estimate from photographed skeins (RESULTS §3, "Energy").
     pub mean_saving: Vec<f64>,
     pub flock_mean_saving: f64,
+    /// Mean wing-tip spacing over the steady frames: the lateral gap between neighbours minus
+    /// one wingspan, wingspans (negative: wing tips overlap), the quantity field studies measure.
+    pub mean_wing_tip_spacing: f64,
+    /// The example's shape family and how the animation keeps it.
+    pub shape_family: FamilyCheck,
+    /// Steady frames × birds whose ξ lies in its Step 2 range [(1 − ε) p_i, (1 + ε) P_i], as a
+    /// fraction, and the largest relative excursion outside it.
+    pub xi_in_range_steady: f64,
+    pub xi_worst_excursion_steady: f64,
     pub config: AnimateConfig,
+}
+
+/// The example's shape family (`flock::family`) and the animation's deviations from it,
+/// wingspans, longitudinal, from each side's curve through the leader.
+#[derive(Clone, Debug, Serialize)]
+pub struct FamilyCheck {
+    /// The side model (line for V and line shapes, parabola for U and J).
+    pub model: super::ransac::Model,
+    /// The worst bird's deviation over the example's own frames.
+    pub example_worst: f64,
+    /// The widest band a key shape was held to.
+    pub band_widest: f64,
+    /// The worst bird's deviation over the key shapes and over the steady frames.
+    pub keys_worst: f64,
+    pub steady_worst: f64,
+    /// steady_worst / example_worst.
+    pub ratio: f64,
+}
+
+/// What the steady flight starts from: Step 1's shapes and correspondence, Step 2's ranges, the
+/// example's shape family carried to N birds and the first key shape (the initiation's target).
+pub struct SteadySetup {
+    pub init: steady::InitialShapes,
+    pub range: Vec<[f64; 2]>,
+    pub family: Family,
+    pub first: KeyShape,
+}
+
+/// Steps 1–2 for `n` birds and the first key shape: Step 1's first shape brought into the
+/// example's family ([`steady::settle`]).
+pub fn steady_setup(
+    params: &ShapeParams,
+    n: usize,
+    cfg: &SteadyConfig,
+    rng: &mut rand_chacha::ChaCha8Rng,
+) -> Result<SteadySetup> {
+    let init = steady::initial_shapes(params, n, cfg, rng)?;
+    let (_, range) = steady::ranges(&init.shapes)?;
+    let family = Family::of_example(params, &init);
+    let first = steady::settle(
+        steady::first_key(&init.shapes[0])?,
+        &range,
+        &family,
+        cfg,
+        rng,
+    );
+    Ok(SteadySetup {
+        init,
+        range,
+        family,
+        first,
+    })
 }
 
 /// Key shapes until the timeline covers `duration` seconds.
@@ -153,6 +219,7 @@ fn build_keys(
     nr: usize,
     range: &[[f64; 2]],
     params: &ShapeParams,
+    fam: &Family,
     duration: f64,
     cfg: &SteadyConfig,
     rng: &mut rand_chacha::ChaCha8Rng,
@@ -184,7 +251,16 @@ fn build_keys(
             progress.finish();
             return (keys, tl);
         }
-        let k = steady::next_key(keys.last().unwrap(), nl, nr, range, gap_range, cfg, rng);
+        let k = steady::next_key(
+            keys.last().unwrap(),
+            nl,
+            nr,
+            range,
+            gap_range,
+            fam,
+            cfg,
+            rng,
+        );
         keys.push(k);
         progress.inc(1);
     }
@@ -244,9 +320,12 @@ pub fn animate(
     let fps = cfg.init.fps;
     let v = cfg.init.speed; // wingspans/s
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
-    let init = steady::initial_shapes(params, n, &cfg.steady, &mut rng)?;
-    let (_, range) = steady::ranges(&init.shapes)?;
-    let first = steady::first_key(&init.shapes[0])?;
+    let SteadySetup {
+        init,
+        range,
+        family: fam,
+        first,
+    } = steady_setup(params, n, &cfg.steady, &mut rng)?;
     // The target is the first key shape as the timeline places it (centred on its centroid).
     let target = Target {
         pos: Timeline::new(
@@ -268,23 +347,15 @@ pub fn animate(
     let mut fr = Frames::default();
     let ho = initiation_frames(run.as_ref(), &target, n, fps, v, &mut fr);
     let init_frames = ho.frames;
-    let dmax = ho
-        .delta
-        .iter()
-        .map(|d| d[0].hypot(d[1]))
-        .fold(0.0, f64::max);
-    let wmax = ho.w.iter().map(|d| d[0].hypot(d[1])).fold(0.0, f64::max);
-    let a = cfg.steady.max_accel;
     let hand_s = if run.is_some() {
-        (steady::MIN_JERK_PEAK * dmax / a)
-            .sqrt()
-            .max(6.0 * wmax / a)
-            .max(1.0)
+        hand_over_time(&ho.delta, &ho.w, cfg.steady.max_accel)
     } else {
         0.0
     };
     // The F steady frames start where the hand-over ends: the savings (eq. 1) describe the
-    // formation the model assumes, not birds still moving to their places.
+    // formation the model assumes, not birds still moving to their places. The key shapes'
+    // timeline starts there too (the first key shape is held during the hand-over), so the
+    // hand-over's acceleration is the quintic's alone.
     let hand_count = (hand_s * fps).ceil() as usize;
     let count = hand_count + cfg.frames;
     let (keys, timeline) = build_keys(
@@ -293,7 +364,8 @@ pub fn animate(
         init.nr,
         &range,
         params,
-        (count - 1) as f64 / fps,
+        &fam,
+        ((count - 1) as f64 / fps - hand_s).max(0.0),
         &cfg.steady,
         &mut rng,
         progress,
@@ -308,6 +380,10 @@ pub fn animate(
     } else {
         0.0
     };
+    let steady = &fr.pos[hand_frames.min(fr.pos.len())..];
+    let shape_family = family_check(params, &fam, &keys, steady);
+    let (xi_in_range_steady, xi_worst_excursion_steady) =
+        xi_in_range(&savings, &range, cfg.steady.epsilon);
     let mut meta = TracksMeta::new(Units::Metres, fps, 3);
     meta.provenance = serde_json::json!({
         "generator": "herdfit flock animate",
@@ -341,6 +417,10 @@ pub fn animate(
         max_accel_hand_over,
         mean_saving,
         flock_mean_saving,
+        mean_wing_tip_spacing: mean_wing_tip_spacing(steady),
+        shape_family,
+        xi_in_range_steady,
+        xi_worst_excursion_steady,
         config: cfg.clone(),
     };
     Ok(Animation {
@@ -352,7 +432,64 @@ pub fn animate(
     })
 }
 
-/// The savings CSV: `frame,time,id,e,xi` (e: fraction of the bird's induced power saved).
+/// The example's family and the animation's worst deviations from it (`FamilyCheck`).
+fn family_check(
+    params: &ShapeParams,
+    fam: &Family,
+    keys: &[KeyShape],
+    steady: &[Vec<[f64; 2]>],
+) -> FamilyCheck {
+    let model = fam.model;
+    let worst = |frames: &mut dyn Iterator<Item = Vec<[f64; 2]>>| {
+        frames
+            .map(|p| family::worst_deviation(model, &p))
+            .fold(0.0, f64::max)
+    };
+    let example_worst = family::example_worst(params);
+    let keys_worst = worst(&mut keys.iter().map(|k| k.pos.clone()));
+    let steady_worst = worst(&mut steady.iter().cloned());
+    FamilyCheck {
+        model,
+        example_worst,
+        band_widest: fam.widest(),
+        keys_worst,
+        steady_worst,
+        ratio: steady_worst / example_worst.max(f64::MIN_POSITIVE),
+    }
+}
+
+/// Fraction of the savings rows whose ξ lies in its bird's Step 2 range widened by ε, and the
+/// largest relative excursion outside it (0 when every row is inside).
+fn xi_in_range(savings: &[(u64, f64, u64, f64, f64)], range: &[[f64; 2]], eps: f64) -> (f64, f64) {
+    let (mut inside, mut worst) = (0usize, 0.0f64);
+    for &(_, _, id, _, xi) in savings {
+        let r = range[id as usize];
+        let (lo, hi) = ((1.0 - eps) * r[0], (1.0 + eps) * r[1]);
+        let out = ((lo - xi) / lo).max((xi - hi) / hi).max(0.0);
+        if out <= 1e-9 {
+            inside += 1;
+        }
+        worst = worst.max(out);
+    }
+    (inside as f64 / savings.len().max(1) as f64, worst)
+}
+
+/// Mean over frames and neighbour pairs of the lateral gap minus one wingspan.
+fn mean_wing_tip_spacing(frames: &[Vec<[f64; 2]>]) -> f64 {
+    let (mut sum, mut count) = (0.0, 0usize);
+    for p in frames {
+        let mut x: Vec<f64> = p.iter().map(|q| q[0]).collect();
+        x.sort_by(f64::total_cmp);
+        for w in x.windows(2) {
+            sum += w[1] - w[0] - 1.0;
+            count += 1;
+        }
+    }
+    sum / count.max(1) as f64
+}
+
+/// The savings CSV: `frame,time,id,e,xi` (e: the bird's induced-power saving in units of a lone
+/// bird's induced power, eq. 1 with C = 1; see `write_outputs`).
 pub fn savings_csv(rows: &[(u64, f64, u64, f64, f64)]) -> String {
     use std::fmt::Write as _;
     let mut s = String::from("frame,time,id,e,xi\n");
@@ -388,8 +525,9 @@ pub fn write_outputs(anim: &Animation, out: &Path, progress: &mut dyn Progress) 
             "frame": "frame of tracks.csv",
             "time": "seconds",
             "id": "bird id of tracks.csv",
-            "e": "power reduction e_i = Σ_j g_ij (Klotsman & Tal eq. 1, Hummel 1983): fraction of the bird's induced power saved",
-            "xi": "relative power reduction ξ_i = e_i / Σ e",
+            "e": "induced-power saving e_i = Σ_j g_ij (Klotsman & Tal eq. 1 with the drag ratio C = 1; Hummel 1983): the induced power (induced drag × speed) the other birds' upwash removes from bird i, in units of the induced power of the same bird flying alone. Hummel's horseshoe-vortex model is linear and has no ceiling: e exceeds 1 where wing tips overlap (neighbours less than one wingspan apart laterally), the upwash there more than cancelling the bird's own induced drag. It is not the fraction of the bird's total flight power: that is C·e with C the induced share of its flight power at cruise (Cutts & Speakman 1994 estimate C ≈ 0.17 for pink-footed geese: 14 % of induced power, 2.4 % of total).",
+      "flock mean": "report.json flock_mean_saving: e averaged over birds and steady frames, the figure field studies estimate from photographed skeins (14 %: Cutts & Speakman 1994, pink-footed geese; 36 %: Hainsworth 1987, Canada geese; both of induced power, with Lissaman & Shollenberger's model)",
+            "xi": "relative power reduction ξ_i = e_i / Σ e (§5 Step 3)",
         },
         "frames": "the F steady-flight frames after the hand-over (the model assumes steady formation flight)",
     });

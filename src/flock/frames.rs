@@ -23,6 +23,41 @@ fn hand_over(delta: f64, w: f64, t: f64, big_t: f64) -> (f64, f64) {
     (delta * h0 + w * big_t * h1, delta * d0 + w * big_t * d1)
 }
 
+/// Second derivatives of the quintic's two basis functions at s = τ/T (times T² for the value's,
+/// T for the slope's): h''(τ) = δ H0''(s)/T² + w H1''(s)/T.
+fn hand_over_curvature(s: f64) -> (f64, f64) {
+    (
+        -60.0 * s + 180.0 * s * s - 120.0 * s * s * s,
+        -36.0 * s + 96.0 * s * s - 60.0 * s * s * s,
+    )
+}
+
+/// The peak acceleration (wingspans/s²) of the hand-over quintics with offsets `delta` and
+/// relative velocities `w` when the hand-over lasts `big_t` seconds (sampled at 1/400 of it).
+pub(super) fn hand_over_peak(delta: &[[f64; 2]], w: &[[f64; 2]], big_t: f64) -> f64 {
+    let mut peak: f64 = 0.0;
+    for k in 0..=400 {
+        let (c0, c1) = hand_over_curvature(k as f64 / 400.0);
+        let (a0, a1) = (c0 / (big_t * big_t), c1 / big_t);
+        for (d, v) in delta.iter().zip(w) {
+            peak = peak.max((d[0] * a0 + v[0] * a1).hypot(d[1] * a0 + v[1] * a1));
+        }
+    }
+    peak
+}
+
+/// The shortest hand-over (at least 1 s, in steps of 1 %) whose quintics keep every bird's
+/// acceleration within `a_max` (wingspans/s²): the peak of δ H0''/T² + w H1''/T is not monotone
+/// in T when δ and w point against each other, so T grows until the sampled peak, with 1 % of
+/// margin for the sampling, is within the bound.
+pub(super) fn hand_over_time(delta: &[[f64; 2]], w: &[[f64; 2]], a_max: f64) -> f64 {
+    let mut t = 1.0;
+    while hand_over_peak(delta, w, t) > 0.99 * a_max && t < 1e4 {
+        t *= 1.01;
+    }
+    t
+}
+
 /// Assigns each initiation bird a distinct slot: its own where the slots are a bijection, else
 /// the nearest free target position (greedy, in bird order).
 #[allow(clippy::needless_range_loop)]
@@ -137,7 +172,8 @@ pub(super) fn initiation_frames(
 }
 
 /// The steady frames: the timeline in the flock frame moving at `v`, plus the hand-over
-/// offsets decaying over `hand_s` seconds.
+/// offsets decaying over `hand_s` seconds; the timeline starts when the hand-over ends (its first
+/// key shape is held until then).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn steady_frames(
     timeline: &Timeline,
@@ -154,7 +190,7 @@ pub(super) fn steady_frames(
     progress.start("frames", count as u64);
     for k in 0..count {
         let t = k as f64 / fps;
-        let (rel, relv) = timeline.at(t);
+        let (rel, relv) = timeline.at((t - hand_s).max(0.0));
         let mut p = vec![[0.0; 2]; n];
         let mut vv = vec![[0.0; 2]; n];
         for i in 0..n {

@@ -11,9 +11,16 @@
 //! the positions y, whose density is the volume element √det(JᵀJ) of y ↦ ξ (J = ∂ξ/∂y), so that
 //! the draws are uniform in ξ as eq. 2's are, with the box as a hard constraint. Levenberg–
 //! Marquardt then solves eq. 4 for that ξ̂ from the previous key shape's positions (never from the
-//! chain's), with the straight-line continuation as a fallback; a draw it cannot reproduce to
-//! `solve_tol` is rejected and the chain draws again (bounded, counted in the key shape).
+//! chain's); where it does not reproduce the draw to `solve_tol`, or reproduces it with positions
+//! outside the example's shape family, the chain's own positions are the key shape (they solve
+//! eq. 4 for the draw exactly, by construction).
+//!
+//! The chain's region is also restricted to the example's shape family ([`Family`]: every bird
+//! within its band of longitudinal deviations from its side's curve, the curves' coefficients
+//! within the example's range), so that the key shapes keep the example's look (§5 Step 1:
+//! "the general shapes and deviations of the movie") while their ξ̂ stay in eq. 2's box.
 
+use super::family::Family;
 use super::pairs::Pairs;
 use super::power;
 use super::solve::{self, PositionProblem};
@@ -89,12 +96,26 @@ struct Chain {
     accepted: usize,
 }
 
+/// What a chain must stay inside: eq. 2's box and the example's shape family on layout `x`.
+struct Region<'a> {
+    bx: &'a [[f64; 2]],
+    family: &'a Family,
+    x: &'a [f64],
+}
+
+impl Region<'_> {
+    /// The box's relative violation plus the family's (wingspans); 0 inside both.
+    fn violation(&self, xi: &[f64], y: &[f64]) -> f64 {
+        violation(xi, self.bx) + self.family.violation(self.x, y)
+    }
+}
+
 impl Chain {
-    fn new(pairs: &Pairs, y: Vec<f64>, total: f64, bx: &[[f64; 2]]) -> Self {
+    fn new(pairs: &Pairs, y: Vec<f64>, total: f64, region: &Region) -> Self {
         let mut dg = Vec::new();
         let xi = xi_of(pairs, &y, total, &mut dg);
         Chain {
-            viol: violation(&xi, bx),
+            viol: region.violation(&xi, &y),
             logv: log_volume(&jacobian(pairs, &dg, total)),
             y,
             xi,
@@ -105,15 +126,16 @@ impl Chain {
     }
 
     /// `steps` Metropolis steps: isotropic Gaussian moves of the N − 1 free birds, accepted with
-    /// probability min(1, vol(y′)/vol(y)) inside the box, never outside it. A chain that starts
-    /// outside (the previous key's ξ just off a box face by solver rounding) first accepts any
-    /// move that does not increase the violation. The proposal scale adapts towards 30 %
-    /// acceptance with a decaying gain.
+    /// probability min(1, vol(y′)/vol(y)) inside the region (box and family), never outside it.
+    /// A chain that starts outside (the previous key's ξ just off a box face by solver rounding,
+    /// or a new lateral layout that moved birds off their bands) first accepts any move that does
+    /// not increase the violation. The proposal scale adapts towards 30 % acceptance with a
+    /// decaying gain.
     fn run(
         &mut self,
         pairs: &Pairs,
         total: f64,
-        bx: &[[f64; 2]],
+        region: &Region,
         steps: usize,
         rng: &mut impl Rng,
     ) {
@@ -126,7 +148,7 @@ impl Chain {
                 *v += self.scale / m.sqrt() * z;
             }
             let xi = xi_of(pairs, &y, total, &mut dg);
-            let viol = violation(&xi, bx);
+            let viol = region.violation(&xi, &y);
             self.proposed += 1;
             // The proposal's log volume, once: the Metropolis test needs it inside the box, and
             // an accepted move keeps it.
@@ -263,21 +285,25 @@ pub fn continuation(
 /// Step 3 for one key shape. (1) A uniform lateral gap is drawn in `gap_range` (the paper's
 /// constant x-distance from the range of the example's mean gaps) and the previous key's ξ̂ is
 /// carried onto that layout by [`continuation`] (as far as it goes: the layout then stops part
-/// way). (2) ξ̂ is drawn from eq. 2's box restricted to the reachable set by the Metropolis chain
-/// (`draw_steps` × (N − 1) steps from the previous key's positions). (3) Levenberg–Marquardt
-/// solves eq. 4 for that ξ̂ from the previous positions, then by continuation if that fails; a
-/// draw not reproduced to `solve_tol` is rejected and the chain goes on for another draw, up to
-/// `draw_retries` times. If every draw is rejected the key shape is the continuation's last point
+/// way). (2) ξ̂ is drawn from eq. 2's box restricted to the reachable set and to the example's
+/// shape family `family` by the Metropolis chain (`draw_steps` × (N − 1) steps from the previous
+/// key's positions); where the carried-over shape has left the family and the chain cannot bring
+/// it back within one draw's steps, the previous key's layout is kept (its positions lie inside
+/// both). (3) Levenberg–Marquardt solves eq. 4 for that ξ̂ from the previous positions; a
+/// solution that misses `solve_tol` or leaves the family is replaced by the chain's positions,
+/// which solve eq. 4 for ξ̂ exactly. A chain that never gets inside the region draws again, up to
+/// `draw_retries` times; if it never does, the key shape repeats the previous positions
 /// (`reproduced` false).
 #[allow(clippy::too_many_arguments)]
-pub fn next_key(
+pub fn next_key<R: Rng>(
     prev: &KeyShape,
     nl: usize,
     nr: usize,
     range: &[[f64; 2]],
     gap_range: [f64; 2],
+    family: &Family,
     cfg: &SteadyConfig,
-    rng: &mut impl Rng,
+    rng: &mut R,
 ) -> KeyShape {
     let bx = eq2_box(&prev.xi_target, range, cfg);
     let gap = if gap_range[1] > gap_range[0] {
@@ -289,17 +315,48 @@ pub fn next_key(
     let x0: Vec<f64> = prev.pos.iter().map(|p| p[0] - prev.pos[0][0]).collect();
     let y0: Vec<f64> = prev.pos.iter().map(|p| p[1] - prev.pos[0][1]).collect();
     let x1 = layout(nl, nr, gap);
-    let (ta, ya, _, mut solves, mut evals) =
-        continuation(&x0, &x1, &prev.xi_target, &prev.xi_target, y0, cfg);
-    let x: Vec<f64> = x0.iter().zip(&x1).map(|(a, b)| a + ta * (b - a)).collect();
-    let total = power::total_abreast(&x);
-    let pairs = Pairs::new(&x);
-    let mut chain = Chain::new(&pairs, ya.clone(), total, &bx);
-    let steps = cfg.draw_steps * (x.len() - 1);
+    let (mut solves, mut evals) = (0, 0);
+    let steps = cfg.draw_steps * (x0.len() - 1);
+    // A layout between the previous one and the drawn uniform one (all the way first, then a
+    // half, a quarter, an eighth) with the previous shape carried over: each bird keeps its
+    // residual from its side's curve, now evaluated at its new lateral distance. The chain must
+    // bring it into the region within one draw's steps; else the previous layout is kept (its
+    // positions lie in the region).
+    let attempt = |t: f64, rng: &mut R| {
+        let x: Vec<f64> = x0.iter().zip(&x1).map(|(a, b)| a + t * (b - a)).collect();
+        let pairs = Pairs::new(&x);
+        let total = power::total_abreast(&x);
+        let ya = if t > 0.0 {
+            family.carry(&x0, &y0, &x)
+        } else {
+            y0.clone()
+        };
+        let region = Region {
+            bx: &bx,
+            family,
+            x: &x,
+        };
+        let mut chain = Chain::new(&pairs, ya, total, &region);
+        if chain.viol > 0.0 && t > 0.0 {
+            chain.run(&pairs, total, &region, steps, rng);
+        }
+        (chain.viol == 0.0 || t == 0.0).then(|| {
+            let ya = chain.y.clone();
+            (t, x, pairs, total, chain, ya)
+        })
+    };
+    let (ta, x, pairs, total, mut chain, ya) = [1.0, 0.5, 0.25, 0.125, 0.0]
+        .into_iter()
+        .find_map(|t| attempt(t, rng))
+        .expect("the previous layout is always accepted");
+    let region = Region {
+        bx: &bx,
+        family,
+        x: &x,
+    };
     let mut rejected = 0;
-    let mut best: Option<(f64, Vec<f64>, Vec<f64>, f64)> = None;
     for _ in 0..=cfg.draw_retries {
-        chain.run(&pairs, total, &bx, steps, rng);
+        chain.run(&pairs, total, &region, steps, rng);
         if chain.viol > 0.0 {
             rejected += 1;
             continue;
@@ -311,50 +368,83 @@ pub fn next_key(
         );
         solves += 1;
         evals += s.evaluations;
-        let (t, y, err) = if s.max_relative_error <= cfg.solve_tol {
-            (1.0, s.y, s.max_relative_error)
+        let y = if s.max_relative_error <= cfg.solve_tol && family.violation(&x, &s.y) == 0.0 {
+            s.y
         } else {
-            let (t, y, err, n, e) = continuation(&x, &x, &prev.xi_target, &draw, ya.clone(), cfg);
-            solves += n;
-            evals += e;
-            (t, y, err)
+            chain.y.clone()
         };
-        if t >= 1.0 {
-            return finish(
-                x,
-                y,
-                draw.clone(),
-                draw,
-                err,
-                gap_of(prev, ta, gap),
-                (rejected, &chain, solves, evals),
-            );
-        }
-        rejected += 1;
-        if best.as_ref().is_none_or(|b| t > b.0) {
-            let tgt = prev
-                .xi_target
-                .iter()
-                .zip(&draw)
-                .map(|(a, b)| a + t * (b - a))
-                .collect();
-            best = Some((t, y, tgt, err));
-        }
+        let err = on_line([&x, &x, &draw, &draw], 0.0, y.clone()).max_relative_error();
+        return finish(
+            x,
+            y,
+            draw.clone(),
+            draw,
+            err,
+            gap_of(prev, ta, gap),
+            (rejected, &chain, solves, evals),
+        );
     }
-    let (_, y, tgt, err) =
-        best.unwrap_or((0.0, ya, prev.xi_target.clone(), prev.max_relative_error));
-    let draw = chain.xi.clone();
     let mut k = finish(
-        x,
-        y,
-        tgt,
-        draw,
-        err,
-        gap_of(prev, ta, gap),
+        x0,
+        y0,
+        prev.xi_target.clone(),
+        chain.xi.clone(),
+        prev.max_relative_error,
+        prev.gap,
         (rejected, &chain, solves, evals),
     );
     k.reproduced = false;
     k
+}
+
+/// The first key shape brought into the example's shape family: `key` (Step 1's first shape)
+/// itself when it lies in the family and in Step 2's ranges [(1 − ε) p_i, (1 + ε) P_i], else the
+/// Metropolis chain's point after it got inside (moves that do not increase the violation, then
+/// ordinary steps inside; up to `draw_retries` + 1 runs of `draw_steps` × (N − 1) steps). The
+/// chain's positions give their own ξ exactly. Unchanged if the chain never gets inside.
+pub fn settle<R: Rng>(
+    key: KeyShape,
+    range: &[[f64; 2]],
+    family: &Family,
+    cfg: &SteadyConfig,
+    rng: &mut R,
+) -> KeyShape {
+    let bx: Vec<[f64; 2]> = range
+        .iter()
+        .map(|r| [(1.0 - cfg.epsilon) * r[0], (1.0 + cfg.epsilon) * r[1]])
+        .collect();
+    let x: Vec<f64> = key.pos.iter().map(|p| p[0] - key.pos[0][0]).collect();
+    let y: Vec<f64> = key.pos.iter().map(|p| p[1] - key.pos[0][1]).collect();
+    let pairs = Pairs::new(&x);
+    let total = power::total_abreast(&x);
+    let region = Region {
+        bx: &bx,
+        family,
+        x: &x,
+    };
+    let mut chain = Chain::new(&pairs, y, total, &region);
+    if chain.viol == 0.0 {
+        return key;
+    }
+    let steps = cfg.draw_steps * (x.len() - 1);
+    for _ in 0..=cfg.draw_retries {
+        chain.run(&pairs, total, &region, steps, rng);
+        if chain.viol == 0.0 {
+            let xi = chain.xi.clone();
+            let err = on_line([&x, &x, &xi, &xi], 0.0, chain.y.clone()).max_relative_error();
+            let gap = key.gap;
+            return finish(
+                x,
+                chain.y.clone(),
+                xi.clone(),
+                xi,
+                err,
+                gap,
+                (0, &chain, 0, 0),
+            );
+        }
+    }
+    key
 }
 
 fn gap_of(prev: &KeyShape, t: f64, gap: f64) -> f64 {

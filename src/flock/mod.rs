@@ -11,6 +11,7 @@
 
 pub mod animate;
 pub mod extract;
+pub mod family;
 pub mod figures;
 mod frames;
 pub mod hpr;

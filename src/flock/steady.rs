@@ -7,7 +7,7 @@
 //! side likewise. Positions are `[x, y]` in wingspans in the flock frame (x right, y forward).
 
 use super::extract::{mean_std, FrameShape, ShapeParams, Side};
-pub use super::keys::{layout, next_key};
+pub use super::keys::{layout, next_key, settle};
 use super::power;
 use super::ransac;
 use crate::error::{Error, Result};
@@ -192,6 +192,10 @@ fn side_model(f: &FrameShape, s: Side) -> Result<&[f64]> {
 }
 
 /// Step 1: the correspondence (from the first frame) and one N-bird shape per example frame.
+/// Each bird sits on the frame's side curve at lateral distances drawn from the frame's gap
+/// statistics, displaced longitudinally by its example bird's deviation where that bird is an
+/// outlier in the frame, else by a draw from the frame's N(μ_y, σ_y) kept within the range of
+/// the example's inlier deviations over all its frames.
 pub fn initial_shapes(
     params: &ShapeParams,
     birds: usize,
@@ -222,6 +226,15 @@ pub fn initial_shapes(
     let mut example_bird = vec![Some(f0.leader)];
     example_bird.extend(match_side(nl, &ex[0]));
     example_bird.extend(match_side(nr, &ex[1]));
+    // The inliers' deviations over the whole example: Step 1's Gaussian deviations are kept in
+    // it, so that N birds drawn from a 9-bird example do not stray further than its own inliers.
+    let inlier_dev = params
+        .frames
+        .iter()
+        .flat_map(|f| f.birds.iter().filter(|b| !b.outlier).map(|b| b.dy))
+        .fold([f64::INFINITY, f64::NEG_INFINITY], |r, v| {
+            [r[0].min(v), r[1].max(v)]
+        });
     let mut shapes = Vec::with_capacity(params.frames.len());
     for f in &params.frames {
         let mut pos = vec![[0.0, 0.0]];
@@ -240,7 +253,7 @@ pub fn initial_shapes(
                     .map(|b| b.dy);
                 let dy = match out {
                     Some(d) => d,
-                    None => dev.sample(rng),
+                    None => dev.sample(rng).clamp(inlier_dev[0], inlier_dev[1]),
                 };
                 // Keep every pair at least `min_pair` apart: widen this bird's lateral gap
                 // (deterministically, no extra draw) while it sits too close to a placed bird.

@@ -243,14 +243,21 @@ pub fn synth(cfg: &SynthConfig) -> Result<Tracks> {
 }
 
 /// The steady-flight set-up of a key-shape case: the synthetic example `ex` extracted (§4),
-/// Step 1's initial shapes for `n` birds, Step 2's ranges [p_i, P_i] and the range of the
-/// example's per-frame mean lateral gaps (the gaps key shapes draw from).
+/// Step 1's initial shapes for `n` birds, Step 2's ranges [p_i, P_i], the range of the
+/// example's per-frame mean lateral gaps (the gaps key shapes draw from) and the example's shape
+/// family carried to `n` birds.
+#[allow(clippy::type_complexity)]
 pub fn key_shape_setup(
     ex: &SynthConfig,
     n: usize,
     cfg: &super::steady::SteadyConfig,
     rng: &mut impl Rng,
-) -> Result<(super::steady::InitialShapes, Vec<[f64; 2]>, [f64; 2])> {
+) -> Result<(
+    super::steady::InitialShapes,
+    Vec<[f64; 2]>,
+    [f64; 2],
+    super::family::Family,
+)> {
     let t = synth(ex)?;
     let p = super::extract::extract(&t, "synthetic", &super::extract::ExtractConfig::default())?;
     let init = super::steady::initial_shapes(&p, n, cfg, rng)?;
@@ -260,7 +267,8 @@ pub fn key_shape_setup(
         means.iter().cloned().fold(f64::INFINITY, f64::min),
         means.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
     ];
-    Ok((init, range, gaps))
+    let family = super::family::Family::of_example(&p, &init);
+    Ok((init, range, gaps, family))
 }
 
 /// The examples shipped in `examples/flocks/` (file stem, settings). `herdfit flock synth

@@ -10,6 +10,7 @@
 pub mod ablate;
 pub mod author;
 pub mod bench;
+pub mod boundary;
 pub mod demo;
 pub mod eval;
 pub mod fit;

@@ -160,6 +160,68 @@ pub fn population_control(
     rows
 }
 
+/// Between windows through the open boundary `gates` ([`crate::herd::boundary`]): agents that
+/// left the grid are removed; when the density error exceeds `threshold`, agents move from the
+/// most over-filled cells to the most under-filled ones (the paper's §6.1 control, the count
+/// unchanged); then the count's shortfall against frame `f` enters at the entry gates, each new
+/// agent placed to cross its gate within `ahead` seconds. Returns the rows and what crossed.
+#[allow(clippy::too_many_arguments)]
+pub fn population_control_open(
+    clip: &ClipFields,
+    gates: &crate::data::boundary::Gates,
+    f: usize,
+    rows: Vec<AgentRow>,
+    threshold: f64,
+    speed: &crate::herd::params::SpeedModel,
+    next_id: &mut u64,
+    rng: &mut impl Rng,
+    ahead: f64,
+) -> (Vec<AgentRow>, crate::herd::boundary::Crossings) {
+    use crate::herd::boundary::{edit_rows, Stream};
+    let mut stream = Stream::new(clip, gates, speed.clone(), rng.gen(), *next_id);
+    let mut rows = edit_rows(rows, |a| stream.leave(a) > 0);
+    let (err, _) = field_errors(clip, f, &rows);
+    if err > threshold {
+        let g = clip.grid();
+        let a = g.cell_area();
+        let target: Vec<f64> = (0..g.ny * g.nx)
+            .map(|c| clip.density[[f, c / g.nx, c % g.nx]] as f64 * a)
+            .collect();
+        let (mut n_sim, _) = cell_counts(clip, &rows);
+        // Move one agent at a time from the largest surplus (≥ 1) to the largest deficit.
+        loop {
+            let best = |sign: f64| {
+                (0..n_sim.len())
+                    .filter(|&c| clip.obstacles[[c / g.nx, c % g.nx]] == 0)
+                    .map(|c| (c, sign * (n_sim[c] - target[c])))
+                    .max_by(|p, q| p.1.total_cmp(&q.1).then(q.0.cmp(&p.0)))
+            };
+            let (Some((from, s)), Some((to, d))) = (best(1.0), best(-1.0)) else {
+                break;
+            };
+            if s < 1.0 || d <= 0.0 {
+                break;
+            }
+            let members: Vec<usize> = rows
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| g.cell_of([r.x, r.y]).map(|(ix, iy)| iy * g.nx + ix) == Some(from))
+                .map(|(i, _)| i)
+                .collect();
+            let k = members[rng.gen_range(0..members.len())];
+            let old = rows.remove(k);
+            let v = old.vx.hypot(old.vy);
+            rows.push(new_agent(clip, f, to % g.nx, to / g.nx, old.id, v, rng));
+            n_sim[from] -= 1.0;
+            n_sim[to] += 1.0;
+        }
+    }
+    stream.next_id = (*next_id).max(stream.next_id);
+    let rows = edit_rows(rows, |a| stream.enter(f, ahead, a) > 0);
+    *next_id = stream.next_id;
+    (rows, stream.crossings)
+}
+
 /// How a herd initialised from fields is settled (see [`settle`]; off by default).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

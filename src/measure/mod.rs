@@ -8,6 +8,7 @@ pub mod emergent;
 pub mod fields;
 pub mod info;
 pub mod raster;
+pub mod reference;
 
 pub use emergent::{angular_momentum, aspect_ratio, centroid, polarization};
 pub use raster::{rasterise, speed_density_table, DENSITY_BINS};

@@ -146,6 +146,7 @@ pub fn rasterise(
                 density_table: speed_density_table(&samples),
             },
             dir_spread: None,
+            frame_measures: None,
             provenance,
         },
         density,

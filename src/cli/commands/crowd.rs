@@ -3,6 +3,7 @@
 
 use crate::crowd::eval::{evaluate, EvalConfig};
 use crate::crowd::features::{IntentWindow, Scene};
+use crate::crowd::holdout::{holdout, HoldoutConfig};
 use crate::crowd::layout::Layout;
 use crate::crowd::measure::compare;
 use crate::crowd::model::{learn, read_tracks, CrowdModel, LearnConfig};
@@ -28,6 +29,27 @@ pub enum CrowdCommand {
     Compare(CompareArgs),
     /// Write a synthetic social-force corridor crowd (tracks CSV) to learn from.
     Synth(SynthArgs),
+    /// Split real tracks in time, learn from the first part, simulate the second part's entries
+    /// and compare (Wasserstein distances against those between the two real parts).
+    Holdout(HoldoutArgs),
+}
+
+/// Named learn configurations.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    /// The paper's Table 1 locomotion and chat rows, eq. 3's regression.
+    Paper,
+    /// Imitation of real pedestrians (`LearnConfig::pedestrians`).
+    Pedestrians,
+}
+
+impl Preset {
+    fn config(self) -> LearnConfig {
+        match self {
+            Preset::Paper => LearnConfig::default(),
+            Preset::Pedestrians => LearnConfig::pedestrians(),
+        }
+    }
 }
 
 /// Flags that override a learn configuration.
@@ -65,7 +87,7 @@ pub struct LearnFlags {
 impl LearnFlags {
     fn config(&self, base: LearnConfig) -> Result<LearnConfig> {
         let mut c = match &self.config {
-            Some(p) => read_json::<LearnConfig>(p)?,
+            Some(p) => over(&base, p)?,
             None => base,
         };
         if let Some(v) = self.radius {
@@ -96,6 +118,24 @@ impl LearnFlags {
     }
 }
 
+/// `base` with the keys of the JSON file `p` put over it (objects key by key, anything else
+/// replaced), so a `--config` file changes only what it names, whichever preset it starts from.
+fn over<T: serde::Serialize + serde::de::DeserializeOwned>(base: &T, p: &Path) -> Result<T> {
+    fn put(b: &mut serde_json::Value, o: serde_json::Value) {
+        match (b, o) {
+            (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+                for (k, v) in o {
+                    put(b.entry(k).or_insert(serde_json::Value::Null), v);
+                }
+            }
+            (b, o) => *b = o,
+        }
+    }
+    let mut v = serde_json::to_value(base).map_err(|e| Error::Internal(e.to_string()))?;
+    put(&mut v, read_json(p)?);
+    serde_json::from_value(v).map_err(|e| Error::file(p, format!("bad configuration: {e}")))
+}
+
 fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
     crate::data::atomic::note_input(p);
     let s = std::fs::read_to_string(p).map_err(|e| Error::file(p, format!("cannot read: {e}")))?;
@@ -112,6 +152,9 @@ pub struct LearnArgs {
     /// Training tracks (several allowed, same units and frame rate).
     #[arg(value_name = "TRACKS", num_args = 1.., required = true)]
     pub inputs: Vec<PathBuf>,
+    /// Starting configuration (--config and the flags override it).
+    #[arg(long, value_enum, default_value = "paper")]
+    pub preset: Preset,
     #[command(flatten)]
     pub flags: LearnFlags,
     /// Output model.
@@ -126,7 +169,8 @@ pub struct SimulateArgs {
     /// Layout with walls, obstacles, pivots, regions and spawns.
     #[arg(long, value_name = "LAYOUT.json")]
     pub layout: Option<PathBuf>,
-    /// Agents enter where and when those of these tracks did, heading to where they left.
+    /// Agents enter where and when those of these tracks did, heading to where they left, and
+    /// leave when they did.
     #[arg(long, value_name = "TRACKS", required_unless_present = "layout")]
     pub entries: Option<PathBuf>,
     /// Steps (0: the layout's duration or until the last entry is done).
@@ -138,6 +182,10 @@ pub struct SimulateArgs {
     /// ones left, and stay until the end (--steps; default the tracks' length).
     #[arg(long, requires = "entries")]
     pub no_goals: bool,
+    /// With --entries: agents leave on reaching their goals (or when their time is up) instead
+    /// of when the real ones left.
+    #[arg(long, requires = "entries")]
+    pub leave_at_goal: bool,
     /// Every agent uses locomotion (no groups or lines).
     #[arg(long)]
     pub no_behaviours: bool,
@@ -145,6 +193,9 @@ pub struct SimulateArgs {
     /// it (its learnt step is turned to the edge of the cone; 180: off).
     #[arg(long, value_name = "DEG", default_value_t = SimConfig::default().goal_cone_deg)]
     pub goal_cone: f64,
+    /// Hard minimum distance between agents after each step (units; 0: off).
+    #[arg(long, value_name = "M", default_value_t = SimConfig::default().min_distance)]
+    pub min_distance: f64,
     /// Top-view PNG of the middle frame.
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<PathBuf>,
@@ -208,6 +259,41 @@ pub struct CompareArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct HoldoutArgs {
+    /// Tracks: herdfit.tracks/1 CSV or ETH/UCY .txt.
+    #[arg(value_name = "TRACKS")]
+    pub tracks: PathBuf,
+    /// Walls and obstacles the simulated agents keep to (its spawns are not used).
+    #[arg(long, value_name = "LAYOUT.json")]
+    pub layout: Option<PathBuf>,
+    /// Starting learn configuration (--config and the flags override it).
+    #[arg(long, value_enum, default_value = "pedestrians")]
+    pub preset: Preset,
+    #[command(flatten)]
+    pub flags: LearnFlags,
+    /// Fraction of the agent-frames learnt from (the first part in time).
+    #[arg(long, value_name = "F", default_value_t = 0.5)]
+    pub split: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Agents leave on reaching their goals instead of when the real ones left.
+    #[arg(long)]
+    pub leave_at_goal: bool,
+    /// Goal cone of the simulation (degrees; see `crowd simulate --goal-cone`).
+    #[arg(long, value_name = "DEG", default_value_t = SimConfig::default().goal_cone_deg)]
+    pub goal_cone: f64,
+    /// Hard minimum distance between simulated agents (units; 0: off).
+    #[arg(long, value_name = "M", default_value_t = SimConfig::default().min_distance)]
+    pub min_distance: f64,
+    /// The simulated second part (herdfit.tracks/1 CSV + sidecar).
+    #[arg(long, value_name = "SIM.csv")]
+    pub out: Option<PathBuf>,
+    /// Report (herdfit.crowd-holdout/1 JSON).
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
 pub struct SynthArgs {
     /// Seconds simulated.
     #[arg(long, value_name = "S")]
@@ -226,11 +312,12 @@ pub fn run(c: CrowdCommand) -> Result<()> {
         CrowdCommand::Evaluate(a) => evaluate_cmd(a),
         CrowdCommand::Compare(a) => compare_cmd(a),
         CrowdCommand::Synth(a) => synth_cmd(a),
+        CrowdCommand::Holdout(a) => holdout_cmd(a),
     }
 }
 
 fn learn_cmd(a: LearnArgs) -> Result<()> {
-    let cfg = a.flags.config(LearnConfig::default())?;
+    let cfg = a.flags.config(a.preset.config())?;
     cfg.check()?;
     crate::data::atomic::check_writable(&a.out)?;
     let inputs = a
@@ -288,6 +375,9 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     let entries = match (&real, &layout) {
         (Some((s, _)), _) => {
             let mut e = entries_from_tracks(s);
+            if a.no_goals || a.leave_at_goal {
+                e.iter_mut().for_each(|e| e.leave = None);
+            }
             if a.no_goals {
                 e.iter_mut().for_each(|e| e.goal = None);
                 if steps == 0 {
@@ -304,6 +394,7 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
         seed: a.seed,
         behaviours: !a.no_behaviours,
         goal_cone_deg: a.goal_cone,
+        min_distance: a.min_distance,
         ..SimConfig::default()
     };
     let mut bars = crate::cli::Bars::default();
@@ -441,6 +532,45 @@ fn compare_cmd(a: CompareArgs) -> Result<()> {
     );
     if let Some(p) = &a.json {
         write_json(p, &c)?;
+    }
+    Ok(())
+}
+
+fn holdout_cmd(a: HoldoutArgs) -> Result<()> {
+    let base = HoldoutConfig::default();
+    let cfg = HoldoutConfig {
+        learn: a.flags.config(a.preset.config())?,
+        sim: SimConfig {
+            seed: a.seed,
+            goal_cone_deg: a.goal_cone,
+            min_distance: a.min_distance,
+            ..base.sim.clone()
+        },
+        split: a.split,
+        leave_at_goal: a.leave_at_goal,
+        ..base
+    };
+    cfg.check()?;
+    for p in [a.out.as_ref(), a.json.as_ref()].into_iter().flatten() {
+        crate::data::atomic::check_writable(p)?;
+    }
+    let layout = a.layout.as_deref().map(Layout::load).transpose()?;
+    let t = read_tracks(&a.tracks, cfg.learn.eth_fps)?;
+    let mut bars = crate::cli::Bars::default();
+    let h = holdout(
+        &t,
+        layout.as_ref(),
+        &cfg,
+        &a.tracks.display().to_string(),
+        &mut bars,
+    )
+    .map_err(|e| e.in_file(&a.tracks))?;
+    println!("{}", h.report);
+    if let Some(p) = &a.out {
+        h.simulated.save(p)?;
+    }
+    if let Some(p) = &a.json {
+        write_json(p, &h.report)?;
     }
     Ok(())
 }

@@ -5,6 +5,7 @@ use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::Bars;
 use crate::error::Result;
+use crate::herd::boundary::BoundaryChoice;
 use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
@@ -88,6 +89,11 @@ pub struct FitArgs {
     /// from the fields, so the objective scores the model's steps from where the animals were
     #[arg(long, value_name = "TRACKS.csv")]
     pub tracks: Vec<PathBuf>,
+    /// The clip's open boundary: `auto` (entry and exit cells from the video's flux across the
+    /// grid's edge; closed when nothing crosses it), `closed`, or a herdfit.boundary/1 file.
+    /// Agents leaving the grid are removed and the count's shortfall enters at the entry cells
+    #[arg(long, value_name = "auto|closed|FILE", default_value = "auto")]
+    pub boundary: BoundaryChoice,
     /// Gradient checkpointing: less memory through long windows, more time (see BENCHMARKS.md).
     #[arg(long)]
     pub checkpointing: bool,
@@ -213,6 +219,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             frozen: a.freeze,
             density_weight: a.density_weight,
             tracks: a.tracks,
+            boundary: a.boundary,
             ..FitConfig::default()
         }),
         eval_seeds: a.eval_seeds,

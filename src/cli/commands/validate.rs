@@ -1,10 +1,11 @@
 //! `herdfit validate`: flags → [`ValidateJob`] → [`run`] → the report's Markdown.
 
-use crate::cli::args::with_flags;
+use crate::cli::args::{choice, parse_range, with_flags, MEASURES};
 use crate::cli::Bars;
 use crate::error::Result;
+use crate::herd::boundary::BoundaryChoice;
 use crate::herd::fit::{Settle, GUIDANCE_SCALE};
-use crate::herd::validate::{run, zone_report, ValidateConfig, ValidateJob};
+use crate::herd::validate::{run, zone_report, Measures, ValidateConfig, ValidateJob};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -54,6 +55,18 @@ pub struct ValidateArgs {
     /// its first frame instead of a herd drawn from the fields.
     #[arg(long, value_name = "TRACKS.csv")]
     pub tracks: Option<PathBuf>,
+    /// The clip's open boundary: `auto` (entry and exit cells from the video's flux across the
+    /// grid's edge; closed when nothing crosses it), `closed`, or a herdfit.boundary/1 file.
+    /// Agents leaving the grid are removed and the count's shortfall enters at the entry cells
+    #[arg(long, value_name = "auto|closed|FILE", default_value = "auto")]
+    pub boundary: BoundaryChoice,
+    /// Held-out frames a..b (b exclusive) instead of --split to the end (e.g. the reference's
+    /// logging protocol: 0..101, 100 frames after the clip's first)
+    #[arg(long, value_name = "a..b", value_parser = parse_range)]
+    pub frames: Option<(usize, usize)>,
+    /// Measures reported
+    #[arg(long, value_parser = choice::<Measures>(MEASURES), default_value_t = Measures::Herdfit)]
+    pub measures: Measures,
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
@@ -79,6 +92,9 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             ensemble_mean: a.ensemble_mean,
             horizon: a.horizon,
             tracks: a.tracks,
+            boundary: a.boundary,
+            frames: a.frames.map(|(x, y)| [x, y]),
+            measures: a.measures,
         },
     };
     // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.

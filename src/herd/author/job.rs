@@ -132,7 +132,7 @@ pub fn run(job: &AuthorJob, progress: &mut dyn Progress) -> Result<AuthorSummary
     out.write("trajectories.csv", csv.as_bytes())?;
     plots(&scene, &r, &out)?;
     let centroid = centroids(&r.frames);
-    let report = serde_json::json!({
+    let mut report = serde_json::json!({
         "schema": AUTHORING_SCHEMA,
         "scene": job.scene.display().to_string(),
         "agents": r.frames[0].len(),
@@ -142,6 +142,20 @@ pub fn run(job: &AuthorJob, progress: &mut dyn Progress) -> Result<AuthorSummary
         "regions": region_measures(&r, scene.params.len()),
         "predator": r.predator,
     });
+    // Through the scene's sources and sinks: what entered, what left (left, right, bottom,
+    // top) and the count in the world frame by frame.
+    if let Some(c) = &r.crossings {
+        let in_world = |rows: &Vec<AgentRow>| {
+            rows.iter()
+                .filter(|a| scene.grid.cell_of([a.x, a.y]).is_some())
+                .count()
+        };
+        report["boundary"] = serde_json::json!({
+            "entered": c.entered,
+            "left": c.left,
+            "count": r.frames.iter().map(in_world).collect::<Vec<_>>(),
+        });
+    }
     out.write(
         "report.json",
         serde_json::to_string_pretty(&report)

@@ -5,12 +5,14 @@
 pub mod job;
 pub mod nav;
 pub mod scene;
+pub mod sources;
 
 pub use job::{AuthorJob, AuthorSummary};
 pub use scene::Scene;
 
 use crate::data::agents::AgentRow;
 use crate::error::Result;
+use crate::herd::boundary::{Crossings, Inflow, Stream};
 use crate::herd::params::N_PARAMS;
 use crate::herd::sim::obstacle_map;
 use crate::herd::sim::{
@@ -106,6 +108,8 @@ pub struct AuthorRun {
     pub regions: Vec<Vec<usize>>,
     pub navigation: Vec<P2>,
     pub predator: Vec<P2>,
+    /// What entered and left through the scene's boundary, when it declares one.
+    pub crossings: Option<Crossings>,
 }
 
 fn spawn(scene: &Scene, rng: &mut impl Rng) -> Result<Vec<AgentRow>> {
@@ -160,6 +164,8 @@ struct SceneHooks<'a, P: FnMut()> {
     regions: Vec<Vec<usize>>,
     predator: Vec<P2>,
     progress: &'a mut P,
+    /// The scene's sources and sinks, when it declares them.
+    stream: Option<Stream<'a>>,
 }
 
 impl<P: FnMut()> StepHooks for SceneHooks<'_, P> {
@@ -190,6 +196,13 @@ impl<P: FnMut()> StepHooks for SceneHooks<'_, P> {
         let old_rows = self.frames.last().map(Vec::as_slice).unwrap_or(&[]);
         let mut rows = next.rows(&self.ids)?;
         for (r, old) in rows.iter_mut().zip(old_rows) {
+            // An entrant still outside the world walks in; one leaving through an exit walks out
+            // (the boundary removes it below).
+            if scene.grid.cell_of([old.x, old.y]).is_none()
+                || scene.exits_at([old.x, old.y], [r.x, r.y])
+            {
+                continue;
+            }
             // Speed cap of the region the agent stands in.
             let v = r.vx.hypot(r.vy);
             if let Some(cap) = scene.speed_cap_at([old.x, old.y]) {
@@ -213,6 +226,30 @@ impl<P: FnMut()> StepHooks for SceneHooks<'_, P> {
                 }
             }
         }
+        if let Some(stream) = &mut self.stream {
+            let ids = std::mem::take(&mut self.ids);
+            let old: std::collections::HashMap<u64, [f64; N_PARAMS]> = ids
+                .iter()
+                .copied()
+                .zip(self.thetas.iter().copied())
+                .collect();
+            let mut kept = ids;
+            rows = crate::herd::boundary::edit_rows(rows, |a| {
+                let changed = stream.apply(self.frames.len(), dt, a);
+                kept = a.ids.clone();
+                changed
+            });
+            // Each agent keeps its parameters; a new one takes its region's set.
+            self.thetas = rows
+                .iter()
+                .map(|r| {
+                    old.get(&r.id)
+                        .copied()
+                        .unwrap_or(self.sets[scene.region_at([r.x, r.y])])
+                })
+                .collect();
+            self.ids = kept;
+        }
         let state = HerdState::from_rows(&rows, self.device);
         self.regions
             .push(rows.iter().map(|r| scene.region_at([r.x, r.y])).collect());
@@ -232,6 +269,7 @@ pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result
     let rows = spawn(scene, &mut rng)?;
     let navf = navigation(scene);
     let g = scene.grid;
+    let g_grid = g;
     let model = Model {
         params: scene.params[0].clone(),
         world: World {
@@ -264,10 +302,29 @@ pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result
         regions: vec![region],
         predator: Vec::new(),
         progress: &mut progress,
+        stream: None,
     };
+    let gates = f.boundary.as_ref().map(|b| b.gates());
+    if let (Some(b), Some(g)) = (&f.boundary, &gates) {
+        let inflow = Inflow::Scene {
+            grid: g_grid,
+            heading: &navf,
+            count: b.count,
+            rate: b.rate.unwrap_or(0.0),
+        };
+        let next_id = rows.len() as u64;
+        hooks.stream = Some(Stream::of(
+            inflow,
+            g,
+            model.params.speed.clone(),
+            f.seed,
+            next_id,
+        ));
+    }
     // The set-up θ is unused: every step takes the per-agent sets of [`SceneHooks::forces`].
     let theta = theta_tensor(&hooks.sets[0], device);
     let state = model.run_live(&theta, &rows, steps, &mut rng, &mut hooks)?;
+    let crossings = hooks.stream.map(|s| s.crossings);
     let (frames, mut roles, regions, predator) =
         (hooks.frames, hooks.roles, hooks.regions, hooks.predator);
     roles.push(model.decide(&state.snapshot()?, &mut rng).leader);
@@ -277,5 +334,6 @@ pub fn run(scene: &Scene, device: &Device, mut progress: impl FnMut()) -> Result
         regions,
         navigation: navf,
         predator,
+        crossings,
     })
 }

@@ -148,6 +148,10 @@ pub struct SceneFile {
     pub seed: u64,
     #[serde(default)]
     pub predator: Option<PredatorSpec>,
+    /// Open edges of the world (a stream of animals through an authored valley): the same gates
+    /// as a clip's open boundary ([`crate::herd::boundary`]).
+    #[serde(default)]
+    pub boundary: Option<super::sources::SceneBoundary>,
 }
 
 fn fps25() -> f64 {
@@ -523,10 +527,19 @@ fn check_spawn_and_run(file: &SceneFile, ground: &Ground) -> Result<()> {
         );
         return Err(bad("duration", &m));
     }
-    if let Err(e) =
-        crate::limits::check_memory("duration", "the run", frames * s.count as f64 * 48.0)
-    {
+    // With sources, the count the boundary keeps or what its rate lets in over the run.
+    let inflow = file.boundary.as_ref().map_or(0.0, |b| {
+        b.count.unwrap_or(0) as f64 + b.rate.unwrap_or(0.0) * file.duration
+    });
+    if let Err(e) = crate::limits::check_memory(
+        "duration",
+        "the run",
+        frames * (s.count as f64 + inflow) * 48.0,
+    ) {
         return Err(Error::file(ground.path, e.to_string()));
+    }
+    if let Some(b) = &file.boundary {
+        super::sources::check(b, ground.grid, ground.obstacles, ground.path)?;
     }
     if let Some(p) = &file.predator {
         if p.path.len() < 2 {

@@ -3,6 +3,7 @@
 use crate::backend::Precision;
 use crate::data::ClipFields;
 use crate::error::{check_counts, Error, Result};
+use crate::herd::boundary::BoundaryChoice;
 use crate::herd::guidance::{check_guidance_scale, GUIDANCE_SCALE};
 use crate::herd::start::Settle;
 use crate::optim::Optimizer;
@@ -84,6 +85,16 @@ pub struct FitConfig {
     /// frame. Empty: windows carry the herd drawn from the fields. Not written when empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tracks: Vec<std::path::PathBuf>,
+    /// The clips' open boundary ([`crate::herd::boundary`]): `auto` (the gates the clip's flux
+    /// shows; closed when nothing crosses its edge), `closed`, or a `herdfit.boundary/1` file.
+    /// Agents that leave the grid are removed between windows and the count's shortfall enters
+    /// at the entry gates. Not written when `auto`.
+    #[serde(default, skip_serializing_if = "is_auto")]
+    pub boundary: BoundaryChoice,
+}
+
+fn is_auto(b: &BoundaryChoice) -> bool {
+    *b == BoundaryChoice::Auto
 }
 
 fn unit_weight() -> f64 {
@@ -205,6 +216,7 @@ impl Default for FitConfig {
             density_weight: 1.0,
             still: None,
             tracks: Vec::new(),
+            boundary: BoundaryChoice::Auto,
         }
     }
 }

@@ -4,10 +4,11 @@
 use super::config::FitConfig;
 use super::run::Forward;
 use crate::data::agents::AgentRow;
+use crate::data::boundary::Gates;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::sim::{read_vec, Model};
-use crate::herd::start::population_control;
+use crate::herd::start::{population_control, population_control_open};
 use crate::measure::fields::field_errors;
 use burn::tensor::Tensor;
 use rand_chacha::ChaCha8Rng;
@@ -98,9 +99,11 @@ impl Herds {
     /// After a window ending at frame `f`: each live replica's end state, detached, under
     /// population control; returns the replicas' mean density and velocity errors and their
     /// total agents.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn control(
         &mut self,
         clip: &ClipFields,
+        gates: &Gates,
         f: usize,
         fwd: &Forward,
         cfg: &FitConfig,
@@ -117,15 +120,32 @@ impl Herds {
                 Some(_) => f64::INFINITY,
                 None => cfg.density_threshold,
             };
-            self.rows[r] = population_control(
-                clip,
-                f,
-                rows,
-                threshold,
-                &model.params.speed,
-                &mut self.next_ids[r],
-                rng,
-            );
+            self.rows[r] = if gates.is_open() {
+                // Entrants cross their gate within the next window.
+                let ahead = cfg.window as f64 * model.dt;
+                population_control_open(
+                    clip,
+                    gates,
+                    f,
+                    rows,
+                    threshold,
+                    &model.params.speed,
+                    &mut self.next_ids[r],
+                    rng,
+                    ahead,
+                )
+                .0
+            } else {
+                population_control(
+                    clip,
+                    f,
+                    rows,
+                    threshold,
+                    &model.params.speed,
+                    &mut self.next_ids[r],
+                    rng,
+                )
+            };
             let (d, v) = field_errors(clip, f, &self.rows[r]);
             de += d / kr;
             ve += v / kr;

@@ -339,9 +339,13 @@ fn evaluation(
         .iter()
         .map(|c| guidance_fields(c, cfg.guidance_scale))
         .collect();
+    let gates = clips
+        .iter()
+        .map(|c| cfg.boundary.gates(c))
+        .collect::<Result<Vec<_>>>()?;
     let errors = |p: &Params| -> Result<(f64, f64)> {
         let (mut d, mut v) = (0.0, 0.0);
-        for ((c, guidance), a) in clips.iter().zip(&guidance).zip(anchors) {
+        for (((c, guidance), a), gates) in clips.iter().zip(&guidance).zip(anchors).zip(&gates) {
             let mut q = p.clone();
             q.speed = SpeedModel::of_clip(c, base);
             for k in 0..job.eval_seeds {
@@ -349,6 +353,7 @@ fn evaluation(
                     c,
                     &q,
                     a.as_ref().and_then(|a| a.at(cfg.frames.start)),
+                    gates,
                     cfg.frames.clone(),
                     cfg.seed.wrapping_add(k as u64),
                     cfg.precision,

@@ -13,6 +13,7 @@ use super::target::Stencil;
 use super::zones::Zones;
 use crate::backend::cpu_device;
 use crate::data::agents::AgentRow;
+use crate::data::boundary::Gates;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::eval::clip_model;
@@ -157,6 +158,8 @@ struct FitRun<'a> {
     zones: Option<&'a Zones>,
     /// Each clip's tracked animals, which start every window when given (`cfg.tracks`).
     anchors: Vec<Option<Anchors>>,
+    /// Each clip's open boundary (`cfg.boundary`; closed gates change nothing).
+    gates: Vec<Gates>,
 }
 
 /// The forward pass over one window besides its loss: the logged loss values, and each live
@@ -237,6 +240,10 @@ impl<'a> FitRun<'a> {
             })
             .collect();
         let anchors = super::anchor::load_all(cfg, clips)?;
+        let gates = clips
+            .iter()
+            .map(|c| cfg.boundary.gates(c))
+            .collect::<Result<Vec<_>>>()?;
         Ok(FitRun {
             clips,
             init,
@@ -249,6 +256,7 @@ impl<'a> FitRun<'a> {
             probe: false,
             zones: None,
             anchors,
+            gates,
         })
     }
 
@@ -290,7 +298,7 @@ impl<'a> FitRun<'a> {
             // A still's settling steps (§7.2.4) are simulated, not learnt from nor logged.
             if cfg.still.is_some_and(|s| f + w <= s.settle) {
                 f += w;
-                herds.control(clip, f, &fwd, cfg, &model, rng)?;
+                herds.control(clip, &self.gates[ci], f, &fwd, cfg, &model, rng)?;
                 progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
                 continue;
             }
@@ -319,7 +327,8 @@ impl<'a> FitRun<'a> {
             }
             model.params = model.params.with_vec(&learnt.theta);
             f += w;
-            let (de, ve, agents) = herds.control(clip, f, &fwd, cfg, &model, rng)?;
+            let (de, ve, agents) =
+                herds.control(clip, &self.gates[ci], f, &fwd, cfg, &model, rng)?;
             learnt.log.push(LogRow {
                 epoch,
                 frame: f,

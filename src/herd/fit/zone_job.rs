@@ -148,6 +148,7 @@ fn errors_of(
 ) -> Result<(f64, f64)> {
     let device = cpu_device(job.config.precision)?;
     let guidance = guidance_fields(clip, job.config.guidance_scale);
+    let gates = job.config.boundary.gates(clip)?;
     let (mut d, mut v, mut n) = (0.0, 0.0, 0.0);
     for k in 0..job.eval_seeds {
         run_from(
@@ -155,6 +156,7 @@ fn errors_of(
             &sets.sets[0],
             Some(sets),
             tracked,
+            &gates,
             (frames.start, frames.end - 1),
             job.config.seed.wrapping_add(k as u64),
             &job.config.settle,

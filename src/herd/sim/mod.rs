@@ -60,6 +60,41 @@ pub struct Snapshot {
     pub speed: Vec<f64>,
 }
 
+impl Snapshot {
+    /// The state of agent rows: velocity gives heading and speed (a standing agent faces +x).
+    pub fn of_rows(rows: &[AgentRow]) -> Self {
+        let mut head = Vec::with_capacity(rows.len());
+        let mut speed = Vec::with_capacity(rows.len());
+        for r in rows {
+            let s = (r.vx * r.vx + r.vy * r.vy).sqrt();
+            head.push(if s > 1e-12 {
+                [r.vx / s, r.vy / s]
+            } else {
+                [1.0, 0.0]
+            });
+            speed.push(s);
+        }
+        Snapshot {
+            pos: rows.iter().map(|r| [r.x, r.y]).collect(),
+            head,
+            speed,
+        }
+    }
+
+    /// Agent rows (velocity = speed · heading) with the given ids.
+    pub fn rows(&self, ids: &[u64]) -> Vec<AgentRow> {
+        (0..self.pos.len())
+            .map(|i| AgentRow {
+                id: ids[i],
+                x: self.pos[i][0],
+                y: self.pos[i][1],
+                vx: self.speed[i] * self.head[i][0],
+                vy: self.speed[i] * self.head[i][1],
+            })
+            .collect()
+    }
+}
+
 fn vec_tensor(v: Vec<f64>, device: &Device) -> Tensor<1> {
     let n = v.len();
     Tensor::from_data(TensorData::new(v, [n]), device)
@@ -82,26 +117,17 @@ pub fn read_vec(t: &Tensor<1>) -> Result<Vec<f64>> {
 impl HerdState {
     /// Builds a state from agent rows: velocity gives heading and speed (a standing agent faces +x).
     pub fn from_rows(rows: &[AgentRow], device: &Device) -> Self {
-        let mut hx = Vec::with_capacity(rows.len());
-        let mut hy = Vec::with_capacity(rows.len());
-        let mut sp = Vec::with_capacity(rows.len());
-        for r in rows {
-            let s = (r.vx * r.vx + r.vy * r.vy).sqrt();
-            if s > 1e-12 {
-                hx.push(r.vx / s);
-                hy.push(r.vy / s);
-            } else {
-                hx.push(1.0);
-                hy.push(0.0);
-            }
-            sp.push(s);
-        }
+        Self::from_snapshot(&Snapshot::of_rows(rows), device)
+    }
+
+    /// Puts a plain state on the device.
+    pub fn from_snapshot(s: &Snapshot, device: &Device) -> Self {
         HerdState {
-            x: vec_tensor(rows.iter().map(|r| r.x).collect(), device),
-            y: vec_tensor(rows.iter().map(|r| r.y).collect(), device),
-            hx: vec_tensor(hx, device),
-            hy: vec_tensor(hy, device),
-            speed: vec_tensor(sp, device),
+            x: vec_tensor(s.pos.iter().map(|p| p[0]).collect(), device),
+            y: vec_tensor(s.pos.iter().map(|p| p[1]).collect(), device),
+            hx: vec_tensor(s.head.iter().map(|h| h[0]).collect(), device),
+            hy: vec_tensor(s.head.iter().map(|h| h[1]).collect(), device),
+            speed: vec_tensor(s.speed.clone(), device),
         }
     }
 
@@ -123,16 +149,7 @@ impl HerdState {
 
     /// Agent rows (velocity = speed · heading) with the given ids.
     pub fn rows(&self, ids: &[u64]) -> Result<Vec<AgentRow>> {
-        let s = self.snapshot()?;
-        Ok((0..s.pos.len())
-            .map(|i| AgentRow {
-                id: ids[i],
-                x: s.pos[i][0],
-                y: s.pos[i][1],
-                vx: s.speed[i] * s.head[i][0],
-                vy: s.speed[i] * s.head[i][1],
-            })
-            .collect())
+        Ok(self.snapshot()?.rows(ids))
     }
 
     /// The same values cut from the autodiff graph (used between training windows).

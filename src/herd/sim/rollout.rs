@@ -46,6 +46,24 @@ pub trait StepHooks {
     fn after(&mut self, t: usize, dec: &StepDecisions, next: HerdState) -> Result<HerdState>;
 }
 
+impl<T: StepHooks + ?Sized> StepHooks for Box<T> {
+    fn before_decide(&mut self, t: usize, model: &mut Model) -> Result<()> {
+        (**self).before_decide(t, model)
+    }
+
+    fn forces(&mut self, t: usize, state: &HerdState) -> Result<Option<ForceTensors>> {
+        (**self).forces(t, state)
+    }
+
+    fn extra(&mut self, t: usize, state: &HerdState) -> Result<Option<Vec<P2>>> {
+        (**self).extra(t, state)
+    }
+
+    fn after(&mut self, t: usize, dec: &StepDecisions, next: HerdState) -> Result<HerdState> {
+        (**self).after(t, dec, next)
+    }
+}
+
 /// Hooks that only observe: `observe(t, dec, next)` after every step.
 struct Observe<F>(F);
 

@@ -7,8 +7,10 @@
 
 use crate::backend::{cpu_device, Precision};
 use crate::data::agents::AgentRow;
+use crate::data::boundary::Gates;
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
+use crate::herd::boundary::{BoundaryChoice, Crossings};
 use crate::herd::eval::run_from;
 use crate::herd::fit::anchor::Anchors;
 use crate::herd::guidance::guidance_fields;
@@ -19,10 +21,14 @@ use crate::measure::rasterise;
 use serde::Serialize;
 
 pub mod paired;
+mod population;
+pub mod reference;
 mod report;
 pub mod zone_report;
 pub mod zones;
 
+pub use population::{BoundaryReport, Population};
+pub use reference::Measures;
 pub use report::{markdown, run, ValidateJob};
 
 /// The measures compared, in report order.
@@ -40,6 +46,8 @@ pub const MEASURES: [&str; 6] = [
 pub struct SimRun {
     pub frames: Vec<Vec<AgentRow>>,
     pub fields: ClipFields,
+    /// What crossed the clip's open boundary during the run.
+    pub crossings: Crossings,
 }
 
 /// Simulates `range` of the clip with `params` and seed `seed` (leaders follow `guidance`, the
@@ -57,9 +65,11 @@ pub fn simulate_clip(
     seed: u64,
     cfg: &ValidateConfig,
     tracked: Option<&Anchors>,
+    gates: &Gates,
     guidance: &[crate::herd::sim::Guidance],
     device: &burn::tensor::Device,
 ) -> Result<SimRun> {
+    let mut crossings = Crossings::default();
     // The agents of every frame of `piece`, the herd started from the fields of frame
     // `piece.start − warmup` (or from the animals `tracked` in it) and run through the warm-up
     // unrecorded.
@@ -67,11 +77,12 @@ pub fn simulate_clip(
         let first = piece.start - cfg.warmup.min(piece.start);
         let mut frames = Vec::with_capacity(piece.len());
         let last = piece.end.saturating_sub(1);
-        let rows = run_from(
+        let (rows, crossed) = run_from(
             clip,
             params,
             None,
             tracked.and_then(|a| a.at(first)),
+            gates,
             (first, last),
             seed,
             &cfg.settle,
@@ -84,12 +95,14 @@ pub fn simulate_clip(
                 Ok(())
             },
         )?;
+        crossings.add(&crossed);
         if first == piece.start {
             frames.insert(0, rows);
         }
         Ok(frames)
     };
     let mut frames = Vec::with_capacity(range.len());
+    let mut run_piece = run_piece;
     // With a horizon, the herd is drawn afresh from the clip every `horizon` frames (each piece
     // with its own seed derived from `seed`, the same for every parameter set).
     let step = if cfg.horizon == 0 {
@@ -112,7 +125,11 @@ pub fn simulate_clip(
         serde_json::json!({"source": "validate simulation", "seed": seed}),
     )?;
     smooth_velocity(&mut fields, clip.meta.velocity_window());
-    Ok(SimRun { frames, fields })
+    Ok(SimRun {
+        frames,
+        fields,
+        crossings,
+    })
 }
 
 /// Mean and standard deviation.
@@ -165,6 +182,13 @@ pub struct SetReport {
     /// average when every frame's value is finite.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub seed_errors: Vec<[f64; 6]>,
+    /// Through an open boundary: what entered and left, and the count in the view frame by
+    /// frame. Absent for a closed clip.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub population: Option<Population>,
+    /// The reference implementation's measures (`measures: reference`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference: Option<reference::RefReport>,
 }
 
 impl SetReport {
@@ -200,6 +224,10 @@ pub struct HeldOut {
     pub tracks: Option<String>,
 }
 
+fn is_auto(b: &BoundaryChoice) -> bool {
+    *b == BoundaryChoice::Auto
+}
+
 fn is_zero(x: &usize) -> bool {
     *x == 0
 }
@@ -233,6 +261,10 @@ pub struct Report {
     /// The video's per-frame measures: [polarization, ang. momentum centroid, frame centre,
     /// aspect ratio].
     pub video_per_frame: Vec<[f64; 4]>,
+    /// The clip's open boundary, when it has one: its entry and exit gates and the video's count
+    /// at each held-out frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub boundary: Option<BoundaryReport>,
     pub sets: Vec<SetReport>,
     /// The first set against each other set, seed by seed ([`paired`]); empty with one set or
     /// for the seeds' mean prediction.
@@ -273,6 +305,23 @@ pub struct ValidateConfig {
     /// when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracks: Option<std::path::PathBuf>,
+    /// The clip's open boundary ([`crate::herd::boundary`]): `auto` (the gates the clip's flux
+    /// shows; closed when nothing crosses its edge), `closed`, or a `herdfit.boundary/1` file.
+    /// Not written when `auto`.
+    #[serde(default, skip_serializing_if = "is_auto")]
+    pub boundary: BoundaryChoice,
+    /// The held-out frames `[a, b)` (`--frames a..b`), instead of `split` to the end: e.g. the
+    /// reference's logging protocol, 100 frames from the clip's start. Not written when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<[usize; 2]>,
+    /// Which measures to report: herdfit's own, or also the reference implementation's
+    /// ([`reference`]). Not written when herdfit's own.
+    #[serde(default, skip_serializing_if = "is_herdfit")]
+    pub measures: Measures,
+}
+
+fn is_herdfit(m: &Measures) -> bool {
+    *m == Measures::Herdfit
 }
 
 impl Default for ValidateConfig {
@@ -287,6 +336,9 @@ impl Default for ValidateConfig {
             ensemble_mean: false,
             horizon: 0,
             tracks: None,
+            boundary: BoundaryChoice::Auto,
+            frames: None,
+            measures: Measures::Herdfit,
         }
     }
 }
@@ -303,9 +355,55 @@ impl ValidateConfig {
             .transpose()
     }
 
-    /// The first held-out frame of a clip of `frames` frames: ⌊frames · split⌋.
+    /// The first held-out frame of a clip of `frames` frames: the start of [`Self::frames`]
+    /// when given, else ⌊frames · split⌋.
     pub fn held_out_start(&self, frames: usize) -> usize {
-        ((frames as f64) * self.split).floor() as usize
+        match self.frames {
+            Some([a, _]) => a,
+            None => ((frames as f64) * self.split).floor() as usize,
+        }
+    }
+
+    /// The held-out frames `(start, end)` of a clip of `frames` frames: [`Self::frames`] when
+    /// given (checked against the clip), else from ⌊frames · split⌋ to the end.
+    pub fn held_out(&self, frames: usize) -> Result<(usize, usize)> {
+        match self.frames {
+            Some([a, b]) if a < b && b <= frames => Ok((a, b)),
+            Some([a, b]) => Err(Error::config(
+                "frames",
+                format!("{a}..{b} is not a range of frames inside the clip's 0..{frames}"),
+            )),
+            None => Ok((self.held_out_start(frames), frames)),
+        }
+    }
+
+    /// The held-out frames `(start, end)` of `clip` ([`Self::held_out`]), checked: not a still,
+    /// at least 2 frames, the warm-up inside the clip.
+    pub fn held_out_checked(&self, clip: &ClipFields) -> Result<(usize, usize)> {
+        let cfg = self;
+        if clip.frames() == 1 {
+            return Err(Error::invalid(
+                "the clip is a still (one frame): it has no held-out part; `herdfit fit` scores a still \
+                 itself (its parameter set's provenance.evaluation.still)",
+            ));
+        }
+        // `nf`: the end of the held-out part (the clip's end unless `frames` says otherwise).
+        let (start, nf) = cfg.held_out(clip.frames())?;
+        if nf - start < 2 {
+            return Err(Error::invalid(format!(
+                "the held-out part {start}..{nf} has fewer than 2 frames"
+            )));
+        }
+        if cfg.warmup > start {
+            return Err(Error::config(
+                "warmup",
+                format!(
+                    "{} frames reach before the clip: the held-out part starts at frame {start}",
+                    cfg.warmup
+                ),
+            ));
+        }
+        Ok((start, nf))
     }
 
     /// Checks the ranges; errors name the key.
@@ -356,29 +454,10 @@ pub fn validate(
 ) -> Result<(Report, Vec<Vec<SimRun>>)> {
     cfg.check()?;
     let (split, grid, seeds) = (cfg.split, cfg.coarse_grid, cfg.seeds);
-    let nf = clip.frames();
-    let start = cfg.held_out_start(nf);
-    if nf == 1 {
-        return Err(Error::invalid(
-            "the clip is a still (one frame): it has no held-out part; `herdfit fit` scores a still \
-             itself (its parameter set's provenance.evaluation.still)",
-        ));
-    }
-    if nf - start < 2 {
-        return Err(Error::invalid(format!(
-            "the held-out part {start}..{nf} has fewer than 2 frames"
-        )));
-    }
-    if cfg.warmup > start {
-        return Err(Error::config(
-            "warmup",
-            format!(
-                "{} frames reach before the clip: the held-out part starts at frame {start}",
-                cfg.warmup
-            ),
-        ));
-    }
+    // `nf`: the end of the held-out part (the clip's end unless `frames` says otherwise).
+    let (start, nf) = cfg.held_out_checked(clip)?;
     let anchors = cfg.anchors(clip)?;
+    let gates = cfg.boundary.gates(clip)?;
     let device = cpu_device(Precision::F32)?;
     // The leaders' guidance of every frame, the same for every set and seed.
     let guidance = guidance_fields(clip, cfg.guidance_scale);
@@ -418,6 +497,7 @@ pub fn validate(
         let mut mean_cells = vec![vec![[0.0f64; 3]; kx * ky]; nf - start];
         let mut mean_vals = vec![[0.0f64; 4]; nf - start];
         let w = 1.0 / seeds as f64;
+        let mut population = Population::new(nf - start);
         for seed in 0..seeds {
             let run = simulate_clip(
                 clip,
@@ -426,6 +506,7 @@ pub fn validate(
                 seed as u64,
                 cfg,
                 anchors.as_ref(),
+                &gates,
                 &guidance,
                 &device,
             )?;
@@ -447,6 +528,7 @@ pub fn validate(
                     record(k, [de, ve, vals[0], vals[1], vals[2], vals[3]], &cells, w);
                 }
             }
+            population.add(&run, w);
             runs.push(run);
             progress();
         }
@@ -470,6 +552,9 @@ pub fn validate(
             } else {
                 paired::seed_means(&errs, seeds, nf - start)
             },
+            population: gates.is_open().then_some(population),
+            reference: (cfg.measures == Measures::Reference)
+                .then(|| reference::reference_of(clip, start, &runs)),
         });
         runs_all.push(runs);
     }
@@ -487,6 +572,10 @@ pub fn validate(
             },
             ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),
+            boundary: gates.is_open().then(|| BoundaryReport {
+                video_count: (start..nf).map(|f| clip.count(f)).collect(),
+                gates: gates.clone(),
+            }),
             paired: paired::comparisons(&reports),
             sets: reports,
         },

@@ -61,6 +61,7 @@ pub fn markdown(r: &Report) -> String {
     }
     s.push_str("\nThe simulation's velocities are averaged over the same window of frames as the clip's (the extraction's smoothing) before they are compared. Density and velocity errors are relative (Σ|n' − n| / Σn and Σn‖V' − V‖ / Σn‖V‖ over coarse cells); the other errors are |simulation − video| per frame. Measures come from the fields of the video and of the rasterised simulation (paper §7.1.2).\n\n");
     s.push_str(&super::paired::markdown(&r.paired));
+    s.push_str(&super::reference::markdown(r));
     s.push_str("| parameter |");
     for set in &r.sets {
         s.push_str(&format!(" {} |", set.name));
@@ -184,6 +185,17 @@ pub fn run(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Report, St
     let md = markdown(&report);
     out.write("report.md", md.as_bytes())?;
     plots(&report, &out)?;
+    if let Some(b) = &report.boundary {
+        let text =
+            serde_json::to_string_pretty(&b.gates).map_err(|e| Error::Internal(e.to_string()))?;
+        out.write("boundary.json", format!("{text}\n").as_bytes())?;
+        count_plot(&report, &b.video_count, &out)?;
+    }
+    for set in &report.sets {
+        if let Some(r) = &set.reference {
+            out.write(&format!("errorlog-{}.txt", set.name), r.log().as_bytes())?;
+        }
+    }
     #[cfg(feature = "video")]
     if job.video {
         if let Some(run) = runs.first().and_then(|r| r.first()) {
@@ -252,6 +264,25 @@ fn plots(report: &Report, out: &AtomicDir) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// `count.png`: the animals in view over the held-out frames, the video's and each set's.
+fn count_plot(report: &Report, video: &[f64], out: &AtomicDir) -> Result<()> {
+    let start = report.run.frames[0];
+    let line = |v: &[f64]| -> Vec<(f64, f64)> {
+        v.iter()
+            .enumerate()
+            .map(|(k, c)| ((start + k) as f64, *c))
+            .collect()
+    };
+    let mut lines = vec![("video".to_string(), line(video), RGBColor(0, 0, 0))];
+    for (i, set) in report.sets.iter().enumerate() {
+        if let Some(p) = &set.population {
+            lines.push((set.name.clone(), line(&p.count), COLOURS[i % 6]));
+        }
+    }
+    let title = "animals in view (held-out frames, open boundary)";
+    chart(&out.path("count.png"), title, "animals", &lines)
 }
 
 /// A named line of (frame, value) points and its colour.

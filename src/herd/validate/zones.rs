@@ -109,6 +109,7 @@ pub fn validate_zones(
     let device = cpu_device(Precision::F32)?;
     let guidance = guidance_fields(clip, cfg.guidance_scale);
     let first = start - cfg.warmup;
+    let gates = cfg.boundary.gates(clip)?;
     let mut out = Vec::new();
     for (name, zs) in sets {
         let nz = zs.zones.len();
@@ -122,11 +123,12 @@ pub fn validate_zones(
         let mut means = vec![vec![[0.0f64; 3]; nz]; nf - start];
         for seed in 0..cfg.seeds {
             let mut frames = Vec::new();
-            let rows = run_from(
+            let (rows, _) = run_from(
                 clip,
                 &zs.sets[0],
                 Some(zs),
                 anchors.as_ref().and_then(|a| a.at(first)),
+                &gates,
                 (first, nf - 1),
                 seed as u64,
                 &cfg.settle,

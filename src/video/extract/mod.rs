@@ -505,6 +505,7 @@ fn clip_meta(
         body_pixel_coverage: Some(calib.body_pixels),
         speed,
         dir_spread: None,
+        frame_measures: None,
         provenance,
     }
 }

@@ -1,0 +1,184 @@
+//! Open boundaries (paper §7.1.3, issue #46): a stream of animals through a corridor keeps the
+//! video's count; entries appear only at the entry gates, outside the view; a closed clip runs as
+//! before.
+
+use herdfit::data::boundary::{Gate, Gates, Side};
+use herdfit::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
+use herdfit::herd::boundary::{gates_of_clip, Agents, BoundaryChoice, Stream};
+use herdfit::herd::params::{Params, SpeedModel};
+use herdfit::herd::validate::{validate, ValidateConfig};
+use ndarray::{Array2, Array3, Array4};
+
+/// A corridor clip: `frames` frames at 10 fps of a 20 × 8 grid of 1-BL cells, rows 2..6 holding
+/// `rho` agents/BL² in every column, all moving at `vx` BL/s (a stream from right to left when
+/// `vx` < 0; standing when 0).
+fn corridor(frames: usize, rho: f32, vx: f32) -> ClipFields {
+    let (nx, ny) = (20, 8);
+    let mut d = Array3::zeros((frames, ny, nx));
+    let mut v = Array4::zeros((frames, ny, nx, 2));
+    let mut var = Array3::zeros((frames, ny, nx));
+    for f in 0..frames {
+        for iy in 2..6 {
+            for ix in 0..nx {
+                d[[f, iy, ix]] = rho;
+                v[[f, iy, ix, 0]] = vx;
+                var[[f, iy, ix]] = 0.01;
+            }
+        }
+    }
+    ClipFields {
+        meta: ClipMeta {
+            schema: CLIP_SCHEMA.into(),
+            fps: 10.0,
+            cell_size: 1.0,
+            nx,
+            ny,
+            frames,
+            origin: [0.0, 0.0],
+            body_length_px: None,
+            body_pixel_coverage: None,
+            speed: ClipSpeed {
+                mean: vx.abs().max(1.0) as f64,
+                std: 0.2,
+                density_table: vec![],
+            },
+            dir_spread: None,
+            frame_measures: None,
+            provenance: serde_json::Value::Null,
+        },
+        density: d,
+        velocity: v,
+        dir_variance: var,
+        obstacles: Array2::zeros((ny, nx)),
+    }
+}
+
+fn gate(ix: usize, iy: usize, side: Side) -> Gate {
+    Gate {
+        cell: [ix, iy],
+        side,
+    }
+}
+
+#[test]
+fn a_stream_has_entries_upstream_and_exits_downstream() {
+    let clip = corridor(50, 0.6, -3.0);
+    let g = gates_of_clip(&clip);
+    assert_eq!(
+        g.entries,
+        (2..6)
+            .map(|iy| gate(19, iy, Side::Right))
+            .collect::<Vec<_>>()
+    );
+    assert_eq!(
+        g.exits,
+        (2..6).map(|iy| gate(0, iy, Side::Left)).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn a_standing_herd_is_a_closed_clip() {
+    assert!(!gates_of_clip(&corridor(50, 0.6, 0.0)).is_open());
+}
+
+/// The per-frame count inside the view of a validation run of `clip` with the neutral set
+/// through `boundary`, and the video's.
+fn counts(clip: &ClipFields, boundary: BoundaryChoice) -> (Vec<f64>, Vec<f64>) {
+    let cfg = ValidateConfig {
+        split: 0.0,
+        seeds: 1,
+        boundary,
+        ..Default::default()
+    };
+    let sets = vec![("neutral".to_string(), Params::neutral())];
+    let (report, runs) = validate(clip, "corridor", &sets, &cfg, || {}).unwrap();
+    let sim: Vec<f64> = (0..clip.frames())
+        .map(|k| runs[0][0].fields.count(k))
+        .collect();
+    let video: Vec<f64> = (0..clip.frames()).map(|f| clip.count(f)).collect();
+    if let Some(p) = &report.sets[0].population {
+        assert_eq!(p.count, sim, "the report's count is the run's");
+    }
+    (sim, video)
+}
+
+#[test]
+fn a_stream_keeps_its_count_over_500_frames_in_validate() {
+    // 20 × 4 cells × 0.5 = 40 animals in view, each crossing the 20-BL corridor in 6.7 s while the
+    // run lasts 50 s: the whole herd is replaced about 7 times.
+    let clip = corridor(500, 0.5, -3.0);
+    let (sim, video) = counts(&clip, BoundaryChoice::Auto);
+    assert_eq!(video[0], 40.0);
+    for (f, (s, v)) in sim.iter().zip(&video).enumerate() {
+        assert!(
+            (s - v).abs() <= 0.1 * v,
+            "frame {f}: {s} agents in view, the video holds {v}"
+        );
+    }
+    // Closed, the same stream drains out of the corridor within its crossing time.
+    let (closed, _) = counts(&clip, BoundaryChoice::Closed);
+    assert!(closed[499] < 0.1 * 40.0, "closed: {} left", closed[499]);
+}
+
+#[test]
+fn entries_appear_only_outside_the_grid_at_entry_gates_heading_in() {
+    let clip = corridor(20, 0.5, -3.0);
+    let gates = Gates::new(vec![gate(19, 3, Side::Right)], vec![gate(0, 3, Side::Left)]);
+    let speed = SpeedModel {
+        mean: 3.0,
+        std: 0.2,
+        max: 6.0,
+        ..SpeedModel::default()
+    };
+    let mut s = Stream::new(&clip, &gates, speed, 7, 100);
+    let (mut pos, mut head, mut sp, mut ids) = (vec![], vec![], vec![], vec![]);
+    let mut a = Agents {
+        pos: &mut pos,
+        head: &mut head,
+        speed: &mut sp,
+        ids: &mut ids,
+    };
+    // Nobody in view: the whole count (40) enters.
+    assert!(s.apply(5, 0.1, &mut a));
+    assert_eq!(a.ids.len(), 40);
+    assert_eq!(s.crossings.entered, 40);
+    assert_eq!(a.ids[0], 100, "new ids continue from next_id");
+    for (p, h) in a.pos.iter().zip(a.head.iter()) {
+        assert!(p[0] >= 20.0, "an entrant stands inside the view at {p:?}");
+        assert!(p[0] <= 20.0 + 0.1 * 6.0, "too far out: {p:?}");
+        assert!((3.0..4.0).contains(&p[1]), "not at its gate's edge: {p:?}");
+        assert!(h[0] < -0.19, "heading {h:?} does not point in");
+    }
+    // Leaving: an agent past the left edge heading out is removed (counted on the left); one
+    // outside the right edge heading in (an entrant) stays.
+    a.pos[0] = [-0.1, 3.5];
+    a.head[0] = [-1.0, 0.0];
+    assert_eq!(s.leave(&mut a), 1);
+    assert_eq!(s.crossings.left, [1, 0, 0, 0]);
+    assert_eq!(a.ids.len(), 39);
+}
+
+#[test]
+fn a_boundary_file_overrides_the_derived_gates_and_is_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = corridor(20, 0.6, -3.0);
+    let p = dir.path().join("b.json");
+    Gates::new(vec![gate(19, 2, Side::Right)], vec![])
+        .save(&p)
+        .unwrap();
+    let g = BoundaryChoice::File(p.clone()).gates(&clip).unwrap();
+    assert_eq!(g.entries, vec![gate(19, 2, Side::Right)]);
+    std::fs::write(
+        &p,
+        r#"{"schema": "herdfit.boundary/1", "entries": [{"cell": [5, 2], "side": "right"}], "exits": []}"#,
+    )
+    .unwrap();
+    let e = BoundaryChoice::File(p.clone())
+        .gates(&clip)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("b.json") && e.contains("entries[0]") && e.contains("not on the Right side"),
+        "{e}"
+    );
+}
