@@ -199,6 +199,22 @@ fn bad_tracks_get_one_line_and_write_nothing() {
         assert!(e.contains(want) && e.contains(s(file)), "{e}");
         assert!(!report.exists(), "{e}");
     }
+    // The tracked animals enter and leave by themselves: the fields' open boundary is refused.
+    let e = fails(&[
+        "fit",
+        s(&one),
+        "--objective",
+        "tracks",
+        "--boundary",
+        "closed",
+        "--out",
+        s(&d.join("fitted.json")),
+    ]);
+    assert!(
+        e.contains("--boundary is an option of the fields objective"),
+        "{e}"
+    );
+    assert!(!d.join("fitted.json").exists(), "{e}");
 }
 
 /// A small synthetic clip fitted from its trajectories and validated on them: the parameter set

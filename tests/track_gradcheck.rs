@@ -86,7 +86,7 @@ fn the_track_loss_gradient_matches_finite_differences_in_f64() {
         let h = 1e-4;
         let fd: Vec<f64> = (0..N_PARAMS)
             .map(|j| {
-                let at = |d: f64| {
+                let mut at = |d: f64| {
                     let mut t = theta;
                     t[j] += d;
                     loss(clip, &w, &how, &t, &device, &mut rec, false).0

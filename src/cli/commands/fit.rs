@@ -194,6 +194,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
     if a.objective == Objective::Tracks {
         return super::track_fit::exec(a);
     }
+    let uncertainty = uncertainty_of(&a);
     let job = FitJob {
         clips: a.clips,
         start: a.start,
@@ -228,12 +229,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
         out: a.out,
         log: a.log,
         plot: a.plot,
-        uncertainty: UncertaintyConfig {
-            enabled: !a.no_uncertainty,
-            seeds: a.uncertainty_seeds,
-            step: a.uncertainty_step,
-            ..UncertaintyConfig::default()
-        },
+        uncertainty,
         zones: a.zones,
         still: crate::herd::fit::still::StillConfig {
             settle: a.still_settle,
@@ -266,4 +262,14 @@ pub fn exec(a: FitArgs) -> Result<()> {
     }
     print!("{summary}");
     Ok(())
+}
+
+/// The identifiability estimate's flags (both objectives).
+pub fn uncertainty_of(a: &FitArgs) -> UncertaintyConfig {
+    UncertaintyConfig {
+        enabled: !a.no_uncertainty,
+        seeds: a.uncertainty_seeds,
+        step: a.uncertainty_step,
+        ..UncertaintyConfig::default()
+    }
 }

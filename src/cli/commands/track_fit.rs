@@ -1,11 +1,12 @@
 //! `herdfit fit --objective tracks`: the track objective's flags of `fit` → [`TrackFitJob`] →
 //! [`run`] → the summary.
 
-use super::fit::FitArgs;
+use super::fit::{uncertainty_of, FitArgs};
 use crate::cli::args::with_flags;
 use crate::cli::Bars;
 use crate::error::{Error, Result};
-use crate::herd::fit::{LossKind, UncertaintyConfig};
+use crate::herd::boundary::BoundaryChoice;
+use crate::herd::fit::LossKind;
 use crate::herd::sim::ForceKernel;
 use crate::herd::track_fit::job::{run, TrackFitJob};
 use crate::herd::track_fit::{Rollout, TrackFitConfig};
@@ -81,7 +82,12 @@ pub fn exec(a: FitArgs) -> Result<()> {
     if a.loss != LossKind::Fields {
         return refuse("--loss");
     }
+    // The tracked animals enter and leave by themselves: a window starts whoever is tracked.
+    if a.boundary != BoundaryChoice::default() {
+        return refuse("--boundary");
+    }
     let defaults = TrackFitConfig::default();
+    let uncertainty = uncertainty_of(&a);
     let job = TrackFitJob {
         inputs: a.clips,
         tracks: a.tracks,
@@ -106,12 +112,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
         out: a.out,
         log: a.log,
         plot: a.plot,
-        uncertainty: UncertaintyConfig {
-            enabled: !a.no_uncertainty,
-            seeds: a.uncertainty_seeds,
-            step: a.uncertainty_step,
-            ..UncertaintyConfig::default()
-        },
+        uncertainty,
     };
     let summary = run(&job, &mut Bars::default()).map_err(|e| {
         with_flags(

@@ -8,10 +8,9 @@ use super::speed::SpeedFit;
 use super::{load_input, TrackClip};
 use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::{Error, Result};
-use crate::herd::fit::identify::{report, summary, Uncertainty, UncertaintyConfig};
+use crate::herd::fit::identify::{identify_by, summary, Uncertainty, UncertaintyConfig};
 use crate::herd::fit::job::sibling;
-use crate::herd::params::{param_names, Params, MIN_RANGE, N_PARAMS};
-use crate::optim::curvature;
+use crate::herd::params::{param_names, Params, N_PARAMS};
 use crate::progress::Progress;
 use plotters::style::RGBColor;
 use std::path::{Path, PathBuf};
@@ -130,8 +129,8 @@ pub fn load_inputs(
         .collect()
 }
 
-/// The identifiability estimate of the track objective at `params` ([`crate::optim::curvature`],
-/// the method of `fit`'s estimate with the track windows as its probes).
+/// The identifiability estimate of the track objective at `params` ([`identify_by`], the method
+/// of `fit`'s estimate with the track windows as its probes).
 pub fn identify_tracks(
     clips: &[TrackClip],
     params: &Params,
@@ -139,30 +138,13 @@ pub fn identify_tracks(
     ucfg: &UncertaintyConfig,
     progress: &mut dyn Progress,
 ) -> Result<Uncertainty> {
-    ucfg.check()?;
-    let s = ucfg.settings();
-    let x = params.to_vec();
-    let lo: Vec<f64> = (0..N_PARAMS)
-        .map(|i| if i % 3 == 0 { 0.0 } else { MIN_RANGE })
-        .collect();
-    let hi = vec![1.0; N_PARAMS];
-    let probes = curvature::probes_needed(&x, &lo, &hi, &s);
-    progress.start("uncertainty", probes as u64);
-    let est = curvature::estimate(&x, &lo, &hi, &s, |p, seed| -> Result<_> {
-        let mut v = [0.0; N_PARAMS];
-        v.copy_from_slice(p);
+    identify_by(params, cfg.seed, ucfg, progress, |p, seed| {
         let c = TrackFitConfig {
-            seed: cfg
-                .seed
-                .wrapping_add(0x5EED_0000_u64.wrapping_mul(seed as u64 + 1)),
+            seed,
             ..cfg.clone()
         };
-        let w = window_gradients(clips, &params.with_vec(&v), &c)?;
-        progress.inc(1);
-        Ok(w.into_iter().map(|(l, g)| (l, g.to_vec())).collect())
-    })?;
-    progress.finish();
-    Ok(report(&est, ucfg))
+        window_gradients(clips, p, &c)
+    })
 }
 
 /// Runs a track fit job and writes the parameter set, the log and the loss curve.
