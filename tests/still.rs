@@ -305,3 +305,64 @@ fn a_still_among_video_clips_and_the_ensemble_objective_are_refused() {
     assert!(e.contains("clip.json") && e.contains("dir_spread"), "{e}");
     assert!(!p.exists(), "nothing written");
 }
+
+/// A still fitted with one parameter set per zone and a fixed speed per zone (paper §7.2.4, the
+/// seals: 3.0 BL/s in the water, 0.5 on land): the zone fit takes the still's stationary target,
+/// keeps each zone at its speed and lowers the smoothed density error; the bundle records the
+/// still's measures. (Issue #46: the seals, `scripts/seals.py`.)
+#[test]
+fn a_zone_fit_of_a_still_keeps_each_zone_at_its_speed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clip, _) = still(dir.path(), 1.0);
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(clip.join("clip.json")).unwrap()).unwrap();
+    let x0 = meta["origin"][0].as_f64().unwrap();
+    let y0 = meta["origin"][1].as_f64().unwrap();
+    let (w, mid) = (48.0, 24.0);
+    let rect = |a: f64, b: f64| {
+        serde_json::json!([
+            [x0 + a, y0],
+            [x0 + b, y0],
+            [x0 + b, y0 + w],
+            [x0 + a, y0 + w]
+        ])
+    };
+    let zones = dir.path().join("zones.json");
+    let z = serde_json::json!({"schema": "herdfit.zones/1", "zones": [
+        {"name": "water", "polygon": rect(0.0, mid), "speed": 3.0},
+        {"name": "land", "polygon": rect(mid, w), "speed": 0.5}]});
+    std::fs::write(&zones, z.to_string()).unwrap();
+    let out = dir.path().join("sets.json");
+    let line = ok(&[
+        "fit",
+        s(&clip),
+        "--zones",
+        s(&zones),
+        "--epochs",
+        "4",
+        "--out",
+        s(&out),
+    ]);
+    assert!(line.contains("mean speed per zone"), "{line}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(json["sets"].as_array().unwrap().len(), 2);
+    let st = &json["provenance"]["evaluation"]["still"];
+    let v: Vec<f64> = st["fitted_zone_speeds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    // Agents crossing from the water into the land slow down at the OU reversion rate (eq. 6),
+    // so the land's mean lies a little above its 0.5 (0.61 here, 25 fps).
+    assert!(
+        (v[0] - 3.0).abs() < 0.3 && (v[1] - 0.5).abs() < 0.15,
+        "{st}"
+    );
+    let m = |set: &str, key: &str| st[set][key].as_f64().unwrap();
+    assert!(
+        m("fitted", "smooth_density_error") < m("start", "smooth_density_error"),
+        "{st}"
+    );
+}

@@ -15,13 +15,15 @@
 
 use super::loss::density_loss;
 use crate::backend::{cpu_device, Precision};
+use crate::data::boundary::Gates;
 use crate::data::{ClipFields, ClipSpeed};
 use crate::error::{Error, Result};
-use crate::herd::eval::run_from_fields;
+use crate::herd::eval::run_from;
 use crate::herd::params::{Params, SpeedModel};
 use crate::herd::sim::Guidance;
 use crate::herd::sim::{read_vec, HerdState};
 use crate::herd::start::Settle;
+use crate::herd::zoned::ZoneSets;
 use crate::measure::emergent::polarization;
 use crate::measure::fields::{cell_counts, field_errors};
 use serde::{Deserialize, Serialize};
@@ -112,7 +114,44 @@ pub fn still_measures(
     seeds: usize,
     precision: Precision,
 ) -> Result<[StillMeasures; 2]> {
+    let run = StillRun {
+        cfg,
+        seed,
+        seeds,
+        precision,
+    };
+    Ok(still_measures_in(clip, params, None, &run)?.0)
+}
+
+/// How [`still_measures_in`] runs: the schedule, the first seed, the number of seeds and the
+/// precision.
+pub struct StillRun<'a> {
+    pub cfg: &'a StillConfig,
+    pub seed: u64,
+    pub seeds: usize,
+    pub precision: Precision,
+}
+
+/// [`still_measures`] of one set, or with `zones` of one set per zone (each agent with its
+/// zone's set and speed, paper §7.2.4), and the mean speed of the agents in each zone (BL/s,
+/// over the averaged steps and the seeds; one value without zones).
+pub fn still_measures_in(
+    clip: &ClipFields,
+    params: &Params,
+    zones: Option<&ZoneSets>,
+    run: &StillRun,
+) -> Result<([StillMeasures; 2], Vec<f64>)> {
+    let StillRun {
+        cfg,
+        seed,
+        seeds,
+        precision,
+    } = *run;
+    let nz = zones.map_or(1, |z| z.sets.len());
+    let mut speed_sum = vec![0.0f64; nz];
+    let mut speed_n = vec![0.0f64; nz];
     let device = cpu_device(precision)?;
+    let grid = clip.grid();
     let guidance = vec![Guidance::None; clip.frames()];
     let area = clip.grid().cell_area();
     let crowding = |n: &[f64]| {
@@ -141,9 +180,12 @@ pub fn still_measures(
         ])
     };
     for k in 0..seeds.max(1) {
-        let rows0 = run_from_fields(
+        let (rows0, _) = run_from(
             clip,
             params,
+            zones,
+            None,
+            &Gates::closed(),
             (0, cfg.settle + cfg.average),
             seed.wrapping_add(k as u64),
             &Settle::default(),
@@ -154,6 +196,18 @@ pub fn still_measures(
                     let m = measure(f, state, ids)?;
                     sum.iter_mut().zip(m).for_each(|(s, v)| *s += v);
                     n += 1.0;
+                    // Agents in the view only (outside it they are in no zone).
+                    let rows: Vec<_> = state
+                        .rows(ids)?
+                        .into_iter()
+                        .filter(|r| grid.cell_of([r.x, r.y]).is_some())
+                        .collect();
+                    let pos: Vec<[f64; 2]> = rows.iter().map(|r| [r.x, r.y]).collect();
+                    let zone = zones.map_or_else(|| vec![0; pos.len()], |z| z.zone_of(&pos));
+                    for (r, z) in rows.iter().zip(zone) {
+                        speed_sum[z] += r.vx.hypot(r.vy);
+                        speed_n[z] += 1.0;
+                    }
                 }
                 Ok(())
             },
@@ -170,7 +224,12 @@ pub fn still_measures(
         crowding: m[2] / n,
         polarization: m[3] / n,
     };
-    Ok([of(start, k), of(sum, n.max(1.0))])
+    let speeds = speed_sum
+        .iter()
+        .zip(&speed_n)
+        .map(|(s, n)| if *n > 0.0 { s / n } else { f64::NAN })
+        .collect();
+    Ok(([of(start, k), of(sum, n.max(1.0))], speeds))
 }
 
 /// [`still_measures`]' result.

@@ -5,6 +5,7 @@
 use super::global::fit_zones_global;
 use super::job::{loss_plot, FitJob};
 use super::log::write_log;
+use super::still::{stationary_clip, still_measures_in, StillConfig, StillMeasures, StillRun};
 use super::zones::Zones;
 use crate::backend::cpu_device;
 use crate::data::agents::AgentRow;
@@ -17,6 +18,7 @@ use crate::herd::params::{param_names, Params, SpeedModel};
 use crate::herd::zoned::ZoneSets;
 use crate::measure::fields::field_errors;
 use crate::progress::Progress;
+use serde::Serialize;
 use std::ops::Range;
 use std::path::PathBuf;
 
@@ -35,6 +37,8 @@ pub struct ZoneFitSummary {
     pub plot: PathBuf,
     /// The global phase's candidates and choice, when it ran.
     pub global: Option<super::global::GlobalReport>,
+    /// A still's measures (the clip was one frame).
+    pub still: Option<ZoneStill>,
 }
 
 /// Runs a zone fit job (`job.zones` set): loads the clip, the zones (checked against the clip's
@@ -45,14 +49,27 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         return Err(crate::error::Error::config("zones", "no zones file given"));
     };
     let clip = ClipFields::load(&job.clips[0])?;
-    let zones = Zones::load(zpath, &clip)?;
     let start = match &job.start {
         Some(p) => Params::load(p)?,
         None => Params::neutral(),
     };
-    let frames = job.frames.clone().unwrap_or(0..clip.frames());
+    // A still (one frame, paper §7.2.4) is fitted as its stationary target, as `fit` does.
+    let still = (clip.frames() == 1).then_some(job.still);
+    let clip = match &still {
+        Some(s) => {
+            s.check()?;
+            stationary_clip(&clip, s, &start.speed)
+        }
+        None => clip,
+    };
+    let zones = Zones::load(zpath, &clip)?;
+    let frames = match still {
+        Some(_) => 0..clip.frames(),
+        None => job.frames.clone().unwrap_or(0..clip.frames()),
+    };
     let cfg = super::config::FitConfig {
         frames: frames.clone(),
+        still,
         ..job.config.clone()
     };
     cfg.check_clip(&clip)
@@ -95,10 +112,20 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         sets: vec![start_speed; zones.len()],
         grid,
     };
-    let errors = [
-        errors_of(&clip, &unfitted, &frames, job, tracked)?,
-        errors_of(&clip, &fitted, &frames, job, tracked)?,
-    ];
+    let still = match &cfg.still {
+        Some(s) => Some(ZoneStill::of(&clip, &unfitted, &fitted, s, job)?),
+        None => None,
+    };
+    let errors = match &still {
+        Some(z) => [
+            (z.start.density_error, f64::NAN),
+            (z.fitted.density_error, f64::NAN),
+        ],
+        None => [
+            errors_of(&clip, &unfitted, &frames, job, tracked)?,
+            errors_of(&clip, &fitted, &frames, job, tracked)?,
+        ],
+    };
     let names: Vec<String> = zones.specs.iter().map(|z| z.name.clone()).collect();
     let mut prov = serde_json::json!({
         "source": "fit --zones",
@@ -114,6 +141,11 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
             "fitted": {"density_error": errors[1].0, "velocity_error": errors[1].1},
         },
     });
+    if let Some(z) = &still {
+        prov["evaluation"]["still"] = serde_json::to_value(z).map_err(|e| {
+            crate::error::Error::Internal(format!("serialising the still's measures: {e}"))
+        })?;
+    }
     if let Some(g) = &global {
         prov["global"] = serde_json::to_value(g).map_err(|e| {
             crate::error::Error::Internal(format!("serialising the global phase: {e}"))
@@ -134,7 +166,48 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         log: log_path,
         plot: plot_path,
         global,
+        still,
     })
+}
+
+/// A still's measures with per-zone sets (paper §7.2.4, [`still_measures_in`]): the herd as drawn
+/// from the image, and after settling with the start sets and with the fitted sets; the mean
+/// speed of the agents in each zone (BL/s) with each.
+#[derive(Clone, Debug, Serialize)]
+pub struct ZoneStill {
+    pub what: &'static str,
+    pub drawn: StillMeasures,
+    pub start: StillMeasures,
+    pub fitted: StillMeasures,
+    pub start_zone_speeds: Vec<f64>,
+    pub fitted_zone_speeds: Vec<f64>,
+}
+
+impl ZoneStill {
+    fn of(
+        clip: &ClipFields,
+        start: &ZoneSets,
+        fitted: &ZoneSets,
+        s: &StillConfig,
+        job: &FitJob,
+    ) -> Result<ZoneStill> {
+        let run = StillRun {
+            cfg: s,
+            seed: job.config.seed,
+            seeds: job.eval_seeds,
+            precision: job.config.precision,
+        };
+        let ([drawn, before], v0) = still_measures_in(clip, &start.sets[0], Some(start), &run)?;
+        let ([_, after], v1) = still_measures_in(clip, &fitted.sets[0], Some(fitted), &run)?;
+        Ok(ZoneStill {
+            what: "against the image: density error of cell counts and smoothed (the fit's density term), crowding, polarization (eq. 12), averaged over the steps after settling and over the seeds; zone speeds: mean |v| of the agents in each zone (BL/s)",
+            drawn,
+            start: before,
+            fitted: after,
+            start_zone_speeds: v0,
+            fitted_zone_speeds: v1,
+        })
+    }
 }
 
 /// Mean density and velocity errors of runs with `sets` through `frames`, over the job's seeds,
@@ -202,11 +275,31 @@ impl std::fmt::Display for ZoneFitSummary {
             writeln!(f)?;
         }
         let [b, a] = self.errors;
-        writeln!(
-            f,
-            "density error {:.4} → {:.4}, velocity error {:.4} → {:.4}",
-            b.0, a.0, b.1, a.1
-        )?;
+        match &self.still {
+            Some(z) => {
+                writeln!(
+                    f,
+                    "still: density error {:.4} → {:.4} (as drawn {:.4}), smoothed {:.4} → {:.4}, polarization {:.4} → {:.4}",
+                    z.start.density_error,
+                    z.fitted.density_error,
+                    z.drawn.density_error,
+                    z.start.smooth_density_error,
+                    z.fitted.smooth_density_error,
+                    z.start.polarization,
+                    z.fitted.polarization
+                )?;
+                write!(f, "mean speed per zone (BL/s), fitted:")?;
+                for (n, v) in self.names.iter().zip(&z.fitted_zone_speeds) {
+                    write!(f, " {n} {v:.3}")?;
+                }
+                writeln!(f)?;
+            }
+            None => writeln!(
+                f,
+                "density error {:.4} → {:.4}, velocity error {:.4} → {:.4}",
+                b.0, a.0, b.1, a.1
+            )?,
+        }
         writeln!(
             f,
             "wrote {}, {}, {}",
