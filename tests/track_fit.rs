@@ -266,11 +266,11 @@ fn fit_and_validate_from_a_clips_tracks() {
             "--frames",
             "20..30",
             "--horizons",
-            "0.2,0.4",
+            "0.1,0.2",
             "--seeds",
             "3",
             "--free-run",
-            "0.4",
+            "0.2",
             "--out",
             s(&r),
         ]);

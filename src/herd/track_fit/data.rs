@@ -5,7 +5,7 @@
 //! Trackers lose animals: a row whose position is `NaN` (or empty) is an untracked frame of that
 //! animal, a frame with no row likewise; the animal keeps every other frame. Velocities are read
 //! from positions where a window needs them without looking ahead ([`TrackSet::back_vel`]), and
-//! from the file (or central differences) where they only orient a replayed neighbour.
+//! from the file (or the step into the frame) where they only orient a replayed neighbour.
 
 use crate::data::tracks::{Tracks, Units};
 use crate::error::{Error, Result};
@@ -129,19 +129,15 @@ impl TrackSet {
         Some([(b[0] - a[0]) * self.fps, (b[1] - a[1]) * self.fps])
     }
 
-    /// The unit heading of `id` in frame `f` for a replayed neighbour: the file's velocity, else a
-    /// central (or one-sided) difference; +x for an animal that does not move.
+    /// The unit heading of `id` in frame `f` for a replayed neighbour: the file's velocity, else
+    /// the step into `f` (the model's own heading after that step, eq. 2), else the step out of
+    /// it where `f − 1` is untracked; +x for an animal that does not move.
     pub fn heading(&self, f: usize, id: u64) -> P2 {
         let v = self
             .fix(f, id)
             .and_then(|a| a.vel)
-            .or_else(|| {
-                let p = |g: Option<usize>| g.and_then(|g| self.pos(g, id));
-                match (p(f.checked_sub(1)), p(Some(f + 1))) {
-                    (Some(a), Some(b)) => Some([b[0] - a[0], b[1] - a[1]]),
-                    _ => self.back_vel(f, id).or_else(|| self.back_vel(f + 1, id)),
-                }
-            })
+            .or_else(|| self.back_vel(f, id))
+            .or_else(|| self.back_vel(f + 1, id))
             .unwrap_or([0.0; 2]);
         unit(v).unwrap_or([1.0, 0.0])
     }
@@ -228,7 +224,7 @@ mod tests {
         assert_eq!(t.back_vel(3, 1), None, "no look across the gap");
         assert_eq!(t.back_vel(0, 2), None);
         let h = t.heading(2, 2);
-        assert!((h[1] - 1.0).abs() < 1e-12, "central difference");
+        assert!((h[1] - 1.0).abs() < 1e-12, "the step into the frame");
         let h = t.heading(3, 1);
         assert!(
             (h[1] - 1.0).abs() < 1e-12,

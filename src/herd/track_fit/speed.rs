@@ -251,26 +251,18 @@ mod tests {
         for (f, fr) in frames.iter_mut().enumerate() {
             let t = f as f64;
             // Two far apart animals at 1 BL/s, and a pair 1 BL apart at 3 BL/s.
-            fr.push(Fix {
-                id: 0,
-                pos: [t * 0.1, 0.0],
-                vel: None,
-            });
-            fr.push(Fix {
-                id: 1,
-                pos: [t * 0.1, 50.0],
-                vel: None,
-            });
-            fr.push(Fix {
-                id: 2,
-                pos: [t * 0.3, 100.0],
-                vel: None,
-            });
-            fr.push(Fix {
-                id: 3,
-                pos: [t * 0.3, 101.0],
-                vel: None,
-            });
+            for (id, v, y) in [
+                (0, 0.1, 0.0),
+                (1, 0.1, 50.0),
+                (2, 0.3, 100.0),
+                (3, 0.3, 101.0),
+            ] {
+                fr.push(Fix {
+                    id,
+                    pos: [t * v, y],
+                    vel: None,
+                });
+            }
         }
         let t = TrackSet::new(10.0, frames);
         let (m, _) = learn_speed(&[(&t, 0..400)], 4.0, &SpeedModel::default()).unwrap();
