@@ -42,3 +42,6 @@ fi
 node "$ROOT/scripts/validate-gltf.js" >/dev/null \
   || { echo "setup: the glTF validator does not load (node $(node --version))" >&2; exit 1; }
 bash "$(dirname "$0")/fetch-testdata.sh"
+# The many-clips workflow (workflow/): snakemake and its Slurm plugin, pinned, in .venv-workflow;
+# Slurm and munge for its cluster test.
+bash "$(dirname "$0")/setup-workflow.sh"

@@ -3,7 +3,7 @@
 //! before.
 
 use herdfit::data::boundary::{Gate, Gates, Side};
-use herdfit::data::{ClipFields, ClipMeta, ClipSpeed, CLIP_SCHEMA};
+use herdfit::data::{ClipFields, ClipMeta, ClipSpeed, Grid};
 use herdfit::herd::boundary::{gates_of_clip, Agents, BoundaryChoice, Stream};
 use herdfit::herd::params::{Params, SpeedModel};
 use herdfit::herd::validate::{validate, ValidateConfig};
@@ -27,25 +27,21 @@ fn corridor(frames: usize, rho: f32, vx: f32) -> ClipFields {
         }
     }
     ClipFields {
-        meta: ClipMeta {
-            schema: CLIP_SCHEMA.into(),
-            fps: 10.0,
-            cell_size: 1.0,
-            nx,
-            ny,
+        meta: ClipMeta::of_grid(
+            &Grid {
+                origin: [0.0, 0.0],
+                cell_size: 1.0,
+                nx,
+                ny,
+            },
+            10.0,
             frames,
-            origin: [0.0, 0.0],
-            body_length_px: None,
-            body_pixel_coverage: None,
-            speed: ClipSpeed {
+            ClipSpeed {
                 mean: vx.abs().max(1.0) as f64,
                 std: 0.2,
                 density_table: vec![],
             },
-            dir_spread: None,
-            frame_measures: None,
-            provenance: serde_json::Value::Null,
-        },
+        ),
         density: d,
         velocity: v,
         dir_variance: var,

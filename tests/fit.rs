@@ -4,7 +4,7 @@
 mod common;
 use common::{herdfit, ok, s};
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::data::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
+use herdfit::data::{ClipFields, ClipMeta, ClipSpeed, Grid};
 use herdfit::herd::fit::loss::{step_loss, StepTarget};
 use herdfit::herd::fit::target::{splat_density, target_field, Stencil};
 use herdfit::herd::params::Params;
@@ -95,25 +95,21 @@ fn line_clip(density: [f32; 5], vel: [f32; 2]) -> ClipFields {
         }
     }
     ClipFields {
-        meta: ClipMeta {
-            schema: CLIP_SCHEMA.into(),
-            fps: 10.0,
-            cell_size: 1.0,
-            nx: 5,
-            ny: 1,
-            frames: 2,
-            origin: [0.0, 0.0],
-            body_length_px: None,
-            body_pixel_coverage: None,
-            speed: ClipSpeed {
+        meta: ClipMeta::of_grid(
+            &Grid {
+                origin: [0.0, 0.0],
+                cell_size: 1.0,
+                nx: 5,
+                ny: 1,
+            },
+            10.0,
+            2,
+            ClipSpeed {
                 mean: 1.0,
                 std: 0.1,
                 density_table: vec![],
             },
-            dir_spread: None,
-            frame_measures: None,
-            provenance: serde_json::Value::Null,
-        },
+        ),
         density: d,
         velocity: v,
         dir_variance: Array3::zeros((2, 1, 5)),

@@ -130,6 +130,26 @@ pub struct FrameMeasures {
 }
 
 impl ClipMeta {
+    /// The meta of a clip of `frames` frames at `fps` on `grid` with speed statistics `speed`;
+    /// no body size, direction spread, frame measures or provenance (set them after).
+    pub fn of_grid(grid: &super::Grid, fps: f64, frames: usize, speed: ClipSpeed) -> ClipMeta {
+        ClipMeta {
+            schema: CLIP_SCHEMA.into(),
+            fps,
+            cell_size: grid.cell_size,
+            nx: grid.nx,
+            ny: grid.ny,
+            frames,
+            origin: grid.origin,
+            body_length_px: None,
+            body_pixel_coverage: None,
+            speed,
+            dir_spread: None,
+            frame_measures: None,
+            provenance: serde_json::Value::Null,
+        }
+    }
+
     /// The temporal window (frames) over which the clip's velocities were averaged: the extraction's
     /// `smooth` setting for clips extracted from video, 1 otherwise.
     pub fn velocity_window(&self) -> usize {

@@ -11,7 +11,7 @@
 //! [L − 1, L) (only cells with n ≥ 0.5 are written), so we place it at n = L − 0.5 (0.75 for L = 1)
 //! animals per cell. Rows `0 0` mark empty bins and are skipped.
 
-use super::clip::{ClipFields, ClipMeta, ClipSpeed, FrameMeasures, CLIP_SCHEMA};
+use super::clip::{ClipFields, ClipMeta, ClipSpeed, FrameMeasures, Grid};
 use crate::error::{Error, Result};
 use ndarray::{Array2, Array3, Array4};
 use std::path::{Path, PathBuf};
@@ -391,21 +391,6 @@ pub fn import_reference(prefix: &Path) -> Result<ClipFields> {
     let (mean, std) = meta.speed.unwrap_or((0.0, 0.0));
     let clip = ClipFields {
         meta: ClipMeta {
-            schema: CLIP_SCHEMA.into(),
-            fps: meta.frame_time.map_or(1.0, |t| 1.0 / t),
-            cell_size: cell,
-            nx: res,
-            ny: res,
-            frames: nf,
-            origin: [0.0, 0.0],
-            body_length_px: None,
-            body_pixel_coverage: None,
-            speed: ClipSpeed {
-                mean,
-                std,
-                density_table,
-            },
-            dir_spread: None,
             frame_measures,
             provenance: serde_json::json!({
                 "source": "import-reference",
@@ -413,6 +398,21 @@ pub fn import_reference(prefix: &Path) -> Result<ClipFields> {
                 "frame_time_given": meta.frame_time.is_some(),
                 "total_frame_count": meta.total_frames,
             }),
+            ..ClipMeta::of_grid(
+                &Grid {
+                    origin: [0.0, 0.0],
+                    cell_size: cell,
+                    nx: res,
+                    ny: res,
+                },
+                meta.frame_time.map_or(1.0, |t| 1.0 / t),
+                nf,
+                ClipSpeed {
+                    mean,
+                    std,
+                    density_table,
+                },
+            )
         },
         density,
         velocity,

@@ -2,7 +2,7 @@
 //! validation and the reference import all produce fields with these definitions.
 
 use crate::data::agents::AgentRow;
-use crate::data::clip::{ClipFields, ClipMeta, ClipSpeed, Grid, CLIP_SCHEMA};
+use crate::data::clip::{ClipFields, ClipMeta, ClipSpeed, Grid};
 use crate::error::{Error, Result};
 use ndarray::{Array2, Array3, Array4};
 
@@ -131,23 +131,17 @@ pub fn rasterise(
     };
     let clip = ClipFields {
         meta: ClipMeta {
-            schema: CLIP_SCHEMA.into(),
-            fps,
-            cell_size: grid.cell_size,
-            nx,
-            ny,
-            frames: nf,
-            origin: grid.origin,
-            body_length_px: None,
-            body_pixel_coverage: None,
-            speed: ClipSpeed {
-                mean,
-                std,
-                density_table: speed_density_table(&samples),
-            },
-            dir_spread: None,
-            frame_measures: None,
             provenance,
+            ..ClipMeta::of_grid(
+                &grid,
+                fps,
+                nf,
+                ClipSpeed {
+                    mean,
+                    std,
+                    density_table: speed_density_table(&samples),
+                },
+            )
         },
         density,
         velocity,

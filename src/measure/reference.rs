@@ -400,7 +400,7 @@ pub fn reference_frame(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::{ClipMeta, ClipSpeed, CLIP_SCHEMA};
+    use crate::data::{ClipMeta, ClipSpeed, Grid};
     use ndarray::{Array2, Array3, Array4};
 
     /// Two 1-BL cells side by side: two animals in the left one moving +x, none in the right.
@@ -410,25 +410,21 @@ mod tests {
         let mut velocity = Array4::zeros((1, 1, 2, 2));
         velocity[[0, 0, 0, 0]] = 1.0;
         ClipFields {
-            meta: ClipMeta {
-                schema: CLIP_SCHEMA.into(),
-                fps: 10.0,
-                cell_size: 1.0,
-                nx: 2,
-                ny: 1,
-                frames: 1,
-                origin: [0.0, 0.0],
-                body_length_px: None,
-                body_pixel_coverage: None,
-                speed: ClipSpeed {
+            meta: ClipMeta::of_grid(
+                &Grid {
+                    origin: [0.0, 0.0],
+                    cell_size: 1.0,
+                    nx: 2,
+                    ny: 1,
+                },
+                10.0,
+                1,
+                ClipSpeed {
                     mean: 1.0,
                     std: 0.1,
                     density_table: vec![],
                 },
-                dir_spread: None,
-                frame_measures: None,
-                provenance: serde_json::Value::Null,
-            },
+            ),
             density,
             velocity,
             dir_variance: Array3::zeros((1, 1, 2)),
