@@ -161,7 +161,10 @@ fn perceive_rows(
         .into_par_iter()
         .map_init(Scratch::default, |sc, c| {
             let mut out = ChunkViews::default();
-            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+            let (start, end) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
+            let here = positions[start..end].iter().zip(&queries.head[start..end]);
+            for (k, (&p, &h)) in here.enumerate() {
+                let i = start + k;
                 let ctx = Context {
                     pos: scene.pos,
                     head: scene.head,
@@ -170,11 +173,7 @@ fn perceive_rows(
                     cfg,
                     cone,
                 };
-                let q = Query {
-                    p: positions[i],
-                    h: queries.head[i],
-                    own: own(i),
-                };
+                let q = Query { p, h, own: own(i) };
                 view_of(q, &ctx, sc, &mut out);
             }
             out
