@@ -210,7 +210,7 @@ mod tests {
     #[test]
     fn an_ou_process_is_recovered_with_and_without_tracking_noise() {
         for noise in [0.0, 0.01] {
-            let (fps, theta, sigma, mu) = (25.0, 0.8, 0.5, 2.0);
+            let (fps, theta, sigma, mu): (f64, f64, f64, f64) = (25.0, 0.8, 0.5, 2.0);
             let dt = 1.0 / fps;
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
             let mut frames = vec![Vec::new(); 20_000];
