@@ -111,24 +111,70 @@ pub fn perceive(
     obstacles: Option<&ObstacleMap>,
     cfg: &PerceptionConfig,
 ) -> Perception {
+    let scene = Scene {
+        pos: positions,
+        head: headings,
+    };
+    perceive_rows(scene, scene, |i| Some(i as u32), obstacles, cfg)
+}
+
+/// Positions and headings of a set of agents.
+#[derive(Clone, Copy)]
+pub struct Scene<'a> {
+    pub pos: &'a [P2],
+    pub head: &'a [P2],
+}
+
+/// The perception of `queries` — agents that are not part of `scene` — among the agents of
+/// `scene`: row i is what an agent at `queries.pos[i]` heading `queries.head[i]` perceives of the
+/// scene, with scene agent `own[i]` (its own tracked twin, when there is one) left out, and the
+/// other queries invisible to it. Neighbour indices are scene indices; padded entries hold the
+/// query's index `i` (mask 0) and padded obstacle points its position. Occlusion is by closer
+/// scene agents, as in [`perceive`] (which is this with the scene as its own queries); the
+/// result does not depend on the thread count. The neighbour-conditioned rollout of a track fit
+/// uses it: each animal is simulated among its neighbours replayed from their tracks.
+pub fn perceive_among(
+    queries: Scene<'_>,
+    own: &[Option<u32>],
+    scene: Scene<'_>,
+    obstacles: Option<&ObstacleMap>,
+    cfg: &PerceptionConfig,
+) -> Perception {
+    assert_eq!(queries.pos.len(), own.len(), "one `own` entry per query");
+    perceive_rows(queries, scene, |i| own[i], obstacles, cfg)
+}
+
+/// The rows of `queries` among `scene` (agent `own(i)` of the scene excluded from row i).
+fn perceive_rows(
+    queries: Scene<'_>,
+    scene: Scene<'_>,
+    own: impl Fn(usize) -> Option<u32> + Sync,
+    obstacles: Option<&ObstacleMap>,
+    cfg: &PerceptionConfig,
+) -> Perception {
+    let positions = queries.pos;
     let n = positions.len();
-    let grid = UniformGrid::build(positions, 0.5 * cfg.radius);
+    let grid = UniformGrid::build(scene.pos, 0.5 * cfg.radius);
     let obstacles = obstacles.filter(|m| m.any());
     let cone = FrontCone::new(cfg.front_cone);
     let chunks: Vec<ChunkViews> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map_init(Scratch::default, |sc, c| {
             let mut out = ChunkViews::default();
-            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+            let (start, end) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
+            let here = positions[start..end].iter().zip(&queries.head[start..end]);
+            for (k, (&p, &h)) in here.enumerate() {
+                let i = start + k;
                 let ctx = Context {
-                    pos: positions,
-                    head: headings,
+                    pos: scene.pos,
+                    head: scene.head,
                     grid: &grid,
                     obstacles,
                     cfg,
                     cone,
                 };
-                view_of(i, &ctx, sc, &mut out);
+                let q = Query { p, h, own: own(i) };
+                view_of(q, &ctx, sc, &mut out);
             }
             out
         })
@@ -288,10 +334,16 @@ impl Context<'_> {
     }
 }
 
-fn view_of(i: usize, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) {
+/// The perceiving agent: position, heading and the scene index it stands for, if any.
+struct Query {
+    p: P2,
+    h: P2,
+    own: Option<u32>,
+}
+
+fn view_of(me: Query, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) {
     let (pos, cfg) = (ctx.pos, ctx.cfg);
-    let p = pos[i];
-    let h = ctx.head[i];
+    let (p, h) = (me.p, me.h);
     let r2 = cfg.radius * cfg.radius;
     // In-range candidates sorted by distance (ties by index: deterministic). d2 > 0, so its
     // bit pattern orders like the value.
@@ -300,7 +352,7 @@ fn view_of(i: usize, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) 
     ctx.grid.for_each_candidate(p, cfg.radius, |j| {
         let d2 = (pos[j][0] - p[0]).powi(2) + (pos[j][1] - p[1]).powi(2);
         // Coincident agents have no bearing: they are not perceived.
-        if d2 < r2 && d2 > 1e-18 && j != i {
+        if d2 < r2 && d2 > 1e-18 && Some(j as u32) != me.own {
             keys.push((d2.to_bits() as u128) << 32 | j as u128);
         }
     });
@@ -366,220 +418,4 @@ fn view_of(i: usize, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) 
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-    use rand::{Rng, SeedableRng};
-
-    fn cfg(occlusion: bool) -> PerceptionConfig {
-        PerceptionConfig {
-            radius: 4.0,
-            capsule: Capsule {
-                half_length: 0.3,
-                radius: 0.2,
-            },
-            occlusion,
-            max_neighbours: usize::MAX,
-            max_obstacles: usize::MAX,
-            front_cone: 60f64.to_radians(),
-        }
-    }
-
-    /// A random herd at one agent per 2 BL², random headings, and 12 blocked cells of a 14 × 14
-    /// obstacle map (also the force kernel's test scene).
-    pub(crate) fn scene(seed: u64, n: usize) -> (Vec<P2>, Vec<P2>, ObstacleMap) {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let side = (2.0 * n as f64).sqrt();
-        let pos: Vec<P2> = (0..n)
-            .map(|_| [rng.gen_range(0.0..side), rng.gen_range(0.0..side)])
-            .collect();
-        let head: Vec<P2> = (0..n)
-            .map(|_| {
-                let a: f64 = rng.gen_range(-3.2..3.2);
-                [a.cos(), a.sin()]
-            })
-            .collect();
-        let mut map = ObstacleMap::empty([0.0, 0.0], 1.5, 14, 14);
-        for _ in 0..12 {
-            let c = rng.gen_range(0..map.blocked.len());
-            map.blocked[c] = true;
-        }
-        (pos, head, map)
-    }
-
-    /// The definition, pair by pair, with no grid and no sorting.
-    fn brute(pos: &[P2], head: &[P2], map: &ObstacleMap, c: &PerceptionConfig) -> Vec<Vec<u32>> {
-        let d2 = |a: P2, b: P2| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2);
-        (0..pos.len())
-            .map(|i| {
-                let mut v: Vec<(f64, u32)> = vec![];
-                for j in 0..pos.len() {
-                    let dij = d2(pos[i], pos[j]);
-                    if j == i || dij >= c.radius * c.radius {
-                        continue;
-                    }
-                    let hidden = c.occlusion
-                        && ((0..pos.len()).any(|k| {
-                            k != i
-                                && k != j
-                                && d2(pos[i], pos[k]) < dij
-                                && c.capsule.blocks(pos[i], pos[j], pos[k], head[k])
-                        }) || map.segment_blocked(pos[i], pos[j]));
-                    if !hidden {
-                        v.push((dij, j as u32));
-                    }
-                }
-                v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                v.into_iter().map(|x| x.1).collect()
-            })
-            .collect()
-    }
-
-    fn lists(p: &Perception) -> Vec<Vec<u32>> {
-        (0..p.n)
-            .map(|i| {
-                (0..p.k)
-                    .filter(|&s| p.neighbour_mask[i * p.k + s] == 1)
-                    .map(|s| p.neighbours[i * p.k + s])
-                    .collect()
-            })
-            .collect()
-    }
-
-    #[test]
-    fn neighbour_lists_match_brute_force_on_random_scenes() {
-        for seed in 0..4 {
-            for occ in [false, true] {
-                let (pos, head, map) = scene(seed, 300);
-                let c = cfg(occ);
-                let got = perceive(&pos, &head, Some(&map), &c);
-                assert_eq!(
-                    lists(&got),
-                    brute(&pos, &head, &map, &c),
-                    "seed {seed} occ {occ}"
-                );
-                assert_eq!(got.neighbours.len(), got.n * got.k);
-            }
-        }
-    }
-
-    /// Branch codes, front-cone counts (atan2 bearing) and densities by their definitions, on the
-    /// brute-force lists.
-    #[test]
-    fn branches_front_counts_and_density_match_definitions() {
-        for seed in 20..23 {
-            let (pos, head, map) = scene(seed, 300);
-            let c = cfg(true);
-            let got = perceive(&pos, &head, Some(&map), &c);
-            let want = brute(&pos, &head, &map, &c);
-            for (i, w) in want.iter().enumerate() {
-                let off = |j: u32| {
-                    [
-                        pos[j as usize][0] - pos[i][0],
-                        pos[j as usize][1] - pos[i][1],
-                    ]
-                };
-                let front = w
-                    .iter()
-                    .filter(|&&j| bearing(head[i], off(j)) <= c.front_cone)
-                    .count();
-                assert_eq!(got.front_count[i] as usize, front, "agent {i}");
-                for (s, &j) in w.iter().enumerate() {
-                    assert_eq!(
-                        got.neighbour_branch[i * got.k + s],
-                        branch_of(head[i], off(j))
-                    );
-                }
-                let in_range = (0..pos.len())
-                    .filter(|&j| {
-                        let d2 = (pos[j][0] - pos[i][0]).powi(2) + (pos[j][1] - pos[i][1]).powi(2);
-                        d2 < 16.0 && (j == i || d2 > 1e-18)
-                    })
-                    .count();
-                let area = std::f64::consts::PI * 16.0;
-                assert_eq!(got.density[i], in_range as f64 / area);
-            }
-        }
-    }
-
-    #[test]
-    fn occlusion_hides_some_but_not_all() {
-        let (pos, head, map) = scene(11, 400);
-        let open = perceive(&pos, &head, Some(&map), &cfg(false));
-        let occl = perceive(&pos, &head, Some(&map), &cfg(true));
-        let count = |p: &Perception| p.neighbour_mask.iter().map(|&m| m as usize).sum::<usize>();
-        assert!(count(&occl) < count(&open));
-        assert!(count(&occl) * 3 > count(&open));
-    }
-
-    #[test]
-    fn obstacle_points_match_brute_force() {
-        let (pos, head, map) = scene(5, 200);
-        let c = cfg(true);
-        let got = perceive(&pos, &head, Some(&map), &c);
-        for i in 0..pos.len() {
-            let p = pos[i];
-            let mut want = vec![];
-            for iy in 0..map.ny {
-                for ix in 0..map.nx {
-                    if !map.blocked[iy * map.nx + ix] {
-                        continue;
-                    }
-                    let q = map.centre(ix, iy);
-                    let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
-                    if d2 >= 16.0 || d2 == 0.0 || map.segment_blocked(p, q) {
-                        continue;
-                    }
-                    let hidden = (0..pos.len()).any(|k| {
-                        let dk = (pos[k][0] - p[0]).powi(2) + (pos[k][1] - p[1]).powi(2);
-                        k != i && dk < d2 && c.capsule.blocks(p, q, pos[k], head[k])
-                    });
-                    if !hidden {
-                        want.push(q);
-                    }
-                }
-            }
-            let mut have: Vec<P2> = (0..got.ko)
-                .filter(|&s| got.obstacle_mask[i * got.ko + s] == 1)
-                .map(|s| got.obstacle_points[i * got.ko + s])
-                .collect();
-            let key = |a: &P2, b: &P2| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1]));
-            want.sort_by(key);
-            have.sort_by(key);
-            assert_eq!(have, want, "agent {i}");
-        }
-    }
-
-    #[test]
-    fn front_cone_counts_and_truncation() {
-        // Agent 0 at the origin heading +x; agents ahead at 0°, 45°, 90° and behind.
-        let pos = vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.5], [-2.0, 0.0]];
-        let head = vec![[1.0, 0.0]; 5];
-        let mut c = cfg(false);
-        let p = perceive(&pos, &head, None, &c);
-        assert_eq!(p.front_count[0], 2);
-        assert_eq!(&p.neighbours[..4], &[1, 2, 3, 4]);
-        c.max_neighbours = 2;
-        let p = perceive(&pos, &head, None, &c);
-        assert_eq!(p.k, 2);
-        assert_eq!(&p.neighbours[..2], &[1, 2]);
-        // Truncation keeps the cone count of all visible neighbours.
-        assert_eq!(p.front_count[0], 2);
-    }
-
-    #[test]
-    fn thread_count_does_not_change_the_output() {
-        let (pos, head, map) = scene(9, 500);
-        let c = cfg(true);
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap()
-            .install(|| perceive(&pos, &head, Some(&map), &c));
-        let two = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap()
-            .install(|| perceive(&pos, &head, Some(&map), &c));
-        assert_eq!(one, two);
-    }
-}
+pub(crate) mod tests;

@@ -37,6 +37,10 @@ pub enum Command {
     /// Validate parameter sets on the held-out part of a clip (errors, polarization, angular
     /// momentum, aspect ratio) and write a report folder.
     Validate(validate::ValidateArgs),
+    /// Score parameter sets on held-out tracks: displacement errors of rollouts from the tracked
+    /// animals (neighbours replayed or simulated) beside constant velocity and the generic and
+    /// default sets, paired verdicts, and free runs' motion distributions against the tracks'.
+    ValidateTracks(validate_tracks::ValidateTracksArgs),
     /// Fit and validate a clip with each of the paper's switches off in turn (occlusion, angular
     /// perception, density term, direction-variance matching, speed–density table): Table 4.
     Ablate(ablate::AblateArgs),
@@ -97,9 +101,11 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Simulate(a) => simulate::exec(a),
         Command::Gradcheck(a) => gradcheck::exec(a),
         Command::Bench(a) => bench::exec(a),
+        Command::Fit(a) if a.objective == fit_objective::Objective::Tracks => track_fit::exec(a),
         Command::Fit(a) => fit::exec(a),
         Command::Extract(a) => extract::exec(a),
         Command::Validate(a) => validate::exec(a),
+        Command::ValidateTracks(a) => validate_tracks::exec(a),
         Command::Ablate(a) => ablate::exec(a),
         Command::Author(a) => author::exec(a),
         Command::Synth(a) => synth::exec(a),

@@ -4,6 +4,7 @@
 
 use super::features::{unit, Scene, V2};
 use crate::error::{Error, Result};
+pub use crate::measure::distribution::{mean, wasserstein};
 use serde::{Deserialize, Serialize};
 
 /// Schema tag of comparison reports.
@@ -77,44 +78,6 @@ pub fn measures(scene: &Scene, still: f64) -> Measures {
         }
     }
     m
-}
-
-/// The 1-Wasserstein distance between two empirical distributions: ∫ |F_a(x) − F_b(x)| dx.
-/// NaN when either is empty.
-pub fn wasserstein(a: &[f64], b: &[f64]) -> f64 {
-    if a.is_empty() || b.is_empty() {
-        return f64::NAN;
-    }
-    let mut a = a.to_vec();
-    let mut b = b.to_vec();
-    a.sort_by(f64::total_cmp);
-    b.sort_by(f64::total_cmp);
-    let (na, nb) = (a.len() as f64, b.len() as f64);
-    let (mut i, mut j) = (0, 0);
-    let mut x = a[0].min(b[0]);
-    let mut w = 0.0;
-    while i < a.len() || j < b.len() {
-        let next = match (a.get(i), b.get(j)) {
-            (Some(&u), Some(&v)) => u.min(v),
-            (Some(&u), None) => u,
-            (None, Some(&v)) => v,
-            (None, None) => break,
-        };
-        w += (i as f64 / na - j as f64 / nb).abs() * (next - x);
-        x = next;
-        while i < a.len() && a[i] <= x {
-            i += 1;
-        }
-        while j < b.len() && b[j] <= x {
-            j += 1;
-        }
-    }
-    w
-}
-
-/// Mean of a sample (NaN when empty).
-pub fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len() as f64
 }
 
 /// An occupancy map: agent-frames per cell divided by all agent-frames inside the bounds.
@@ -257,19 +220,4 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
         sbb += (y - mb).powi(2);
     }
     sab / (saa * sbb).sqrt()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn wasserstein_of_shifted_samples_is_the_shift() {
-        let a = [0.0, 1.0, 2.0, 3.0];
-        let b: Vec<f64> = a.iter().map(|v| v + 0.5).collect();
-        assert!((wasserstein(&a, &b) - 0.5).abs() < 1e-12);
-        assert_eq!(wasserstein(&a, &a), 0.0);
-        // Unequal sizes: {0} vs {0, 1} → ½.
-        assert!((wasserstein(&[0.0], &[0.0, 1.0]) - 0.5).abs() < 1e-12);
-    }
 }

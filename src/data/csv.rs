@@ -55,6 +55,16 @@ impl<'a> Record<'a> {
         Ok(v)
     }
 
+    /// Column `col` as a finite number, or `None` for a missing value (`NaN` or an empty
+    /// field, as trackers write an animal they lost); infinities and other text are errors.
+    pub fn num_or_missing(&self, col: usize, name: &str) -> Result<Option<f64>> {
+        let s = self.get(col, name)?;
+        if s.is_empty() || s.eq_ignore_ascii_case("nan") {
+            return Ok(None);
+        }
+        self.num(col, name).map(Some)
+    }
+
     /// Column `col` as a non-negative integer.
     pub fn int(&self, col: usize, name: &str) -> Result<u64> {
         let s = self.get(col, name)?;

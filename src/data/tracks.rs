@@ -314,6 +314,17 @@ impl Tracks {
     /// Reads a tracks CSV and its sidecar (when present; see the module docs for the defaults
     /// without one).
     pub fn load(path: &Path) -> Result<Tracks> {
+        Ok(Self::read(path, false)?.0)
+    }
+
+    /// [`Tracks::load`] for trackers' output with lost animals: a row whose position or velocity
+    /// is missing (`NaN` or an empty field) is left out, as if the animal were not tracked in
+    /// that frame, and counted (the second value). A file whose every row is missing is an error.
+    pub fn load_with_gaps(path: &Path) -> Result<(Tracks, usize)> {
+        Self::read(path, true)
+    }
+
+    fn read(path: &Path, gaps: bool) -> Result<(Tracks, usize)> {
         crate::data::atomic::note_input(path);
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
@@ -330,7 +341,7 @@ impl Tracks {
         } else {
             None
         };
-        let (rows, has_z) = parse_csv(path, &text)?;
+        let (rows, has_z, missing) = parse_csv(path, &text, gaps)?;
         let meta = match meta {
             Some(m) => {
                 if has_z != (m.dimension == 3) {
@@ -371,12 +382,12 @@ impl Tracks {
                 );
                 let t = Tracks { meta, rows };
                 t.check().map_err(|e| e.in_file(path))?;
-                return Ok(t);
+                return Ok((t, missing));
             }
         };
         let t = Tracks { meta, rows };
         t.check().map_err(|e| e.in_file(path))?;
-        Ok(t)
+        Ok((t, missing))
     }
 }
 
@@ -389,7 +400,9 @@ fn infer_fps(rows: &[TrackRow]) -> Option<f64> {
     (df > 0.0 && dt > 0.0 && dt.is_finite()).then(|| df / dt)
 }
 
-fn parse_csv(path: &Path, text: &str) -> Result<(Vec<TrackRow>, bool)> {
+/// The rows of a tracks CSV, whether it has a z column, and (with `gaps`) how many rows were
+/// left out for a missing position or velocity.
+fn parse_csv(path: &Path, text: &str, gaps: bool) -> Result<(Vec<TrackRow>, bool, usize)> {
     let table = Table::parse(path, text, "frame,time,id,x,y,…")?;
     let (find, need) = (|name: &str| table.find(name), |name: &str| table.need(name));
     let (c_frame, c_time, c_id, c_x, c_y) = (
@@ -412,58 +425,82 @@ fn parse_csv(path: &Path, text: &str) -> Result<(Vec<TrackRow>, bool)> {
     }
     let c_role = find("role");
     let mut rows = Vec::new();
+    let (mut missing, mut last_frame) = (0usize, None::<u64>);
     for r in table.records() {
         let line_no = r.line();
-        let (get, num, int) = (
+        let (get, int) = (
             |c: usize, name: &str| r.get(c, name),
-            |c: usize, name: &str| r.num(c, name),
             |c: usize, name: &str| r.int(c, name),
         );
+        // A value; with `gaps`, `None` when missing (the row is then left out).
+        let num = |c: usize, name: &str| -> Result<Option<f64>> {
+            match gaps {
+                true => r.num_or_missing(c, name),
+                false => r.num(c, name).map(Some),
+            }
+        };
+        let frame = int(c_frame, "frame")?;
+        if let Some(p) = last_frame.filter(|&p| frame < p) {
+            return Err(Error::file(
+                path,
+                format!(
+                    "line {line_no}: frame {frame} after frame {p} (rows must be ordered by frame)"
+                ),
+            ));
+        }
+        last_frame = Some(frame);
         let z = match c_z {
             Some(c) => num(c, "z")?,
-            None => 0.0,
+            None => Some(0.0),
         };
         let vel = match (c_vx, c_vy) {
-            (Some(a), Some(b)) => Some([
-                num(a, "vx")?,
-                num(b, "vy")?,
-                match c_vz {
+            (Some(a), Some(b)) => {
+                let vz = match c_vz {
                     Some(c) => num(c, "vz")?,
-                    None => 0.0,
-                },
-            ]),
+                    None => Some(0.0),
+                };
+                match (num(a, "vx")?, num(b, "vy")?, vz) {
+                    (Some(x), Some(y), Some(z)) => Some(Some([x, y, z])),
+                    _ => Some(None),
+                }
+            }
             _ => None,
         };
         let role = match c_role {
             Some(c) => Some(get(c, "role")?.to_string()),
             None => None,
         };
+        let (x, y, time) = (num(c_x, "x")?, num(c_y, "y")?, r.num(c_time, "time")?);
+        let id = int(c_id, "id")?;
+        let (Some(x), Some(y), Some(z), Some(vel)) =
+            (x, y, z, vel.map_or(Some(None), |v| v.map(Some)))
+        else {
+            missing += 1;
+            continue;
+        };
         rows.push(TrackRow {
-            frame: int(c_frame, "frame")?,
-            time: num(c_time, "time")?,
-            id: int(c_id, "id")?,
-            pos: [num(c_x, "x")?, num(c_y, "y")?, z],
+            frame,
+            time,
+            id,
+            pos: [x, y, z],
             vel,
             role,
         });
-        if let [.., p, r] = rows.as_slice() {
-            if r.frame < p.frame {
-                return Err(Error::file(
-                    path,
-                    format!(
-                        "line {line_no}: frame {} after frame {} (rows must be ordered by frame)",
-                        r.frame, p.frame
-                    ),
-                ));
-            }
-        }
     }
     if rows.is_empty() {
-        return Err(Error::file(path, "no rows (empty tracks)"));
+        return Err(Error::file(
+            path,
+            match missing {
+                0 => "no rows (empty tracks)".to_string(),
+                m => format!(
+                    "every row ({m}) has a missing position or velocity: nothing is tracked"
+                ),
+            },
+        ));
     }
     // Within a frame the file may list ids in any order; duplicates are caught by `check`.
     rows.sort_by_key(|r| (r.frame, r.id));
-    Ok((rows, c_z.is_some()))
+    Ok((rows, c_z.is_some(), missing))
 }
 
 /// Reads the ETH/UCY pedestrian text format: whitespace-separated `frame id x y` rows, no header,

@@ -24,6 +24,7 @@ pub mod sim;
 pub mod simulate;
 pub mod start;
 pub mod synth;
+pub mod track_fit;
 pub mod uncertainty;
 pub mod validate;
 pub mod zoned;

@@ -28,6 +28,23 @@ pub fn param_names() -> Vec<String> {
         .collect()
 }
 
+/// The vector indices of parameters given by name (`cohesion.angular`, …); an unknown name is an
+/// error naming the config key `key`.
+pub fn indices_of(names: &[String], key: &str) -> Result<Vec<usize>> {
+    let all = param_names();
+    names
+        .iter()
+        .map(|n| {
+            all.iter().position(|m| m == n).ok_or_else(|| {
+                Error::config(
+                    key,
+                    format!("'{n}' is not a parameter (one of {})", all.join(", ")),
+                )
+            })
+        })
+        .collect()
+}
+
 /// Lower clamp of the radial and angular parameters (DESIGN §4): a zero range would divide by 0.
 pub const MIN_RANGE: f64 = 1e-3;
 

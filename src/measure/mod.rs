@@ -3,6 +3,7 @@
 //! fields and the speed–density table (§6.2), and field comparisons (density and velocity errors).
 
 pub mod dir_variance;
+pub mod distribution;
 pub mod emergent;
 pub mod fields;
 pub mod info;

@@ -1,5 +1,6 @@
 //! `herdfit fit`: flags → [`FitJob`] → [`run`] → the summary.
 
+use super::fit_objective::{default_rollout, Objective, OBJECTIVES, ROLLOUTS, SPEEDS};
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
@@ -9,6 +10,7 @@ use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
 };
+use crate::herd::track_fit::{Rollout, Speeds, TrackFitConfig};
 use clap::Args;
 
 /// The gradient descent's flags, shared by `fit` and `ablate`.
@@ -164,10 +166,32 @@ pub struct FitArgs {
     /// Finite-difference step of the identifiability estimate.
     #[arg(long, value_name = "H", default_value_t = UncertaintyConfig::default().step)]
     pub uncertainty_step: f64,
+    /// What the fit scores: the clip's fields, or each tracked animal's motion (the clip's
+    /// tracks.csv or trajectories.csv, --tracks, or a tracks CSV in body lengths given as CLIP)
+    #[arg(long, value_parser = choice::<Objective>(OBJECTIVES), default_value_t = Objective::Fields)]
+    pub objective: Objective,
+    /// --objective tracks: how a window's animals are rolled out
+    #[arg(long, value_parser = choice::<Rollout>(ROLLOUTS), default_value_t = default_rollout())]
+    pub rollout: Rollout,
+    /// --objective tracks: window length (s) from the tracked animals
+    #[arg(long, value_name = "S", default_value_t = TrackFitConfig::default().horizon)]
+    pub horizon: f64,
+    /// --objective tracks: the animals' speeds in the training windows
+    #[arg(long, value_parser = choice::<Speeds>(SPEEDS), default_value_t = TrackFitConfig::default().speeds)]
+    pub train_speeds: Speeds,
+    /// --objective tracks: seconds between window starts (windows overlap below --horizon; 0:
+    /// a window from every frame)
+    #[arg(long, value_name = "S", default_value_t = TrackFitConfig::default().stride)]
+    pub stride: f64,
+    /// --objective tracks: weight (BL²) of the squared heading error beside the squared position
+    /// error
+    #[arg(long, value_name = "W", default_value_t = TrackFitConfig::default().heading_weight)]
+    pub heading_weight: f64,
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
     let boundary = crate::cli::args::boundary(&a.boundary)?;
+    let uncertainty = uncertainty_of(&a);
     let job = FitJob {
         clips: a.clips.into_iter().map(Into::into).collect(),
         start: a.start.map(Into::into),
@@ -202,12 +226,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
         out: a.out.into(),
         log: a.log.map(Into::into),
         plot: a.plot.map(Into::into),
-        uncertainty: UncertaintyConfig {
-            enabled: !a.no_uncertainty,
-            seeds: a.uncertainty_seeds,
-            step: a.uncertainty_step,
-            ..UncertaintyConfig::default()
-        },
+        uncertainty,
         zones: a.zones.map(Into::into),
         still: crate::herd::fit::still::StillConfig {
             settle: a.still_settle,
@@ -240,4 +259,14 @@ pub fn exec(a: FitArgs) -> Result<()> {
     }
     print!("{summary}");
     Ok(())
+}
+
+/// The identifiability estimate's flags (both objectives).
+pub fn uncertainty_of(a: &FitArgs) -> UncertaintyConfig {
+    UncertaintyConfig {
+        enabled: !a.no_uncertainty,
+        seeds: a.uncertainty_seeds,
+        step: a.uncertainty_step,
+        ..UncertaintyConfig::default()
+    }
 }

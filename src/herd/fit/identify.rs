@@ -83,6 +83,26 @@ pub fn identify(
     ucfg: &UncertaintyConfig,
     progress: &mut dyn Progress,
 ) -> Result<Uncertainty> {
+    identify_by(params, cfg.seed, ucfg, progress, |p, seed| {
+        let c = FitConfig {
+            seed,
+            ..cfg.clone()
+        };
+        window_gradients(clips, p, &c)
+    })
+}
+
+/// The estimate at `params` for any objective given by its probe: `probe(point, seed)` is each
+/// window's (loss, gradient) over one epoch at `point` with that seed (the same seed, the same
+/// windows and noise: common random numbers). The seeds are `seed`'s probe seeds, apart from the
+/// fit's epochs'. Reports one progress unit per probe.
+pub fn identify_by(
+    params: &Params,
+    seed: u64,
+    ucfg: &UncertaintyConfig,
+    progress: &mut dyn Progress,
+    mut probe: impl FnMut(&Params, u64) -> Result<Vec<(f64, [f64; N_PARAMS])>>,
+) -> Result<Uncertainty> {
     ucfg.check()?;
     let s = ucfg.settings();
     let x = params.to_vec();
@@ -94,14 +114,10 @@ pub fn identify(
         "uncertainty",
         curvature::probes_needed(&x, &lo, &hi, &s) as u64,
     );
-    let est = curvature::estimate(&x, &lo, &hi, &s, |p, seed| -> Result<_> {
+    let est = curvature::estimate(&x, &lo, &hi, &s, |p, k| -> Result<_> {
         let mut v = [0.0; N_PARAMS];
         v.copy_from_slice(p);
-        let c = FitConfig {
-            seed: probe_seed(cfg.seed, seed),
-            ..cfg.clone()
-        };
-        let w = window_gradients(clips, &params.with_vec(&v), &c)?;
+        let w = probe(&params.with_vec(&v), probe_seed(seed, k))?;
         progress.inc(1);
         Ok(w.into_iter().map(|(l, g)| (l, g.to_vec())).collect())
     })?;

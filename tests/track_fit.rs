@@ -1,0 +1,294 @@
+//! Fits from tracked animals (issue #49): a two-animal case whose optimum is known, the CLI's
+//! `fit --objective tracks` and `validate-tracks` end to end, and bad tracks.
+
+mod common;
+use common::{fails, ok, s, small_clip};
+use herdfit::backend::{cpu_device, Precision};
+use herdfit::data::agents::AgentRow;
+use herdfit::herd::params::{param_names, Params, SpeedModel};
+use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Model, World};
+use herdfit::herd::track_fit::{
+    fit_tracks, mean_loss, Fix, Rollout, TrackClip, TrackFitConfig, TrackSet,
+};
+use rand::SeedableRng;
+use std::path::Path;
+
+/// Two animals 2 BL apart on converging headings, stepped by the model with `truth` (no speed
+/// noise, no leaders, an open plane) for `frames` frames at 10 fps: their tracks, and the model.
+fn pair(truth: &Params, frames: usize) -> TrackClip {
+    let device = cpu_device(Precision::F32).unwrap();
+    let model = Model {
+        params: truth.clone(),
+        world: World::open(),
+        dt: 0.1,
+        force_kernel: ForceKernel::Fused,
+    };
+    let (a, v) = (35f64.to_radians(), 1.5);
+    let rows = vec![
+        AgentRow {
+            id: 0,
+            x: 0.0,
+            y: 0.0,
+            vx: v * a.cos(),
+            vy: v * a.sin(),
+        },
+        AgentRow {
+            id: 1,
+            x: 0.0,
+            y: 2.0,
+            vx: v * a.cos(),
+            vy: -v * a.sin(),
+        },
+    ];
+    let fixes = |pos: &[[f64; 2]]| -> Vec<Fix> {
+        pos.iter()
+            .enumerate()
+            .map(|(i, &p)| Fix {
+                id: i as u64,
+                pos: p,
+                vel: None,
+            })
+            .collect()
+    };
+    let mut out = vec![fixes(&[[rows[0].x, rows[0].y], [rows[1].x, rows[1].y]])];
+    let theta = theta_tensor(&truth.to_vec(), &device);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let decide = Decide::Live {
+        rng: &mut rng,
+        record: None,
+    };
+    let state = HerdState::from_rows(&rows, &device);
+    model
+        .rollout(&theta, state, frames - 1, decide, |_, _, s| {
+            out.push(fixes(&s.snapshot()?.pos));
+            Ok(())
+        })
+        .unwrap();
+    TrackClip {
+        name: "pair".into(),
+        tracks: TrackSet::new(10.0, out),
+        model,
+        guidance: Vec::new(),
+        lookahead: 0,
+        frames: 0..frames,
+    }
+}
+
+/// Two animals made by the model itself without noise: the track objective is 0 at the set that
+/// made them and positive away from it, and a fit of the two parameters that shape the pair's
+/// approach (cohesion and alignment weights; the rest held) from 0.15 away ends at them.
+#[test]
+fn a_pair_made_by_the_model_is_fitted_back_to_its_parameters() {
+    let mut truth = Params::default();
+    truth.speed = SpeedModel {
+        mean: 1.5,
+        std: 0.0,
+        ..SpeedModel::default()
+    };
+    let clips = vec![pair(&truth, 60)];
+    let names = param_names();
+    let free = ["cohesion.weight", "alignment.weight"];
+    for rollout in [Rollout::Conditioned, Rollout::Free] {
+        let cfg = TrackFitConfig {
+            rollout,
+            horizon: 1.0,
+            stride: 0.2,
+            epochs: 30,
+            lr: 0.01,
+            learn_speed: false,
+            frozen: names
+                .iter()
+                .filter(|n| !free.contains(&n.as_str()))
+                .cloned()
+                .collect(),
+            ..TrackFitConfig::default()
+        };
+        let at_truth = mean_loss(&clips, &truth, &cfg).unwrap();
+        assert!(at_truth < 1e-9, "{rollout}: {at_truth}");
+        let mut v = truth.to_vec();
+        v[0] += 0.15;
+        v[6] -= 0.15;
+        let start = truth.with_vec(&v);
+        let away = mean_loss(&clips, &start, &cfg).unwrap();
+        assert!(away > 1e-4, "{rollout}: {away}");
+        let (fitted, log) = fit_tracks(&clips, &start, &cfg, |_, _, _| {}).unwrap();
+        let (f, t) = (fitted.to_vec(), truth.to_vec());
+        for (i, n) in names.iter().enumerate() {
+            let tol = if free.contains(&n.as_str()) {
+                0.02
+            } else {
+                0.0
+            };
+            assert!(
+                (f[i] - t[i]).abs() <= tol,
+                "{rollout}: {n} fitted {} truth {} (loss {} → {})",
+                f[i],
+                t[i],
+                log[0].loss,
+                log.last().unwrap().loss
+            );
+        }
+    }
+}
+
+fn write(p: &Path, text: &str) {
+    std::fs::write(p, text).unwrap();
+}
+
+/// Bad tracks get one line naming the file and write nothing, from `fit --objective tracks` and
+/// from `validate-tracks`.
+#[test]
+fn bad_tracks_get_one_line_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let rows = |f: &dyn Fn(usize, usize) -> String| -> String {
+        let mut t = String::from("frame,time,id,x,y\n");
+        for k in 0..30 {
+            for id in 0..3 {
+                t.push_str(&f(k, id));
+            }
+        }
+        t
+    };
+    let one = d.join("one.csv");
+    let mut t = String::from("frame,time,id,x,y\n");
+    for k in 0..30 {
+        t.push_str(&format!("{k},{},7,{},1\n", k as f64 * 0.1, 0.1 * k as f64));
+    }
+    write(&one, &t);
+    let nan = d.join("nan.csv");
+    write(
+        &nan,
+        &rows(&|k, id| format!("{k},{},{id},nan,NaN\n", k as f64 * 0.1)),
+    );
+    let order = d.join("order.csv");
+    let mut t = rows(&|k, id| format!("{k},{},{id},{},{id}\n", k as f64 * 0.1, 0.1 * k as f64));
+    t.push_str("3,0.3,9,0,0\n");
+    write(&order, &t);
+    let params = d.join("p.json");
+    Params::default().save(&params).unwrap();
+    for (file, want) in [
+        (&one, "one animal (id 7)"),
+        (&nan, "every row (90) has a missing position"),
+        (&order, "frame 3 after frame 29"),
+    ] {
+        let out = d.join("fitted.json");
+        let e = fails(&[
+            "fit",
+            s(file),
+            "--objective",
+            "tracks",
+            "--epochs",
+            "1",
+            "--out",
+            s(&out),
+        ]);
+        assert!(e.contains(want) && e.contains(s(file)), "{e}");
+        for p in ["fitted.json", "fitted.log.csv", "fitted.loss.png"] {
+            assert!(!d.join(p).exists(), "{p} written after: {e}");
+        }
+        let report = d.join("report");
+        let e = fails(&[
+            "validate-tracks",
+            s(file),
+            "--params",
+            s(&params),
+            "--out",
+            s(&report),
+        ]);
+        assert!(e.contains(want) && e.contains(s(file)), "{e}");
+        assert!(!report.exists(), "{e}");
+    }
+    // The tracked animals enter and leave by themselves: the fields' open boundary is refused.
+    let e = fails(&[
+        "fit",
+        s(&one),
+        "--objective",
+        "tracks",
+        "--boundary",
+        "closed",
+        "--out",
+        s(&d.join("fitted.json")),
+    ]);
+    assert!(
+        e.contains("--boundary is an option of the fields objective"),
+        "{e}"
+    );
+    assert!(!d.join("fitted.json").exists(), "{e}");
+}
+
+/// A small synthetic clip fitted from its trajectories and validated on them: the parameter set
+/// records the objective, its learnt speed model and the identifiability estimate; the report
+/// scores every set on the same windows and is the same bytes on a second run.
+#[test]
+fn fit_and_validate_from_a_clips_tracks() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = small_clip(d, 40, 30, 3);
+    let out = d.join("p.json");
+    let printed = ok(&[
+        "fit",
+        s(&clip),
+        "--objective",
+        "tracks",
+        "--frames",
+        "0..20",
+        "--epochs",
+        "2",
+        "--horizon",
+        "0.4",
+        "--uncertainty-seeds",
+        "2",
+        "--out",
+        s(&out),
+    ]);
+    assert!(
+        printed.contains("track objective, conditioned rollout"),
+        "{printed}"
+    );
+    let p: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(p["provenance"]["objective"], "tracks");
+    assert_eq!(p["provenance"]["frames"][0], serde_json::json!([0, 20]));
+    assert!(
+        p["uncertainty"]["std"]["cohesion.weight"].is_number()
+            || p["uncertainty"]["bounds"]["cohesion.weight"].is_object()
+    );
+    assert!(p["speed"]["reversion"].as_f64().unwrap() > 0.0);
+    assert!(d.join("p.log.csv").is_file() && d.join("p.loss.png").is_file());
+    let run = |name: &str| {
+        let r = d.join(name);
+        ok(&[
+            "validate-tracks",
+            s(&clip),
+            "--params",
+            s(&out),
+            "--frames",
+            "20..30",
+            "--horizons",
+            "0.1,0.2",
+            "--seeds",
+            "3",
+            "--free-run",
+            "0.2",
+            "--out",
+            s(&r),
+        ]);
+        std::fs::read_to_string(r.join("report.json")).unwrap()
+    };
+    let (a, b) = (run("r1"), run("r2"));
+    assert_eq!(a, b, "the same report twice");
+    let r: serde_json::Value = serde_json::from_str(&a).unwrap();
+    assert_eq!(r["schema"], "herdfit.track-eval/1");
+    assert_eq!(r["speed_frames"][0], serde_json::json!([0, 20]));
+    for ro in r["rollouts"].as_array().unwrap() {
+        for h in ro["horizons"].as_array().unwrap() {
+            assert!(h["samples"].as_u64().unwrap() > 0, "{h}");
+            let sets = h["sets"].as_array().unwrap();
+            assert_eq!(sets.len(), 3, "the set, generic and default");
+            assert!(h["constant_velocity"][0].as_f64().unwrap() > 0.0);
+        }
+    }
+    assert_eq!(r["rollouts"][0]["forecast"], false);
+    assert_eq!(r["rollouts"][1]["forecast"], true);
+}
