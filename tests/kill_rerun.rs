@@ -28,8 +28,8 @@ const LONG: &[&str] = &[
     "crowd simulate model.json --layout layout.json --steps 400 --png cs.png --video cs.avi \
      --out cs.csv",
     "crowd evaluate --data eth --scene HOTEL --json ev.json",
-    "lift run t2.csv --camera cam.json --out lr.csv --plots lp --video lv.avi",
-    "lift evaluate t3.csv --camera cam.json --out lev",
+    "lift run t2.csv --camera cam.json --v-target 0.1 --d-near 1 --d-far 100 --out lr.csv --plots lp --video lv.avi",
+    "lift evaluate t3.csv --camera cam.json --v-target 0.1 --d-near 1 --d-far 100 --out lev",
     "import-tracks t.csv --body-length-m 0.5 --out it",
 ];
 
