@@ -286,6 +286,11 @@ pub const BASELINES: &[(&str, &str)] = &[
         "clip --params sets.json --seeds 1 --no-video --out val",
     ),
     (
+        "validate-tracks",
+        "clip --params p.json --baseline p.json --tracks clip/trajectories.csv --frames 6..12 \
+                  --speed-frames 0..6 --horizons 0.1 --seeds 1 --free-run 0 --out vt",
+    ),
+    (
         "ablate",
         "clip --out ab --epochs 1 --window 2 --seeds 1 --start p.json",
     ),
@@ -337,8 +342,8 @@ pub const BASELINES: &[(&str, &str)] = &[
     ("crowd synth", "--duration 5 --out cy.csv"),
     (
         "lift run",
-        "t2.csv --camera cam.json --config lift.json --out lr.csv --report lrr.json \
-                  --plots lp --video lv.avi",
+        "t2.csv --camera cam.json --config lift.json --v-target 0.1 --d-near 1 --d-far 100 \
+                  --out lr.csv --report lrr.json --plots lp --video lv.avi",
     ),
     (
         "lift synth",
@@ -347,7 +352,8 @@ pub const BASELINES: &[(&str, &str)] = &[
     ("lift project", "t3.csv --camera cam.json --out lpj.csv"),
     (
         "lift evaluate",
-        "t3.csv --camera cam.json --config lift.json --out lev",
+        "t3.csv --camera cam.json --config lift.json --v-target 0.1 --d-near 1 --d-far 100 \
+                  --out lev",
     ),
     (
         "lift camera",

@@ -190,6 +190,25 @@ pub struct FitArgs {
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
+    // The track objective's flags are checked whatever the objective (a value out of range is
+    // refused, not silently ignored).
+    TrackFitConfig {
+        horizon: a.horizon,
+        stride: a.stride,
+        heading_weight: a.heading_weight,
+        ..TrackFitConfig::default()
+    }
+    .check()
+    .map_err(|e| {
+        with_flags(
+            e,
+            &[
+                ("horizon", "--horizon"),
+                ("stride", "--stride"),
+                ("heading_weight", "--heading-weight"),
+            ],
+        )
+    })?;
     let boundary = crate::cli::args::boundary(&a.boundary)?;
     let uncertainty = uncertainty_of(&a);
     let job = FitJob {

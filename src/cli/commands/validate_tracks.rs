@@ -75,6 +75,15 @@ pub struct ValidateTracksArgs {
 }
 
 pub fn exec(a: ValidateTracksArgs) -> Result<()> {
+    for (flag, r) in [("--frames", a.frames), ("--speed-frames", a.speed_frames)] {
+        if let Some((x, y)) = r {
+            if x >= y {
+                return Err(crate::error::Error::invalid(format!(
+                    "{flag}: {x}..{y} holds no frame"
+                )));
+            }
+        }
+    }
     let mut params: Vec<std::path::PathBuf> = vec![a.params.into()];
     params.extend(a.baseline.into_iter().map(Into::into));
     let job = TrackEvalJob {
@@ -100,8 +109,22 @@ pub fn exec(a: ValidateTracksArgs) -> Result<()> {
         },
         out: a.out.into(),
     };
-    let report = run(&job, &mut Bars::default())
-        .map_err(|e| with_flags(e, &[("inputs", "CLIP/"), ("params", "--params")]))?;
+    let report = run(&job, &mut Bars::default()).map_err(|e| {
+        with_flags(
+            e,
+            &[
+                ("inputs", "CLIP/"),
+                ("params", "--params"),
+                ("horizons", "--horizons"),
+                ("stride", "--stride"),
+                ("blocks", "--blocks"),
+                ("free_run", "--free-run"),
+                ("seeds", "--seeds"),
+                ("observe", "--observe"),
+                ("guidance_scale", "--guidance-scale"),
+            ],
+        )
+    })?;
     print!("{report}");
     println!("wrote {}", job.out.display());
     Ok(())

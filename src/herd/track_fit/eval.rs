@@ -42,6 +42,8 @@ pub struct TrackEvalConfig {
     pub free_run: f64,
     /// Speed (BL/s) below which a step does not count as moving (turning rate, polarization).
     pub still: f64,
+    /// σ (cells) of the leaders' guidance smoothing; ∞ is written as "inf", not null.
+    #[serde(with = "crate::limits::infinite_ok")]
     pub guidance_scale: f64,
     pub precision: Precision,
 }
@@ -67,8 +69,16 @@ impl TrackEvalConfig {
     /// Checks the settings; errors name the key.
     pub fn check(&self) -> Result<()> {
         let bad = |k: &str, m: String| Err(Error::config(k, m));
-        if self.horizons.is_empty() || self.horizons.iter().any(|h| !(h.is_finite() && *h > 0.0)) {
-            return bad("horizons", "give one or more positive horizons (s)".into());
+        if self.horizons.is_empty()
+            || self
+                .horizons
+                .iter()
+                .any(|h| !(h.is_finite() && *h > 0.0 && *h <= 3600.0))
+        {
+            return bad(
+                "horizons",
+                "give one or more horizons in (0, 3600] s".into(),
+            );
         }
         if self.rollouts.is_empty() {
             return bad("rollouts", "give conditioned, free or both".into());
@@ -79,16 +89,19 @@ impl TrackEvalConfig {
         if self.observe < 2 {
             return bad("observe", "must be ≥ 2 (a start needs its velocity)".into());
         }
-        if self.blocks < 2 {
-            return bad("blocks", "must be ≥ 2".into());
+        if !(2..=10_000).contains(&self.blocks) {
+            return bad(
+                "blocks",
+                format!("{} is out of range 2..=10000", self.blocks),
+            );
         }
         for (k, v) in [
             ("stride", self.stride),
             ("free_run", self.free_run),
             ("still", self.still),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return bad(k, format!("{v} must be ≥ 0"));
+            if !(v.is_finite() && (0.0..=3600.0).contains(&v)) {
+                return bad(k, format!("{v} is out of range 0..=3600 s"));
             }
         }
         crate::herd::guidance::check_guidance_scale(self.guidance_scale)
