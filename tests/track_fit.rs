@@ -79,11 +79,13 @@ fn pair(truth: &Params, frames: usize) -> TrackClip {
 /// approach (cohesion and alignment weights; the rest held) from 0.15 away ends at them.
 #[test]
 fn a_pair_made_by_the_model_is_fitted_back_to_its_parameters() {
-    let mut truth = Params::default();
-    truth.speed = SpeedModel {
-        mean: 1.5,
-        std: 0.0,
-        ..SpeedModel::default()
+    let truth = Params {
+        speed: SpeedModel {
+            mean: 1.5,
+            std: 0.0,
+            ..SpeedModel::default()
+        },
+        ..Params::default()
     };
     let clips = vec![pair(&truth, 60)];
     let names = param_names();

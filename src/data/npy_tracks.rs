@@ -154,7 +154,7 @@ fn check_declared(head: &str, body: usize, path: &Path) -> Result<()> {
             .parse()
             .map_err(|_| bad(format!("the .npy header's shape has '{d}'")))?;
         dims.push(v);
-        n = n.checked_mul(v).unwrap_or(usize::MAX);
+        n = n.saturating_mul(v);
     }
     let item = if head.contains("f4") { 4 } else { 8 };
     let need = n.saturating_mul(item);
