@@ -181,6 +181,9 @@ def fit(clip, clip_dir, log, checkpoints, split, threads, cmd):
             out.write(msg + "\n")
             print(msg, file=sys.stderr)
             resume = ["--resume"]
+    # herdfit writes the checkpoint folder itself but not its parents (an output's folder must
+    # exist, #47): the clip's folder of checkpoints is made here.
+    os.makedirs(checkpoints, exist_ok=True)
     code = _run("fit", clip, log, cmd + ["--checkpoint", ck] + resume, threads)
     if code == 0:
         shutil.rmtree(ck, ignore_errors=True)
