@@ -242,7 +242,7 @@ pub fn with_settings(
 }
 
 /// `--boundary auto|closed|FILE` (issue #46) as the library's [`BoundaryChoice`]; a file named
-/// there is an input of the run's plan ([`InFileOrWord`]).
+/// there is an input of the run's plan ([`crate::cli::paths::InFileOrWord`]).
 pub fn boundary(b: &crate::cli::paths::InFileOrWord) -> Result<BoundaryChoice, Error> {
     b.text()
         .parse()
