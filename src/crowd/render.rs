@@ -5,7 +5,7 @@
 use super::features::V2;
 use super::layout::Layout;
 use crate::data::tracks::Tracks;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use plotters::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -136,6 +136,7 @@ pub fn top_view_png(
 /// An MJPG AVI of every frame (agents as discs with short trails), `px` pixels per unit.
 #[cfg(feature = "video")]
 pub fn top_view_avi(path: &Path, tracks: &Tracks, layout: Option<&Layout>, px: f64) -> Result<()> {
+    use crate::error::Error;
     use opencv::core::{Mat, Point, Scalar, CV_8UC3};
     use opencv::imgproc;
     let cv = |e: opencv::Error| Error::file(path, format!("OpenCV: {}", e.message));
