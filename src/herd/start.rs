@@ -111,41 +111,26 @@ pub fn population_control(
 ) -> Vec<AgentRow> {
     let g = clip.grid();
     rows.retain(|r| g.cell_of([r.x, r.y]).is_some());
-    let a = g.cell_area();
-    let target: Vec<f64> = (0..g.ny * g.nx)
-        .map(|c| clip.density[[f, c / g.nx, c % g.nx]] as f64 * a)
-        .collect();
+    let target = cell_targets(clip, f);
     let total = target.iter().sum::<f64>().round() as usize;
     let (err, _) = field_errors(clip, f, &rows);
     let rebalance = err > threshold;
     let (mut n_sim, _) = cell_counts(clip, &rows);
     if rebalance {
         // Remove from surplus cells (largest surplus first) while the surplus is ≥ 1.
-        while let Some((c, s)) = (0..n_sim.len())
-            .map(|c| (c, n_sim[c] - target[c]))
-            .max_by(|p, q| p.1.total_cmp(&q.1).then(q.0.cmp(&p.0)))
-        {
+        while let Some((c, s)) = largest(0..n_sim.len(), |c| n_sim[c] - target[c]) {
             if s < 1.0 || rows.len() <= total {
                 break;
             }
-            let members: Vec<usize> = rows
-                .iter()
-                .enumerate()
-                .filter(|(_, r)| g.cell_of([r.x, r.y]).map(|(ix, iy)| iy * g.nx + ix) == Some(c))
-                .map(|(i, _)| i)
-                .collect();
-            let k = members[rng.gen_range(0..members.len())];
+            let k = random_member(&rows, &g, c, rng);
             rows.remove(k);
             n_sim[c] -= 1.0;
         }
     }
     // Add to deficit cells (largest first) while agents are missing overall.
     while rows.len() < total {
-        let Some((c, d)) = (0..n_sim.len())
-            .filter(|&c| clip.obstacles[[c / g.nx, c % g.nx]] == 0)
-            .map(|c| (c, target[c] - n_sim[c]))
-            .max_by(|p, q| p.1.total_cmp(&q.1).then(q.0.cmp(&p.0)))
-        else {
+        let open = (0..n_sim.len()).filter(|&c| clip.obstacles[[c / g.nx, c % g.nx]] == 0);
+        let Some((c, d)) = largest(open, |c| target[c] - n_sim[c]) else {
             break;
         };
         if d <= 0.0 {
@@ -183,18 +168,13 @@ pub fn population_control_open(
     let (err, _) = field_errors(clip, f, &rows);
     if err > threshold {
         let g = clip.grid();
-        let a = g.cell_area();
-        let target: Vec<f64> = (0..g.ny * g.nx)
-            .map(|c| clip.density[[f, c / g.nx, c % g.nx]] as f64 * a)
-            .collect();
+        let target = cell_targets(clip, f);
         let (mut n_sim, _) = cell_counts(clip, &rows);
         // Move one agent at a time from the largest surplus (≥ 1) to the largest deficit.
         loop {
             let best = |sign: f64| {
-                (0..n_sim.len())
-                    .filter(|&c| clip.obstacles[[c / g.nx, c % g.nx]] == 0)
-                    .map(|c| (c, sign * (n_sim[c] - target[c])))
-                    .max_by(|p, q| p.1.total_cmp(&q.1).then(q.0.cmp(&p.0)))
+                let open = (0..n_sim.len()).filter(|&c| clip.obstacles[[c / g.nx, c % g.nx]] == 0);
+                largest(open, |c| sign * (n_sim[c] - target[c]))
             };
             let (Some((from, s)), Some((to, d))) = (best(1.0), best(-1.0)) else {
                 break;
@@ -202,13 +182,7 @@ pub fn population_control_open(
             if s < 1.0 || d <= 0.0 {
                 break;
             }
-            let members: Vec<usize> = rows
-                .iter()
-                .enumerate()
-                .filter(|(_, r)| g.cell_of([r.x, r.y]).map(|(ix, iy)| iy * g.nx + ix) == Some(from))
-                .map(|(i, _)| i)
-                .collect();
-            let k = members[rng.gen_range(0..members.len())];
+            let k = random_member(&rows, &g, from, rng);
             let old = rows.remove(k);
             let v = old.vx.hypot(old.vy);
             rows.push(new_agent(clip, f, to % g.nx, to / g.nx, old.id, v, rng));
@@ -220,6 +194,36 @@ pub fn population_control_open(
     let rows = edit_rows(rows, |a| stream.enter(f, ahead, a) > 0);
     *next_id = stream.next_id;
     (rows, stream.crossings)
+}
+
+/// Frame `f`'s animals per cell (density × cell area), cells in row-major order.
+fn cell_targets(clip: &ClipFields, f: usize) -> Vec<f64> {
+    let g = clip.grid();
+    let a = g.cell_area();
+    (0..g.ny * g.nx)
+        .map(|c| clip.density[[f, c / g.nx, c % g.nx]] as f64 * a)
+        .collect()
+}
+
+/// The cell of `cells` with the largest `value` (the lowest index among equals) and its value.
+fn largest(
+    cells: impl Iterator<Item = usize>,
+    value: impl Fn(usize) -> f64,
+) -> Option<(usize, f64)> {
+    cells
+        .map(|c| (c, value(c)))
+        .max_by(|p, q| p.1.total_cmp(&q.1).then(q.0.cmp(&p.0)))
+}
+
+/// The index in `rows` of a random agent in cell `c` (row-major) of `g`; `c` must hold one.
+fn random_member(rows: &[AgentRow], g: &crate::data::Grid, c: usize, rng: &mut impl Rng) -> usize {
+    let members: Vec<usize> = rows
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| g.cell_of([r.x, r.y]).map(|(ix, iy)| iy * g.nx + ix) == Some(c))
+        .map(|(i, _)| i)
+        .collect();
+    members[rng.gen_range(0..members.len())]
 }
 
 /// How a herd initialised from fields is settled (see [`settle`]; off by default).

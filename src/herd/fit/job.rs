@@ -88,17 +88,23 @@ pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
 impl FitJob {
     /// The training log's path.
     pub fn log_path(&self) -> PathBuf {
-        self.log
-            .clone()
-            .unwrap_or_else(|| sibling(&self.out, ".log.csv"))
+        log_path_of(&self.out, self.log.as_deref())
     }
 
     /// The loss curve's path.
     pub fn plot_path(&self) -> PathBuf {
-        self.plot
-            .clone()
-            .unwrap_or_else(|| sibling(&self.out, ".loss.png"))
+        plot_path_of(&self.out, self.plot.as_deref())
     }
+}
+
+/// A fit's training log: `log` when given, else `<out stem>.log.csv` beside `out`.
+pub fn log_path_of(out: &Path, log: Option<&Path>) -> PathBuf {
+    log.map_or_else(|| sibling(out, ".log.csv"), Path::to_path_buf)
+}
+
+/// A fit's loss curve: `plot` when given, else `<out stem>.loss.png` beside `out`.
+pub fn plot_path_of(out: &Path, plot: Option<&Path>) -> PathBuf {
+    plot.map_or_else(|| sibling(out, ".loss.png"), Path::to_path_buf)
 }
 
 impl FitJob {

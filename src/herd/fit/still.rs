@@ -15,6 +15,7 @@
 
 use super::loss::density_loss;
 use crate::backend::{cpu_device, Precision};
+use crate::data::agents::AgentRow;
 use crate::data::boundary::Gates;
 use crate::data::{ClipFields, ClipSpeed};
 use crate::error::{Error, Result};
@@ -168,12 +169,11 @@ pub fn still_measures_in(
     let mut sum = [0.0f64; 4];
     let mut n = 0.0f64;
     let mut start = [0.0f64; 4];
-    let measure = |f: usize, state: &HerdState, ids: &[u64]| -> Result<[f64; 4]> {
-        let rows = state.rows(ids)?;
+    let measure = |f: usize, state: &HerdState, rows: &[AgentRow]| -> Result<[f64; 4]> {
         let vel: Vec<[f64; 2]> = rows.iter().map(|r| [r.vx, r.vy]).collect();
-        let (counts, _) = cell_counts(clip, &rows);
+        let (counts, _) = cell_counts(clip, rows);
         Ok([
-            field_errors(clip, f, &rows).0,
+            field_errors(clip, f, rows).0,
             read_vec(&density_loss(clip, state, f)?)?[0],
             crowding(&counts) / image_crowding.max(1e-12),
             polarization(&vel, &vec![1.0; vel.len()]),
@@ -193,18 +193,18 @@ pub fn still_measures_in(
             &device,
             |f, state, ids| {
                 if f > cfg.settle {
-                    let m = measure(f, state, ids)?;
+                    let rows = state.rows(ids)?;
+                    let m = measure(f, state, &rows)?;
                     sum.iter_mut().zip(m).for_each(|(s, v)| *s += v);
                     n += 1.0;
                     // Agents in the view only (outside it they are in no zone).
-                    let rows: Vec<_> = state
-                        .rows(ids)?
-                        .into_iter()
+                    let inside: Vec<&AgentRow> = rows
+                        .iter()
                         .filter(|r| grid.cell_of([r.x, r.y]).is_some())
                         .collect();
-                    let pos: Vec<[f64; 2]> = rows.iter().map(|r| [r.x, r.y]).collect();
+                    let pos: Vec<[f64; 2]> = inside.iter().map(|r| [r.x, r.y]).collect();
                     let zone = zones.map_or_else(|| vec![0; pos.len()], |z| z.zone_of(&pos));
-                    for (r, z) in rows.iter().zip(zone) {
+                    for (r, z) in inside.iter().zip(zone) {
                         speed_sum[z] += r.vx.hypot(r.vy);
                         speed_n[z] += 1.0;
                     }
@@ -214,7 +214,7 @@ pub fn still_measures_in(
         )?;
         let s0 = HerdState::from_rows(&rows0, &device);
         let ids: Vec<u64> = rows0.iter().map(|r| r.id).collect();
-        let m = measure(0, &s0, &ids)?;
+        let m = measure(0, &s0, &s0.rows(&ids)?)?;
         start.iter_mut().zip(m).for_each(|(s, v)| *s += v);
     }
     let k = seeds.max(1) as f64;

@@ -9,7 +9,7 @@ use super::{load_input, TrackClip};
 use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::{Error, Result};
 use crate::herd::fit::identify::{identify_by, UncertaintyConfig};
-use crate::herd::fit::job::sibling;
+use crate::herd::fit::job::{log_path_of, plot_path_of};
 use crate::herd::params::{param_names, Params, N_PARAMS};
 use crate::herd::uncertainty::{summary, Uncertainty};
 use crate::progress::Progress;
@@ -80,15 +80,11 @@ impl TrackFitJob {
     }
 
     fn log_path(&self) -> PathBuf {
-        self.log
-            .clone()
-            .unwrap_or_else(|| sibling(&self.out, ".log.csv"))
+        log_path_of(&self.out, self.log.as_deref())
     }
 
     fn plot_path(&self) -> PathBuf {
-        self.plot
-            .clone()
-            .unwrap_or_else(|| sibling(&self.out, ".loss.png"))
+        plot_path_of(&self.out, self.plot.as_deref())
     }
 }
 
