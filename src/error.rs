@@ -21,6 +21,9 @@ pub enum Error {
     /// An impossible request that no single setting or file explains.
     #[error("{0}")]
     Invalid(String),
+    /// The caller stopped the work ([`crate::progress::Progress::check`], e.g. Ctrl-C in Python).
+    #[error("interrupted")]
+    Interrupted,
     /// An internal numerical failure (e.g. a tensor read-back that failed).
     #[error("internal error: {0}")]
     Internal(String),

@@ -150,17 +150,9 @@ pub fn load_params(path: Option<&Path>) -> Result<Params> {
 pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize> {
     let cfg = &job.config;
     job.check()?;
-    let mut params = load_params(job.run.params.as_deref())?;
-    if let Some(s) = cfg.speed_noise {
-        params.speed.std = s;
-    }
-    let world = World {
-        obstacles: None,
-        guidance: cfg.guidance.map_or(Guidance::None, Guidance::Uniform),
-        fixed_speed: None,
-    };
+    let params = run_params(job.run.params.as_deref(), cfg)?;
     let rows = match &job.run.herd {
-        Some(h) => h.rows(&params, &world, cfg.seed)?,
+        Some(h) => h.rows(&params, &world_of(cfg), cfg.seed)?,
         None => {
             return Err(Error::config(
                 "herd",
@@ -191,25 +183,86 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
     if let Some(r) = &job.run.record {
         check_writable(r)?;
     }
+    let n = rows.len();
+    let mut out = AtomicFile::create(&job.out)?;
+    let mut text = String::with_capacity(64 * n);
+    text.push_str(TRAJ_HEADER);
+    text.push('\n');
+    let record = job.run.record.is_some();
+    let run = Run {
+        params,
+        rows,
+        replay: replay.as_ref(),
+        record,
+    };
+    let rec = run_frames(run, cfg, progress, &mut |frame, time, rows, leader| {
+        push_traj_frame(&mut text, frame, time, rows, leader);
+        out.write_str(&text)?;
+        text.clear();
+        Ok(())
+    })?;
+    if let (Some(path), Some(rec)) = (&job.run.record, &rec) {
+        rec.save(path)?;
+    }
+    out.commit()?;
+    Ok(n)
+}
+
+/// The parameter set of a run (the built-in one when `path` is absent), with the config's speed
+/// noise.
+fn run_params(path: Option<&Path>, cfg: &SimulateConfig) -> Result<Params> {
+    let mut params = load_params(path)?;
+    if let Some(s) = cfg.speed_noise {
+        params.speed.std = s;
+    }
+    Ok(params)
+}
+
+/// The open world of a simulation: no obstacles, the config's uniform guidance.
+fn world_of(cfg: &SimulateConfig) -> World {
+    World {
+        obstacles: None,
+        guidance: cfg.guidance.map_or(Guidance::None, Guidance::Uniform),
+        fixed_speed: None,
+    }
+}
+
+/// What one run starts from: the parameter set (speed noise applied), the initial herd, the
+/// decisions to replay, and whether to record them.
+struct Run<'a> {
+    params: Params,
+    rows: Vec<AgentRow>,
+    replay: Option<&'a Recording>,
+    record: bool,
+}
+
+/// Receives each frame of a run: its index, time (s), the agents' rows in the herd's order and
+/// their leader flags. An error stops the run.
+type FrameSink<'a> = dyn FnMut(usize, f64, &[AgentRow], &[bool]) -> Result<()> + 'a;
+
+/// Runs `cfg.steps` steps of the model from `run.rows`, handing frames 0..=steps to `frame`;
+/// returns the recording when asked for. Stops with [`Error::Interrupted`] when `progress` asks.
+fn run_frames(
+    run: Run<'_>,
+    cfg: &SimulateConfig,
+    progress: &mut dyn Progress,
+    frame: &mut FrameSink<'_>,
+) -> Result<Option<Recording>> {
     let device = cpu_device(cfg.precision)?;
     let model = Model {
-        params,
-        world,
+        params: run.params,
+        world: world_of(cfg),
         dt: 1.0 / cfg.fps,
         force_kernel: crate::herd::sim::ForceKernel::default(),
     };
-    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+    let ids: Vec<u64> = run.rows.iter().map(|r| r.id).collect();
     let theta = theta_tensor(&model.params.to_vec(), &device);
-    let state = HerdState::from_rows(&rows, &device);
-    let mut out = AtomicFile::create(&job.out)?;
-    let mut text = String::with_capacity(64 * rows.len());
-    text.push_str(TRAJ_HEADER);
-    text.push('\n');
-    let mut prev = rows;
-    let mut rec = job.run.record.as_ref().map(|_| Recording::new(ids.len()));
+    let state = HerdState::from_rows(&run.rows, &device);
+    let mut prev = run.rows;
+    let mut rec = run.record.then(|| Recording::new(ids.len()));
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x005e_ed0f_5eed);
     progress.start("simulate", cfg.steps as u64);
-    let decide = match &replay {
+    let decide = match run.replay {
         Some(r) => Decide::Replay(r),
         None => Decide::Live {
             rng: &mut rng,
@@ -217,35 +270,120 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
         },
     };
     let end = model.rollout(&theta, state, cfg.steps, decide, |t, dec, next| {
-        push_traj_frame(&mut text, t, t as f64 * model.dt, &prev, &dec.leader);
-        out.write_str(&text)?;
-        text.clear();
+        frame(t, t as f64 * model.dt, &prev, &dec.leader)?;
         prev = next.rows(&ids)?;
         let pts = prev.iter().map(|r| (r.x, r.y));
         crate::limits::check_state(t + 1, pts, "fps, the parameter set's speeds and the herd")?;
         progress.inc(1);
-        Ok(())
+        progress.check()
     })?;
     progress.finish();
     // Roles of the last frame: the decision the next step would take.
-    let last_roles = match &replay {
+    let last_roles = match run.replay {
         Some(r) if r.steps.len() > cfg.steps => r.steps[cfg.steps].leader.clone(),
         _ => {
             let mut rng2 = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
             model.decide(&end.snapshot()?, &mut rng2).leader
         }
     };
-    push_traj_frame(
-        &mut text,
-        cfg.steps,
-        cfg.steps as f64 * model.dt,
-        &prev,
-        &last_roles,
-    );
-    out.write_str(&text)?;
-    if let (Some(path), Some(rec)) = (&job.run.record, &rec) {
-        rec.save(path)?;
+    frame(cfg.steps, cfg.steps as f64 * model.dt, &prev, &last_roles)?;
+    Ok(rec)
+}
+
+/// The initial herd of an in-memory simulation.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Herd {
+    /// The built-in random herd of N agents ([`HerdSource::Agents`]).
+    Agents(usize),
+    /// These agents (ids unique).
+    Rows(Vec<AgentRow>),
+}
+
+/// A simulation kept in memory: the agents' ids and, per frame 0..=steps and agent,
+/// `[x, y, vx, vy, leader]` (leader 1 or 0).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    pub ids: Vec<u64>,
+    pub frames: ndarray::Array3<f64>,
+}
+
+/// [`simulate`] without files: the parameter set `params` (the built-in one when absent) run
+/// from `herd`; the same frames as the trajectory CSV of [`simulate`] with the same seed.
+pub fn simulate_frames(
+    params: Option<Params>,
+    herd: Herd,
+    cfg: &SimulateConfig,
+    progress: &mut dyn Progress,
+) -> Result<Trajectory> {
+    cfg.check()?;
+    let mut params = match params {
+        Some(p) => {
+            p.validate()?;
+            p
+        }
+        None => Params::default(),
+    };
+    if let Some(s) = cfg.speed_noise {
+        params.speed.std = s;
     }
-    out.commit()?;
-    Ok(ids.len())
+    let rows = match herd {
+        Herd::Agents(n) => {
+            crate::limits::check_count("agents", n, crate::limits::MAX_AGENTS)?;
+            HerdSource::Agents(n).rows(&params, &world_of(cfg), cfg.seed)?
+        }
+        Herd::Rows(rows) => check_rows(rows)?,
+    };
+    let n = rows.len();
+    crate::limits::check_memory(
+        "steps",
+        "the trajectory",
+        (cfg.steps as f64 + 1.0) * n as f64 * 40.0,
+    )?;
+    let ids: Vec<u64> = rows.iter().map(|r| r.id).collect();
+    let mut frames = ndarray::Array3::<f64>::zeros((cfg.steps + 1, n, 5));
+    let run = Run {
+        params,
+        rows,
+        replay: None,
+        record: false,
+    };
+    run_frames(run, cfg, progress, &mut |f, _, rows, leader| {
+        for (a, (r, &l)) in rows.iter().zip(leader).enumerate() {
+            let v = [r.x, r.y, r.vx, r.vy, if l { 1.0 } else { 0.0 }];
+            for (k, x) in v.into_iter().enumerate() {
+                frames[[f, a, k]] = x;
+            }
+        }
+        Ok(())
+    })?;
+    Ok(Trajectory { ids, frames })
+}
+
+/// An initial herd given in memory: not empty, unique ids, finite values within the limits.
+fn check_rows(rows: Vec<AgentRow>) -> Result<Vec<AgentRow>> {
+    use crate::limits::{MAX_COORD, MAX_SPEED};
+    if rows.is_empty() {
+        return Err(Error::config("herd", "no agents (empty herd)"));
+    }
+    crate::limits::check_count("agents", rows.len(), crate::limits::MAX_AGENTS)?;
+    let mut seen = std::collections::HashSet::new();
+    for r in &rows {
+        if !seen.insert(r.id) {
+            return Err(Error::config("herd", format!("duplicate id {}", r.id)));
+        }
+        for (key, v, max) in [
+            ("x", r.x, MAX_COORD),
+            ("y", r.y, MAX_COORD),
+            ("vx", r.vx, MAX_SPEED),
+            ("vy", r.vy, MAX_SPEED),
+        ] {
+            if !(v.is_finite() && v.abs() <= max) {
+                return Err(Error::config(
+                    "herd",
+                    format!("agent {}: {key} = {v} is beyond ±{max}", r.id),
+                ));
+            }
+        }
+    }
+    Ok(rows)
 }

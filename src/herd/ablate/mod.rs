@@ -196,7 +196,10 @@ pub fn ablate(
         let (name, s, c, k) = variant(switch, start, &fit_cfg, clip);
         progress.message(&name);
         let t0 = std::time::Instant::now();
-        let res = fit_clips(&[&k], &s, &c, None, |_, _, _, _| progress.inc(1))?;
+        let res = fit_clips(&[&k], &s, &c, None, |_, _, _, _| {
+            progress.inc(1);
+            progress.check()
+        })?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let sets = [(name.clone(), res.params.clone())];
         let (mut report, _) = validate(&k, clip_name, &sets, &cfg.validate, || progress.inc(1))?;

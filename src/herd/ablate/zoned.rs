@@ -120,7 +120,10 @@ pub fn ablate_zones(
         progress.message(&name);
         let t0 = std::time::Instant::now();
         let starts = vec![s; zones.len()];
-        let res = fit_zones(&k, &starts, &c, zones, None, |_, _, _, _| progress.inc(1))?;
+        let res = fit_zones(&k, &starts, &c, zones, None, |_, _, _, _| {
+            progress.inc(1);
+            progress.check()
+        })?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let sets = ZoneSets {
             zones: zones.clone(),

@@ -27,6 +27,7 @@ use crate::error::{Error, Result};
 use crate::herd::params::{Params, N_PARAMS};
 use crate::herd::zones::Zones;
 use crate::optim::multistart::{latin_hypercube, multistart, Candidate};
+use crate::progress::Proceed;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::ops::Range;
@@ -95,12 +96,12 @@ pub fn objective(cfg: &FitConfig, (em, ev, ef): (f64, f64, f64)) -> f64 {
 /// The fit with its global phase: [`fit_clips`] alone when `cfg.global` is off, otherwise the
 /// multi-start of the module documentation. `progress` is called after every window of every
 /// candidate's refinement.
-pub fn fit_global(
+pub fn fit_global<R: Proceed>(
     clips: &[&ClipFields],
     init: &Params,
     cfg: &FitConfig,
     ckpt: Option<&CheckpointDir>,
-    mut progress: impl FnMut(usize, usize, f64, f64),
+    mut progress: impl FnMut(usize, usize, f64, f64) -> R,
 ) -> Result<(FitResult, Option<GlobalReport>)> {
     if cfg.global.is_off() {
         return Ok((fit_clips(clips, init, cfg, ckpt, progress)?, None));
@@ -135,13 +136,13 @@ pub fn fit_global(
 /// multi-start of the module documentation over every zone's set at once — candidate 0 is the
 /// given starts, the others Latin-hypercube points in 12 dimensions per zone — each refined by
 /// [`fit_zones`] and ranked by [`zone_loss_of`] on the held-out frames. Checkpoints as for one set.
-pub fn fit_zones_global(
+pub fn fit_zones_global<R: Proceed>(
     clip: &ClipFields,
     starts: &[Params],
     cfg: &FitConfig,
     zones: &Zones,
     ckpt: Option<&CheckpointDir>,
-    mut progress: impl FnMut(usize, usize, f64, f64),
+    mut progress: impl FnMut(usize, usize, f64, f64) -> R,
 ) -> Result<(ZoneFitResult, Option<GlobalReport>)> {
     if cfg.global.is_off() {
         return Ok((fit_zones(clip, starts, cfg, zones, ckpt, progress)?, None));

@@ -206,6 +206,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
             "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
         ));
         progress.inc(1);
+        progress.check()
     })
     .map_err(|e| match job.clips.as_slice() {
         [one] => e.in_file(one),

@@ -25,6 +25,7 @@ use crate::herd::sim::{thetas_tensor, ForceTensors, Guidance, HerdState};
 use crate::herd::start::start_herd;
 use crate::herd::zones::Zones;
 use crate::optim::OptState;
+use crate::progress::Proceed;
 use burn::tensor::{Device, Tensor};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -45,12 +46,12 @@ fn epoch_rng(seed: u64, epoch: usize) -> ChaCha8Rng {
 }
 
 /// Runs the fit. `progress(epoch, frame, e_mean, ms_per_step)` is called after every window.
-pub fn fit(
+pub fn fit<R: Proceed>(
     clip: &ClipFields,
     init: &Params,
     cfg: &FitConfig,
     ckpt: Option<&CheckpointDir>,
-    progress: impl FnMut(usize, usize, f64, f64),
+    progress: impl FnMut(usize, usize, f64, f64) -> R,
 ) -> Result<FitResult> {
     fit_inner(&[clip], init, cfg, ckpt, true, progress)
 }
@@ -59,12 +60,12 @@ pub fn fit(
 /// the clips in turn, each with its own herds, obstacles, frame rate and speed model, and one set
 /// of 12 parameters learns from all of them. `cfg.frames` applies to every clip. The exported
 /// speed model is the first clip's.
-pub fn fit_clips(
+pub fn fit_clips<R: Proceed>(
     clips: &[&ClipFields],
     init: &Params,
     cfg: &FitConfig,
     ckpt: Option<&CheckpointDir>,
-    progress: impl FnMut(usize, usize, f64, f64),
+    progress: impl FnMut(usize, usize, f64, f64) -> R,
 ) -> Result<FitResult> {
     fit_inner(clips, init, cfg, ckpt, true, progress)
 }
@@ -143,13 +144,13 @@ struct FitRun<'a> {
     gates: Vec<Gates>,
 }
 
-fn fit_inner(
+fn fit_inner<R: Proceed>(
     clips: &[&ClipFields],
     init: &Params,
     cfg: &FitConfig,
     ckpt: Option<&CheckpointDir>,
     learn: bool,
-    mut progress: impl FnMut(usize, usize, f64, f64),
+    mut progress: impl FnMut(usize, usize, f64, f64) -> R,
 ) -> Result<FitResult> {
     let run = FitRun::new(clips, init, cfg, learn)?;
     let start = init.to_vec();
@@ -231,13 +232,13 @@ impl<'a> FitRun<'a> {
 
     /// One epoch's pass over clip `ci`: fresh herds from the first frame's fields, then window
     /// after window: forward, gradient, optimiser step, population control, log row.
-    fn epoch_on_clip(
+    fn epoch_on_clip<R: Proceed>(
         &self,
         epoch: usize,
         ci: usize,
         learnt: &mut Learnt,
         rng: &mut ChaCha8Rng,
-        progress: &mut impl FnMut(usize, usize, f64, f64),
+        progress: &mut impl FnMut(usize, usize, f64, f64) -> R,
     ) -> Result<()> {
         let (clip, cfg) = (self.clips[ci], self.cfg);
         let (a, b) = (cfg.frames.start, cfg.frames.end);
@@ -268,7 +269,7 @@ impl<'a> FitRun<'a> {
             if cfg.still.is_some_and(|s| f + w <= s.settle) {
                 f += w;
                 herds.control(clip, &self.gates[ci], f, &fwd, cfg, &model, rng)?;
-                progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
+                progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64).proceed()?;
                 continue;
             }
             // The gradient is needed to learn and, for the identifiability probe, to record.
@@ -310,7 +311,7 @@ impl<'a> FitRun<'a> {
                 theta: learnt.theta,
                 clip: ci,
             });
-            progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64);
+            progress(epoch, f, em, t0.elapsed().as_secs_f64() * 1e3 / w as f64).proceed()?;
         }
         Ok(())
     }

@@ -97,6 +97,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
                 "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
             ));
             progress.inc(1);
+            progress.check()
         },
     )
     .map_err(|e| e.in_file(&job.clips[0]))?;

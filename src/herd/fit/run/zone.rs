@@ -8,6 +8,7 @@ use crate::herd::fit::config::FitConfig;
 use crate::herd::fit::log::LogRow;
 use crate::herd::params::Params;
 use crate::herd::zones::Zones;
+use crate::progress::Proceed;
 
 /// The result of a zone fit: one parameter set per zone (in the zones' order) and the log (its
 /// `theta` is zone 0's).
@@ -22,13 +23,13 @@ pub struct ZoneFitResult {
 /// window's gradient reaches every zone's set through the agents that used it, and each set
 /// takes its own optimiser step. `starts[k]` is zone k's start. With `ckpt`, every zone's set and
 /// optimiser state is checkpointed after every epoch, and a resume continues exactly.
-pub fn fit_zones(
+pub fn fit_zones<R: Proceed>(
     clip: &ClipFields,
     starts: &[Params],
     cfg: &FitConfig,
     zones: &Zones,
     ckpt: Option<&CheckpointDir>,
-    progress: impl FnMut(usize, usize, f64, f64),
+    progress: impl FnMut(usize, usize, f64, f64) -> R,
 ) -> Result<ZoneFitResult> {
     zone_fit_inner(clip, starts, cfg, zones, ckpt, true, progress)
 }
@@ -51,14 +52,14 @@ pub fn zone_loss_of(
 
 /// [`fit_zones`], or with `learn` false its schedule without updates (whose frames need not hold
 /// every zone's agents: nothing is learnt there).
-fn zone_fit_inner(
+fn zone_fit_inner<R: Proceed>(
     clip: &ClipFields,
     starts: &[Params],
     cfg: &FitConfig,
     zones: &Zones,
     ckpt: Option<&CheckpointDir>,
     learn: bool,
-    mut progress: impl FnMut(usize, usize, f64, f64),
+    mut progress: impl FnMut(usize, usize, f64, f64) -> R,
 ) -> Result<ZoneFitResult> {
     if starts.len() != zones.len() || starts.is_empty() {
         return Err(Error::Internal(format!(
