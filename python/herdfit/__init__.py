@@ -20,12 +20,13 @@ from .clip import Clip
 from .errors import ConfigError, FileError, HerdfitError
 from .herd import ablate, author, defaults, fit, gradcheck, import_tracks, simulate, synth, validate
 from .params import Params
+from .systems import crowd, export_gltf, flock, lift
 from .tracks import Tracks, from_movement, read_tracks, to_movement
 
 __all__ = [
     "__version__", "features", "missing_features", "Clip", "Params", "Tracks", "simulate", "fit", "validate",
     "ablate", "import_tracks", "synth", "author", "gradcheck", "defaults", "read_tracks", "to_movement", "from_movement",
-    "tracks", "HerdfitError", "ConfigError", "FileError",
+    "tracks", "crowd", "flock", "lift", "export_gltf", "HerdfitError", "ConfigError", "FileError",
 ]
 
 

@@ -16,12 +16,23 @@ use pyo3::prelude::*;
 use serde::de::DeserializeOwned;
 
 /// The job kinds `run_job` knows.
-const KINDS: &[&str] = &["fit", "validate", "ablate", "import_tracks", "synth", "author", "gradcheck"];
+const KINDS: &[&str] = &[
+    "fit",
+    "validate",
+    "ablate",
+    "import_tracks",
+    "synth",
+    "author",
+    "gradcheck",
+];
 
 fn unknown_kind(py: Python<'_>, kind: &str) -> PyErr {
     to_py(
         py,
-        herdfit::Error::config("kind", format!("'{kind}' is not one of {}", KINDS.join(", "))),
+        herdfit::Error::config(
+            "kind",
+            format!("'{kind}' is not one of {}", KINDS.join(", ")),
+        ),
         None,
     )
 }
@@ -64,15 +75,21 @@ fn run_job(
         }
         "synth" => {
             let j: SynthJob = de(py, kind, job)?;
-            detached(py, &mut prog, |p| write_clip(&j, p).map(|s| synth_summary(&s)))
+            detached(py, &mut prog, |p| {
+                write_clip(&j, p).map(|s| synth_summary(&s))
+            })
         }
         "author" => {
             let j: AuthorJob = de(py, kind, job)?;
-            detached(py, &mut prog, |p| herdfit::herd::author::job::run(&j, p).map(|s| s.to_string()))
+            detached(py, &mut prog, |p| {
+                herdfit::herd::author::job::run(&j, p).map(|s| s.to_string())
+            })
         }
         "gradcheck" => {
             let j: GradcheckJob = de(py, kind, job)?;
-            detached(py, &mut prog, |p| herdfit::herd::gradcheck::run(&j, p).map(|r| r.to_string()))
+            detached(py, &mut prog, |p| {
+                herdfit::herd::gradcheck::run(&j, p).map(|r| r.to_string())
+            })
         }
         _ => Err(unknown_kind(py, kind)),
     }
@@ -85,7 +102,9 @@ fn job_defaults<'py>(py: Python<'py>, kind: &str) -> PyResult<Bound<'py, PyAny>>
         "fit" => serde_json::to_value(FitJob::default()),
         "validate" => serde_json::to_value(ValidateJob::default()),
         "ablate" => serde_json::to_value(AblateJob::default()),
-        "import_tracks" => serde_json::to_value(herdfit::herd::import_tracks::ImportTracksConfig::default()),
+        "import_tracks" => {
+            serde_json::to_value(herdfit::herd::import_tracks::ImportTracksConfig::default())
+        }
         "synth" => serde_json::to_value(SynthJob::default()),
         "author" => serde_json::to_value(AuthorJob::default()),
         "gradcheck" => serde_json::to_value(GradcheckJob::default()),
@@ -118,5 +137,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// What a synthetic clip holds, in a line.
 fn synth_summary(s: &herdfit::herd::synth::Synth) -> String {
     let agents = s.frames.first().map_or(0, |f| f.len());
-    format!("synthetic clip: {} frames of {agents} agents\n", s.frames.len())
+    format!(
+        "synthetic clip: {} frames of {agents} agents\n",
+        s.frames.len()
+    )
 }

@@ -8,6 +8,7 @@
 mod errors;
 mod jobs;
 mod progress;
+mod systems;
 mod tracks;
 
 use errors::to_py;
@@ -40,7 +41,11 @@ fn json<T: serde::Serialize>(value: &T) -> PyResult<String> {
 /// A parameter set from JSON text, validated; bad text → HerdfitError.
 fn params_of(py: Python<'_>, text: &str) -> PyResult<Params> {
     let p: Params = serde_json::from_str(text).map_err(|e| {
-        to_py(py, herdfit::Error::invalid(format!("not a herdfit.params/1 set: {e}")), None)
+        to_py(
+            py,
+            herdfit::Error::invalid(format!("not a herdfit.params/1 set: {e}")),
+            None,
+        )
     })?;
     p.validate().map_err(|e| to_py(py, e, None))?;
     Ok(p)
@@ -83,7 +88,11 @@ fn save_clip(
     obstacles: PyReadonlyArray2<u8>,
 ) -> PyResult<()> {
     let meta: ClipMeta = serde_json::from_str(meta).map_err(|e| {
-        to_py(py, herdfit::Error::config("meta", format!("not a herdfit.clip/1 clip.json: {e}")), None)
+        to_py(
+            py,
+            herdfit::Error::config("meta", format!("not a herdfit.clip/1 clip.json: {e}")),
+            None,
+        )
     })?;
     let clip = ClipFields {
         meta,
@@ -133,9 +142,14 @@ fn params_vector(py: Python<'_>, text: &str) -> PyResult<Vec<f64>> {
 #[pyfunction]
 fn params_with_vector(py: Python<'_>, text: &str, values: Vec<f64>) -> PyResult<String> {
     let p = params_of(py, text)?;
-    let mut v: [f64; herdfit::herd::params::N_PARAMS] = values.try_into().map_err(|v: Vec<f64>| {
-        to_py(py, herdfit::Error::config("values", format!("{} values; 12 expected", v.len())), None)
-    })?;
+    let mut v: [f64; herdfit::herd::params::N_PARAMS] =
+        values.try_into().map_err(|v: Vec<f64>| {
+            to_py(
+                py,
+                herdfit::Error::config("values", format!("{} values; 12 expected", v.len())),
+                None,
+            )
+        })?;
     Params::clamp_vec(&mut v);
     json(&p.with_vec(&v))
 }
@@ -178,7 +192,10 @@ fn rows_of(py: Python<'_>, a: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<AgentRo
     if a.ncols() != 5 {
         return Err(to_py(
             py,
-            herdfit::Error::config("herd", format!("{} columns; 5 expected (id, x, y, vx, vy)", a.ncols())),
+            herdfit::Error::config(
+                "herd",
+                format!("{} columns; 5 expected (id, x, y, vx, vy)", a.ncols()),
+            ),
             None,
         ));
     }
@@ -188,11 +205,20 @@ fn rows_of(py: Python<'_>, a: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<AgentRo
             if !(r[0] >= 0.0 && r[0].fract() == 0.0 && r[0] < 9.0e15) {
                 return Err(to_py(
                     py,
-                    herdfit::Error::config("herd", format!("id {} is not a whole number ≥ 0", r[0])),
+                    herdfit::Error::config(
+                        "herd",
+                        format!("id {} is not a whole number ≥ 0", r[0]),
+                    ),
                     None,
                 ));
             }
-            Ok(AgentRow { id: r[0] as u64, x: r[1], y: r[2], vx: r[3], vy: r[4] })
+            Ok(AgentRow {
+                id: r[0] as u64,
+                x: r[1],
+                y: r[2],
+                vx: r[3],
+                vy: r[4],
+            })
         })
         .collect()
 }
@@ -213,5 +239,6 @@ fn _herdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tracks::tracks_load, m)?)?;
     m.add_function(wrap_pyfunction!(tracks::tracks_save, m)?)?;
     jobs::register(m)?;
+    systems::register(m)?;
     Ok(())
 }

@@ -6,7 +6,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2}
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
-type Columns<'py> = (
+pub type Columns<'py> = (
     String,
     Bound<'py, PyArray1<u64>>,
     Bound<'py, PyArray1<f64>>,
@@ -20,7 +20,14 @@ type Columns<'py> = (
 /// (sidecar JSON, frame, time, id, pos `[n, 3]`, vel `[n, 3]` or None, roles or None).
 #[pyfunction]
 pub fn tracks_load(py: Python<'_>, path: PathBuf) -> PyResult<Columns<'_>> {
-    let t = py.detach(|| Tracks::load(&path)).map_err(|e| to_py(py, e, None))?;
+    let t = py
+        .detach(|| Tracks::load(&path))
+        .map_err(|e| to_py(py, e, None))?;
+    Ok(columns(py, &t))
+}
+
+/// `t` as the columns [`tracks_load`] returns.
+pub fn columns<'py>(py: Python<'py>, t: &Tracks) -> Columns<'py> {
     let n = t.rows.len();
     let meta = serde_json::to_string(&t.meta).unwrap_or_default();
     let frame: Vec<u64> = t.rows.iter().map(|r| r.frame).collect();
@@ -30,10 +37,13 @@ pub fn tracks_load(py: Python<'_>, path: PathBuf) -> PyResult<Columns<'_>> {
     let vel = t.has_velocity().then(|| {
         ndarray::Array2::from_shape_fn((n, 3), |(i, k)| t.rows[i].vel.map_or(f64::NAN, |v| v[k]))
     });
-    let role = t
-        .has_role()
-        .then(|| t.rows.iter().map(|r| r.role.clone().unwrap_or_default()).collect());
-    Ok((
+    let role = t.has_role().then(|| {
+        t.rows
+            .iter()
+            .map(|r| r.role.clone().unwrap_or_default())
+            .collect()
+    });
+    (
         meta,
         frame.into_pyarray(py),
         time.into_pyarray(py),
@@ -41,7 +51,7 @@ pub fn tracks_load(py: Python<'_>, path: PathBuf) -> PyResult<Columns<'_>> {
         pos.into_pyarray(py),
         vel.map(|v| v.into_pyarray(py)),
         role,
-    ))
+    )
 }
 
 /// Writes a tracks file from columns (rows sorted by frame and id, checked, written atomically).
@@ -61,7 +71,12 @@ pub fn tracks_save(
     let bad = |msg: String| to_py(py, herdfit::Error::config("tracks", msg), None);
     let meta: TracksMeta =
         serde_json::from_str(meta).map_err(|e| bad(format!("bad sidecar: {e}")))?;
-    let (frame, time, id, pos) = (frame.as_array(), time.as_array(), id.as_array(), pos.as_array());
+    let (frame, time, id, pos) = (
+        frame.as_array(),
+        time.as_array(),
+        id.as_array(),
+        pos.as_array(),
+    );
     let vel = vel.as_ref().map(|v| v.as_array());
     let n = frame.len();
     let d = pos.ncols();
@@ -71,7 +86,10 @@ pub fn tracks_save(
             time.len(), id.len(), pos.nrows()
         )));
     }
-    if vel.as_ref().is_some_and(|v| v.nrows() != n || v.ncols() != d) {
+    if vel
+        .as_ref()
+        .is_some_and(|v| v.nrows() != n || v.ncols() != d)
+    {
         return Err(bad("velocities must have the positions' shape".into()));
     }
     let take = |a: ndarray::ArrayView1<'_, f64>| {

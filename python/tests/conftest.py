@@ -41,3 +41,12 @@ def fish_npy():
     if not p.exists():
         pytest.fail(f"{p}: missing; run scripts/fetch-testdata.sh")
     return p
+
+
+@pytest.fixture(scope="session")
+def shared_data():
+    """The real data: $HERDFIT_SHARED_DATA, else <repo>/../shared/data, else /work/shared/data."""
+    for p in (os.environ.get("HERDFIT_SHARED_DATA"), ROOT.parent / "shared" / "data", "/work/shared/data"):
+        if p and pathlib.Path(p).is_dir():
+            return pathlib.Path(p)
+    pytest.fail("no shared data (set HERDFIT_SHARED_DATA)")
