@@ -3,8 +3,8 @@
 # (git-ignored; it sees the system Python's numpy, matplotlib and Jupyter packages that
 # scripts/setup-debian.sh installs) with the pinned python/requirements.txt, for the pytest suite
 # (python/tests) and the notebooks. The build runs in the workspace's target/ with the release
-# profile, so after `cargo build --release --workspace --no-default-features` only herdfit (with
-# `video`), pyo3 and the bindings compile. Idempotent: the venv is remade only when the
+# profile and the test build's features (python/Cargo.toml), so after
+# `cargo test --release --workspace` only pyo3's crates and the bindings compile. Idempotent: the venv is remade only when the
 # requirements change; the package is rebuilt every time (cargo skips what is current).
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"

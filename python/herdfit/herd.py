@@ -113,7 +113,8 @@ def fit(
     **kwargs: Any,
 ) -> Params:
     """Fits the 12 parameters to one clip or several (§6), writing the set to ``out`` (with its
-    log and loss curve beside it) and returning it. ``frames=(a, b)`` restricts the frames;
+    log and loss curve beside it) and returning it (its ``summary`` what the CLI prints; with
+    ``zones``, the bundle is written and the summary returned). ``frames=(a, b)`` restricts the frames;
     other keywords are ``FitConfig`` keys (``epochs``, ``window``, ``seed``, ``lr``, …) or the
     job's (``eval_seeds``, ``uncertainty``, ``checkpoint``, …)."""
     if isinstance(clips, (str, os.PathLike)):
@@ -123,10 +124,11 @@ def fit(
         raise ConfigError("start: give the path of a saved parameter file (Params.save)", "start")
     files["start"] = None if start is None else os.fspath(start)
     summary = _herdfit.run_job("fit", _job("fit", files, config, kwargs), resolve(progress))
-    fit.summary = summary  # type: ignore[attr-defined]
     if kwargs.get("zones") is not None:
         return summary  # type: ignore[return-value]
-    return Params.load(out)
+    p = Params.load(out)
+    p.summary = summary
+    return p
 
 
 def validate(clip: PathLike, params: PathLike, out: PathLike, *, baseline: Optional[PathLike] = None,

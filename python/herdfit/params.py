@@ -26,10 +26,10 @@ class Params:
 
     def __init__(self, data: Optional[Mapping[str, Any]] = None) -> None:
         text = _herdfit.params_default() if data is None else json.dumps(dict(data))
-        # Validated by herdfit (unknown keys, ranges) before it is kept.
-        self._data: Dict[str, Any] = json.loads(_herdfit.params_with_vector(text, _herdfit.params_vector(text)))
-        if data is not None:
-            self._data = json.loads(json.dumps(dict(data)))
+        _herdfit.params_vector(text)  # validated by herdfit (unknown keys, ranges) before it is kept
+        self._data: Dict[str, Any] = json.loads(text)
+        #: What the fit printed, on a set returned by :func:`herdfit.fit`.
+        self.summary: Optional[str] = None
 
     @classmethod
     def load(cls, path: Union[str, os.PathLike]) -> "Params":

@@ -37,6 +37,7 @@ class Tracks:
 
     @property
     def dimension(self) -> int:
+        """2 or 3 (the columns of ``pos``)."""
         return int(self.pos.shape[1])
 
     def save(self, path: PathLike) -> None:

@@ -69,3 +69,16 @@ def test_sigint_stops_a_long_fit_within_two_seconds(clip_dir, tmp_path):
     assert proc.returncode == 3 and "interrupted" in out, err
     assert waited < 2.0, f"took {waited:.2f} s to stop"
     assert not (tmp_path / "p.json").exists()
+
+
+def test_a_bad_initial_herd_names_the_herd_key():
+    import numpy as np
+
+    init = np.array([[0, 0, 0, 1, 0], [0, 1, 1, 1, 0]], float)
+    with pytest.raises(herdfit.ConfigError) as e:
+        herdfit.simulate(init=init, steps=2, progress=False)
+    assert e.value.key == "herd" and "duplicate id 0" in str(e.value)
+    init[1, 0], init[1, 1] = 1, np.nan
+    with pytest.raises(herdfit.ConfigError) as e:
+        herdfit.simulate(init=init, steps=2, progress=False)
+    assert e.value.key == "herd" and "agent 1: x = NaN" in str(e.value)

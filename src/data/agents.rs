@@ -47,19 +47,8 @@ pub fn read_init_csv(path: &Path) -> Result<Vec<AgentRow>> {
             vx: r.num(idx[3], "vx")?,
             vy: r.num(idx[4], "vy")?,
         };
-        use crate::limits::{MAX_COORD, MAX_SPEED};
-        for (key, v, max) in [
-            ("x", row.x, MAX_COORD),
-            ("y", row.y, MAX_COORD),
-            ("vx", row.vx, MAX_SPEED),
-            ("vy", row.vy, MAX_SPEED),
-        ] {
-            if !(v.is_finite() && v.abs() <= max) {
-                return Err(Error::file(
-                    path,
-                    format!("line {line_no}: {key} = {v} is beyond ±{max}"),
-                ));
-            }
+        if let Some(m) = out_of_range(&row) {
+            return Err(Error::file(path, format!("line {line_no}: {m}")));
         }
         crate::limits::check_count("agents", rows.len() + 1, crate::limits::MAX_AGENTS)
             .map_err(|e| e.in_file(path))?;
@@ -69,6 +58,22 @@ pub fn read_init_csv(path: &Path) -> Result<Vec<AgentRow>> {
         return Err(Error::file(path, "no agents (empty herd)"));
     }
     Ok(rows)
+}
+
+/// The first value of `row` that is not finite or lies beyond the limits (positions
+/// ±[`MAX_COORD`](crate::limits::MAX_COORD), velocities ±[`MAX_SPEED`](crate::limits::MAX_SPEED)),
+/// as "key = value is beyond ±max".
+pub fn out_of_range(row: &AgentRow) -> Option<String> {
+    use crate::limits::{MAX_COORD, MAX_SPEED};
+    [
+        ("x", row.x, MAX_COORD),
+        ("y", row.y, MAX_COORD),
+        ("vx", row.vx, MAX_SPEED),
+        ("vy", row.vy, MAX_SPEED),
+    ]
+    .into_iter()
+    .find(|(_, v, max)| !(v.is_finite() && v.abs() <= *max))
+    .map(|(key, v, max)| format!("{key} = {v} is beyond ±{max}"))
 }
 
 /// Header of trajectory files.

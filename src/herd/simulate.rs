@@ -3,7 +3,7 @@
 //! replaying the run's no-gradient decisions (perception, roles, noise).
 
 use crate::backend::{cpu_device, Precision};
-use crate::data::agents::{push_traj_frame, read_init_csv, AgentRow, TRAJ_HEADER};
+use crate::data::agents::{out_of_range, push_traj_frame, read_init_csv, AgentRow, TRAJ_HEADER};
 use crate::data::atomic::{check_writable, AtomicFile};
 use crate::error::{Error, Result};
 use crate::herd::params::Params;
@@ -361,7 +361,6 @@ pub fn simulate_frames(
 
 /// An initial herd given in memory: not empty, unique ids, finite values within the limits.
 fn check_rows(rows: Vec<AgentRow>) -> Result<Vec<AgentRow>> {
-    use crate::limits::{MAX_COORD, MAX_SPEED};
     if rows.is_empty() {
         return Err(Error::config("herd", "no agents (empty herd)"));
     }
@@ -371,18 +370,8 @@ fn check_rows(rows: Vec<AgentRow>) -> Result<Vec<AgentRow>> {
         if !seen.insert(r.id) {
             return Err(Error::config("herd", format!("duplicate id {}", r.id)));
         }
-        for (key, v, max) in [
-            ("x", r.x, MAX_COORD),
-            ("y", r.y, MAX_COORD),
-            ("vx", r.vx, MAX_SPEED),
-            ("vy", r.vy, MAX_SPEED),
-        ] {
-            if !(v.is_finite() && v.abs() <= max) {
-                return Err(Error::config(
-                    "herd",
-                    format!("agent {}: {key} = {v} is beyond ±{max}", r.id),
-                ));
-            }
+        if let Some(m) = out_of_range(r) {
+            return Err(Error::config("herd", format!("agent {}: {m}", r.id)));
         }
     }
     Ok(rows)
