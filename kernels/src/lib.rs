@@ -21,6 +21,6 @@ pub use forces::{
 pub use geometry::{Capsule, P2};
 pub use obstacles::ObstacleMap;
 pub use perception::{
-    branch_of, perceive, perceive_among, Perception, PerceptionConfig, Scene, BRANCH_BEHIND,
-    BRANCH_RIGHT,
+    branch_of, perceive, perceive_among, NeighbourLists, Perception, PerceptionConfig, Scene,
+    BRANCH_BEHIND, BRANCH_RIGHT,
 };
