@@ -39,7 +39,7 @@ use std::path::Path;
 /// candidates within R_perc + s, rebuilt once an agent has moved s/2. It changes no decision,
 /// only the time; chosen by the criterion sweep `cargo bench --bench step -- neighbour_skin`
 /// (docs/performance.md).
-pub const NEIGHBOUR_SKIN: f64 = 1.0;
+pub const NEIGHBOUR_SKIN: f64 = 0.5;
 
 /// Guard of the vector normalisation N(·) of eq. 2 (BL²/s²).
 const NORM_EPS: f64 = 1e-12;
