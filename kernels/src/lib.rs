@@ -24,3 +24,13 @@ pub use perception::{
     branch_of, perceive, perceive_among, NeighbourLists, Perception, PerceptionConfig, Scene,
     BRANCH_BEHIND, BRANCH_RIGHT,
 };
+
+/// `f` run on a rayon pool of `threads` threads (tests that the output does not depend on it).
+#[cfg(test)]
+pub(crate) fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}

@@ -201,16 +201,8 @@ fn front_cone_counts_and_truncation() {
 fn thread_count_does_not_change_the_output() {
     let (pos, head, map) = scene(9, 500);
     let c = cfg(true);
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(|| perceive(&pos, &head, Some(&map), &c));
-    let two = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .build()
-        .unwrap()
-        .install(|| perceive(&pos, &head, Some(&map), &c));
+    let one = crate::on_threads(1, || perceive(&pos, &head, Some(&map), &c));
+    let two = crate::on_threads(2, || perceive(&pos, &head, Some(&map), &c));
     assert_eq!(one, two);
 }
 
@@ -312,16 +304,12 @@ fn verlet_lists_do_not_depend_on_the_thread_count() {
     let (pos, head, map) = scene(9, 500);
     let c = cfg(true);
     let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut lists = NeighbourLists::new(1.0);
-                let moved: Vec<P2> = pos.iter().map(|p| [p[0] + 0.1, p[1]]).collect();
-                lists.perceive(&pos, &head, Some(&map), &c);
-                lists.perceive(&moved, &head, Some(&map), &c)
-            })
+        crate::on_threads(threads, || {
+            let mut lists = NeighbourLists::new(1.0);
+            let moved: Vec<P2> = pos.iter().map(|p| [p[0] + 0.1, p[1]]).collect();
+            lists.perceive(&pos, &head, Some(&map), &c);
+            lists.perceive(&moved, &head, Some(&map), &c)
+        })
     };
     assert_eq!(run(1), run(2));
 }
