@@ -4,7 +4,7 @@
 //! `s / 2`), so perception filters the kept lists instead of searching the grid. The lists stay
 //! sorted by the last step's distances, so this step's sort starts nearly sorted. The in-range
 //! candidates, their order and everything decided from them (occlusion every step, front cone,
-//! density) are exactly those of [`perceive`].
+//! density) are exactly those of [`perceive`](super::perceive).
 
 use super::{
     assemble, dist2, in_range, key_of, view_sorted, ChunkViews, Context, FrontCone, Perception,
@@ -24,7 +24,7 @@ struct ChunkLists {
 }
 
 /// Verlet neighbour lists kept between the steps of one run: [`NeighbourLists::perceive`] gives
-/// the same [`Perception`] as [`perceive`], rebuilding the lists only when an agent has moved more
+/// the same [`Perception`] as [`perceive`](super::perceive), rebuilding the lists only when an agent has moved more
 /// than half the skin since the last build (or the herd's size or the radius changed).
 #[derive(Clone, Debug)]
 pub struct NeighbourLists {
@@ -110,7 +110,7 @@ impl NeighbourLists {
         self.builds += 1;
     }
 
-    /// Perception of this step (what [`perceive`] returns for the same arguments).
+    /// Perception of this step (what [`perceive`](super::perceive) returns for the same arguments).
     pub fn perceive(
         &mut self,
         positions: &[P2],
