@@ -5,6 +5,9 @@
 //! forward + backward replaying decisions recorded once outside the timed loop
 //! (`forward_backward_10_steps_replay`), as `fit` does after its plan and as the JAX peer does.
 //!
+//! `neighbour_skin/S/N` perceives the 20 steps of an N-agent run with Verlet lists of skin S BL
+//! (`fresh/N` searches the grid every step): the sweep behind `NEIGHBOUR_SKIN`.
+//!
 //! `cargo bench --bench step` (set `HERDFIT_BENCH_LARGE=1` to add the 100,000-agent cases).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
@@ -12,7 +15,7 @@ use herdfit::backend::{cpu_device, Precision};
 use herdfit::herd::gradcheck::objective;
 use herdfit::herd::scenario::bench_model;
 use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState};
-use herdfit_kernels::perceive;
+use herdfit_kernels::{perceive, NeighbourLists};
 use rand::SeedableRng;
 use std::time::Duration;
 
@@ -131,8 +134,53 @@ fn grad_group(c: &mut Criterion, group: &str, replay: bool) {
     g.finish();
 }
 
+/// Perception over the 20 steps of a live run of N agents (the positions and headings recorded
+/// once): a fresh grid search every step (`fresh/N`) against Verlet lists of skin S BL (`S/N`).
+fn neighbour_skin(c: &mut Criterion) {
+    let device = cpu_device(Precision::F32).unwrap();
+    let mut g = c.benchmark_group("neighbour_skin");
+    g.sample_size(10).measurement_time(Duration::from_secs(4));
+    for n in sizes(&[1500]) {
+        let (model, init) = bench_model(n, 1).unwrap();
+        let theta = theta_tensor(&model.params.to_vec(), &device);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let start = HerdState::from_rows(&init, &device);
+        let mut steps = vec![start.snapshot().unwrap()];
+        let decide = Decide::Live {
+            rng: &mut rng,
+            record: None,
+        };
+        model
+            .rollout(&theta, start, 20, decide, |_, _, s| {
+                steps.push(s.snapshot()?);
+                Ok(())
+            })
+            .unwrap();
+        let cfg = model.perception_config();
+        g.bench_with_input(BenchmarkId::new("fresh", n), &n, |b, _| {
+            b.iter(|| {
+                for s in &steps {
+                    perceive(&s.pos, &s.head, None, &cfg);
+                }
+            })
+        });
+        for skin in [0.1, 0.25, 0.5, 1.0, 2.0] {
+            g.bench_with_input(BenchmarkId::new(skin.to_string(), n), &skin, |b, &skin| {
+                b.iter(|| {
+                    let mut lists = NeighbourLists::new(skin);
+                    for s in &steps {
+                        lists.perceive(&s.pos, &s.head, None, &cfg);
+                    }
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
 criterion_group!(
     benches,
+    neighbour_skin,
     perception,
     sim_step,
     grad_window,

@@ -21,6 +21,16 @@ pub use forces::{
 pub use geometry::{Capsule, P2};
 pub use obstacles::ObstacleMap;
 pub use perception::{
-    branch_of, perceive, perceive_among, Perception, PerceptionConfig, Scene, BRANCH_BEHIND,
-    BRANCH_RIGHT,
+    branch_of, perceive, perceive_among, NeighbourLists, Perception, PerceptionConfig, Scene,
+    BRANCH_BEHIND, BRANCH_RIGHT,
 };
+
+/// `f` run on a rayon pool of `threads` threads (tests that the output does not depend on it).
+#[cfg(test)]
+pub(crate) fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}

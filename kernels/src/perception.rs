@@ -8,6 +8,10 @@ use crate::grid::UniformGrid;
 use crate::obstacles::ObstacleMap;
 use rayon::prelude::*;
 
+mod verlet;
+
+pub use verlet::NeighbourLists;
+
 /// Settings of the perception kernel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PerceptionConfig {
@@ -168,17 +172,22 @@ fn perceive_rows(
                 let ctx = Context {
                     pos: scene.pos,
                     head: scene.head,
-                    grid: &grid,
                     obstacles,
                     cfg,
                     cone,
                 };
                 let q = Query { p, h, own: own(i) };
-                view_of(q, &ctx, sc, &mut out);
+                view_of(q, &grid, &ctx, sc, &mut out);
             }
             out
         })
         .collect();
+    assemble(&chunks, positions, cfg)
+}
+
+/// The padded lists of all agents from the views of their chunks.
+fn assemble(chunks: &[ChunkViews], positions: &[P2], cfg: &PerceptionConfig) -> Perception {
+    let n = positions.len();
     let widest = |f: fn(&ChunkViews) -> &Vec<u32>| {
         chunks
             .iter()
@@ -202,7 +211,7 @@ fn perceive_rows(
         density: Vec::with_capacity(n),
     };
     let area = std::f64::consts::PI * cfg.radius * cfg.radius;
-    for c in &chunks {
+    for c in chunks {
         out.front_count.extend_from_slice(&c.front);
         out.density
             .extend(c.in_range.iter().map(|&m| m as f64 / area));
@@ -212,7 +221,7 @@ fn perceive_rows(
         .par_chunks_mut(CHUNK * k)
         .zip(out.neighbour_mask.par_chunks_mut(CHUNK * k))
         .zip(out.neighbour_branch.par_chunks_mut(CHUNK * k))
-        .zip(&chunks)
+        .zip(chunks)
         .enumerate()
         .for_each(|(c, (((idx, mask), branch), v))| {
             let mut src = 0;
@@ -229,7 +238,7 @@ fn perceive_rows(
         .par_chunks_mut(CHUNK * ko)
         .zip(out.obstacle_mask.par_chunks_mut(CHUNK * ko))
         .zip(out.obstacle_branch.par_chunks_mut(CHUNK * ko))
-        .zip(&chunks)
+        .zip(chunks)
         .enumerate()
         .for_each(|(c, (((pts, mask), branch), v))| {
             let mut src = 0;
@@ -284,7 +293,6 @@ impl FrontCone {
 struct Context<'a> {
     pos: &'a [P2],
     head: &'a [P2],
-    grid: &'a UniformGrid,
     obstacles: Option<&'a ObstacleMap>,
     cfg: &'a PerceptionConfig,
     cone: FrontCone,
@@ -341,22 +349,54 @@ struct Query {
     own: Option<u32>,
 }
 
-fn view_of(me: Query, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) {
-    let (pos, cfg) = (ctx.pos, ctx.cfg);
-    let (p, h) = (me.p, me.h);
-    let r2 = cfg.radius * cfg.radius;
-    // In-range candidates sorted by distance (ties by index: deterministic). d2 > 0, so its
-    // bit pattern orders like the value.
+/// The sort key of candidate `j` at squared distance `d2`: `d2 > 0`, so its bit pattern orders
+/// like the value, and one integer compare orders by distance, then index (deterministic).
+#[inline]
+fn key_of(d2: f64, j: u32) -> u128 {
+    (d2.to_bits() as u128) << 32 | j as u128
+}
+
+/// Squared distance from `p` to `q`.
+#[inline]
+fn dist2(p: P2, q: P2) -> f64 {
+    (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2)
+}
+
+/// Is `j` at squared distance `d2` perceived by a query whose own scene entry is `own`?
+/// Coincident agents have no bearing: they are not perceived.
+#[inline]
+fn in_range(d2: f64, r2: f64, j: u32, own: Option<u32>) -> bool {
+    d2 < r2 && d2 > 1e-18 && Some(j) != own
+}
+
+/// The view of one query: its in-range candidates from the grid, sorted, then [`view_sorted`].
+fn view_of(
+    me: Query,
+    grid: &UniformGrid,
+    ctx: &Context<'_>,
+    sc: &mut Scratch,
+    out: &mut ChunkViews,
+) {
+    let (pos, p) = (ctx.pos, me.p);
+    let r2 = ctx.cfg.radius * ctx.cfg.radius;
     let keys = &mut sc.keys;
     keys.clear();
-    ctx.grid.for_each_candidate(p, cfg.radius, |j| {
-        let d2 = (pos[j][0] - p[0]).powi(2) + (pos[j][1] - p[1]).powi(2);
-        // Coincident agents have no bearing: they are not perceived.
-        if d2 < r2 && d2 > 1e-18 && Some(j as u32) != me.own {
-            keys.push((d2.to_bits() as u128) << 32 | j as u128);
+    grid.for_each_candidate(p, ctx.cfg.radius, |j| {
+        let d2 = dist2(p, pos[j]);
+        if in_range(d2, r2, j as u32, me.own) {
+            keys.push(key_of(d2, j as u32));
         }
     });
     keys.sort_unstable();
+    view_sorted(me, ctx, sc, out);
+}
+
+/// The view of one query from its in-range candidates, sorted by [`key_of`], in `sc.keys`:
+/// occlusion, front cone, the kept neighbours and obstacle points.
+fn view_sorted(me: Query, ctx: &Context<'_>, sc: &mut Scratch, out: &mut ChunkViews) {
+    let (pos, cfg) = (ctx.pos, ctx.cfg);
+    let (p, h) = (me.p, me.h);
+    let keys = &sc.keys;
     sc.cand.clear();
     sc.cand.extend(keys.iter().map(|&key| {
         let (b, j) = ((key >> 32) as u64, key as u32);

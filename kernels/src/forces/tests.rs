@@ -169,15 +169,11 @@ fn thread_count_does_not_change_forces_or_gradients() {
     };
     let w: Vec<f64> = (0..2 * lists.n).map(|i| (i as f64 * 0.37).sin()).collect();
     let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut f = vec![0.0; 2 * lists.n];
-                forces_forward(&lists, a, Coefficients(&coef), &mut f);
-                (f, forces_backward(&lists, a, Coefficients(&coef), &w, None))
-            })
+        crate::on_threads(threads, || {
+            let mut f = vec![0.0; 2 * lists.n];
+            forces_forward(&lists, a, Coefficients(&coef), &mut f);
+            (f, forces_backward(&lists, a, Coefficients(&coef), &w, None))
+        })
     };
     assert_eq!(run(1), run(3));
 }

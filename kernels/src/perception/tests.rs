@@ -201,16 +201,8 @@ fn front_cone_counts_and_truncation() {
 fn thread_count_does_not_change_the_output() {
     let (pos, head, map) = scene(9, 500);
     let c = cfg(true);
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(|| perceive(&pos, &head, Some(&map), &c));
-    let two = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .build()
-        .unwrap()
-        .install(|| perceive(&pos, &head, Some(&map), &c));
+    let one = crate::on_threads(1, || perceive(&pos, &head, Some(&map), &c));
+    let two = crate::on_threads(2, || perceive(&pos, &head, Some(&map), &c));
     assert_eq!(one, two);
 }
 
@@ -257,4 +249,67 @@ fn a_query_among_the_scene_sees_what_the_moved_agent_sees() {
             assert_eq!(obs(&got, 0), obs(&want, i));
         }
     }
+}
+
+/// Verlet lists give exactly [`perceive`]'s output (lists, their order, branches, counts,
+/// densities, obstacle points) step after step on a moving herd, for skins from 0 to larger
+/// than the steps, while agents leave and enter (the herd's size changes, as through open
+/// boundaries) and some stand on one spot.
+#[test]
+fn verlet_lists_give_the_same_perception_as_a_fresh_search() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(53);
+    for skin in [0.0, 0.3, 1.0, 2.5] {
+        for occ in [false, true] {
+            let (mut pos, mut head, map) = scene(40 + skin as u64, 400);
+            let c = cfg(occ);
+            let mut lists = NeighbourLists::new(skin);
+            for step in 0..40 {
+                if step % 13 == 12 {
+                    // One agent leaves, two enter at random spots.
+                    pos.remove(step % pos.len());
+                    head.remove(step % head.len());
+                    for _ in 0..2 {
+                        pos.push([rng.gen_range(0.0..28.0), rng.gen_range(0.0..28.0)]);
+                        head.push([0.0, 1.0]);
+                    }
+                }
+                let got = lists.perceive(&pos, &head, Some(&map), &c);
+                let want = perceive(&pos, &head, Some(&map), &c);
+                assert_eq!(got, want, "skin {skin}, occlusion {occ}, step {step}");
+                for (i, (p, h)) in pos.iter_mut().zip(head.iter_mut()).enumerate() {
+                    if i % 7 == 0 {
+                        continue;
+                    }
+                    let a: f64 = rng.gen_range(-0.3..0.3);
+                    *h = [
+                        h[0] * a.cos() - h[1] * a.sin(),
+                        h[0] * a.sin() + h[1] * a.cos(),
+                    ];
+                    let v = rng.gen_range(0.0..0.12);
+                    *p = [p[0] + v * h[0], p[1] + v * h[1]];
+                }
+            }
+            let (builds, steps) = lists.builds_and_steps();
+            assert_eq!(steps, 40);
+            if skin >= 1.0 {
+                assert!(builds < 20, "skin {skin}: {builds} builds in 40 steps");
+            }
+        }
+    }
+}
+
+/// A Verlet list run is the same for any thread count.
+#[test]
+fn verlet_lists_do_not_depend_on_the_thread_count() {
+    let (pos, head, map) = scene(9, 500);
+    let c = cfg(true);
+    let run = |threads: usize| {
+        crate::on_threads(threads, || {
+            let mut lists = NeighbourLists::new(1.0);
+            let moved: Vec<P2> = pos.iter().map(|p| [p[0] + 0.1, p[1]]).collect();
+            lists.perceive(&pos, &head, Some(&map), &c);
+            lists.perceive(&moved, &head, Some(&map), &c)
+        })
+    };
+    assert_eq!(run(1), run(2));
 }

@@ -29,11 +29,17 @@ use crate::data::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::herd::params::{Constants, Params, N_PARAMS};
 use burn::tensor::{Device, Tensor, TensorData};
-use herdfit_kernels::{perceive, Capsule, Perception, PerceptionConfig, P2};
+use herdfit_kernels::{perceive, Capsule, NeighbourLists, Perception, PerceptionConfig, P2};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// Skin s (BL) of the neighbour candidates a run keeps between steps ([`NeighbourLists`]):
+/// candidates within R_perc + s, rebuilt once an agent has moved s/2. It changes no decision,
+/// only the time; chosen by the criterion sweep `cargo bench --bench step -- neighbour_skin`
+/// (docs/performance.md).
+pub const NEIGHBOUR_SKIN: f64 = 0.5;
 
 /// Guard of the vector normalisation N(·) of eq. 2 (BL²/s²).
 const NORM_EPS: f64 = 1e-12;
@@ -394,6 +400,33 @@ impl Model {
             self.world.obstacles.as_ref(),
             &self.perception_config(),
         );
+        self.decide_from(perception, snap, rng)
+    }
+
+    /// [`Model::decide`] with the neighbour candidates kept in `lists` between the steps of a
+    /// run: the same decisions, faster.
+    pub fn decide_with(
+        &self,
+        snap: &Snapshot,
+        rng: &mut impl Rng,
+        lists: &mut NeighbourLists,
+    ) -> StepDecisions {
+        let perception = lists.perceive(
+            &snap.pos,
+            &snap.head,
+            self.world.obstacles.as_ref(),
+            &self.perception_config(),
+        );
+        self.decide_from(perception, snap, rng)
+    }
+
+    /// Roles (§5.1, DESIGN §4.2) and ξ of eq. 6 from this step's perception.
+    fn decide_from(
+        &self,
+        perception: Perception,
+        snap: &Snapshot,
+        rng: &mut impl Rng,
+    ) -> StepDecisions {
         let max_front = self.params.constants.leader_max_neighbours;
         let n = snap.pos.len();
         let mut leader = vec![false; n];

@@ -8,7 +8,7 @@ use crate::data::AgentRow;
 use crate::error::{Error, Result};
 use crate::herd::sim::Guidance;
 use burn::tensor::Tensor;
-use herdfit_kernels::P2;
+use herdfit_kernels::{NeighbourLists, P2};
 use rand::Rng;
 
 /// Where a rollout's no-gradient decisions come from.
@@ -166,13 +166,14 @@ impl Model {
                 )));
             }
         }
+        let mut lists = NeighbourLists::new(super::NEIGHBOUR_SKIN);
         for t in 0..steps {
             hooks.before_decide(t, &mut model)?;
             let live;
             let dec = match &mut decide {
                 Decide::Replay(rec) => &rec.steps[t],
                 Decide::Live { rng, record } => {
-                    live = model.decide(&state.snapshot()?, *rng);
+                    live = model.decide_with(&state.snapshot()?, *rng, &mut lists);
                     if let Some(r) = record {
                         r.steps.push(live.clone());
                     }
