@@ -178,3 +178,23 @@ fn a_boundary_file_overrides_the_derived_gates_and_is_checked() {
         "{e}"
     );
 }
+
+/// A caller that asks validate to stop (the Python package's Ctrl-C) gets `Error::Interrupted`
+/// after the seed in progress, and no further seed is run.
+#[test]
+fn validate_stops_after_the_seed_in_progress_when_asked() {
+    let clip = corridor(30, 0.6, -2.0);
+    let cfg = ValidateConfig {
+        split: 0.5,
+        seeds: 4,
+        ..Default::default()
+    };
+    let sets = vec![("neutral".to_string(), Params::neutral())];
+    let mut seeds_run = 0;
+    let r = validate(&clip, "corridor", &sets, &cfg, || {
+        seeds_run += 1;
+        Err::<(), _>(herdfit::error::Error::Interrupted)
+    });
+    assert!(matches!(r, Err(herdfit::error::Error::Interrupted)));
+    assert_eq!(seeds_run, 1, "no seed after the interrupt");
+}

@@ -202,7 +202,10 @@ pub fn ablate(
         })?;
         let fit_seconds = t0.elapsed().as_secs_f64();
         let sets = [(name.clone(), res.params.clone())];
-        let (mut report, _) = validate(&k, clip_name, &sets, &cfg.validate, || progress.inc(1))?;
+        let (mut report, _) = validate(&k, clip_name, &sets, &cfg.validate, || {
+            progress.inc(1);
+            progress.check()
+        })?;
         let validation = report.sets.remove(0);
         first_report.get_or_insert(report);
         out.push(Variant {

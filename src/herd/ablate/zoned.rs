@@ -131,7 +131,10 @@ pub fn ablate_zones(
             grid: k.grid(),
         };
         let named = [(name.clone(), sets)];
-        let mut reports = validate_zones(&k, &named, &cfg.validate, || progress.inc(1))?;
+        let mut reports = validate_zones(&k, &named, &cfg.validate, || {
+            progress.inc(1);
+            progress.check()
+        })?;
         let [(_, sets)] = named;
         let report = ZoneVariantReport {
             name,

@@ -18,6 +18,7 @@ use crate::herd::params::Params;
 use crate::herd::start::Settle;
 use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocity, Emergent};
 use crate::measure::rasterise;
+use crate::progress::Proceed;
 use serde::Serialize;
 
 pub mod paired;
@@ -451,12 +452,12 @@ fn measure_rows(video: &[Emergent], sims: &[Vec<f64>], errs: &[Vec<f64>]) -> Vec
 }
 
 /// Validates parameter sets on the held-out part `[split·F, F)` of a clip.
-pub fn validate(
+pub fn validate<R: Proceed>(
     clip: &ClipFields,
     clip_name: &str,
     sets: &[(String, Params)],
     cfg: &ValidateConfig,
-    mut progress: impl FnMut(),
+    mut progress: impl FnMut() -> R,
 ) -> Result<(Report, Vec<Vec<SimRun>>)> {
     cfg.check()?;
     let (split, grid, seeds) = (cfg.split, cfg.coarse_grid, cfg.seeds);
@@ -536,7 +537,7 @@ pub fn validate(
             }
             population.add(&run, w);
             runs.push(run);
-            progress();
+            progress().proceed()?;
         }
         if cfg.ensemble_mean {
             for k in 0..nf - start {

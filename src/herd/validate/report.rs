@@ -176,7 +176,10 @@ pub fn run(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Report, St
         &job.clip.display().to_string(),
         &sets,
         &job.config,
-        || progress.inc(1),
+        || {
+            progress.inc(1);
+            progress.check()
+        },
     )
     .map_err(|e| e.in_file(&job.clip))?;
     progress.finish();

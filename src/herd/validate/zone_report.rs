@@ -84,8 +84,11 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
     }
     let out = AtomicDir::create(&job.out)?;
     progress.start("validate", (sets.len() * job.config.seeds) as u64);
-    let reports = validate_zones(&clip, &sets, &job.config, || progress.inc(1))
-        .map_err(|e| e.in_file(&job.clip))?;
+    let reports = validate_zones(&clip, &sets, &job.config, || {
+        progress.inc(1);
+        progress.check()
+    })
+    .map_err(|e| e.in_file(&job.clip))?;
     progress.finish();
     let z = &fitted.zones;
     let nf = clip.frames();

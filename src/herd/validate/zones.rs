@@ -13,6 +13,7 @@ use crate::herd::guidance::guidance_fields;
 use crate::herd::zoned::ZoneSets;
 use crate::measure::fields::{cell_errors, coarse_cells, emergent, smooth_velocity};
 use crate::measure::rasterise;
+use crate::progress::Proceed;
 use ndarray::s;
 use serde::Serialize;
 
@@ -81,11 +82,11 @@ fn zone_density_error(
 /// (`cfg.seeds` runs each, errors averaged over the runs' frames; with `cfg.ensemble_mean` the
 /// zones' emergent measures are averaged over the runs frame by frame before they are compared,
 /// the density errors stay per run).
-pub fn validate_zones(
+pub fn validate_zones<R: Proceed>(
     clip: &ClipFields,
     sets: &[(String, ZoneSets)],
     cfg: &ValidateConfig,
-    mut progress: impl FnMut(),
+    mut progress: impl FnMut() -> R,
 ) -> Result<Vec<ZoneSetReport>> {
     cfg.check()?;
     let anchors = cfg.anchors(clip)?;
@@ -172,7 +173,7 @@ pub fn validate_zones(
                     }
                 }
             }
-            progress();
+            progress().proceed()?;
         }
         if cfg.ensemble_mean {
             for (k, mean_k) in means.iter().enumerate() {
