@@ -386,6 +386,21 @@ fn demo_runs_the_whole_chain() {
         text.contains("held-out frames 60..120, start → fitted"),
         "{text}"
     );
+    // The files name the folder the user gave, never the temporary one they were written in
+    // (which is gone): the fitted set's clip is `<out>/clip` (or `<out>/synthetic` without
+    // OpenCV), and it exists.
+    let params = std::fs::read_to_string(out.join("params.json")).unwrap();
+    assert!(!params.contains(".herdfit-"), "{params}");
+    let clip_named = [out.join("clip"), out.join("synthetic")]
+        .into_iter()
+        .find(|c| params.contains(&format!("\"{}\"", c.display())))
+        .unwrap_or_else(|| panic!("no clip of {} named in {params}", out.display()));
+    assert!(clip_named.join("clip.json").is_file());
+    for f in ["report/report.md", "report/report.json", "clip/clip.json"] {
+        if let Ok(t) = std::fs::read_to_string(out.join(f)) {
+            assert!(!t.contains(".herdfit-"), "{f}: {t}");
+        }
+    }
     for f in [
         "truth.json",
         "start.json",

@@ -309,6 +309,50 @@ impl AtomicDir {
             .map_err(|e| Error::file(self.target.join(name), format!("cannot write: {e}")))
     }
 
+    /// Rewrites the text files of the folder (`.json`, `.md`, `.csv`, `.txt`, at any depth) that
+    /// name the temporary folder so that they name the target instead: for writers that record
+    /// the paths of what they wrote and read back inside the folder (the demo), so the committed
+    /// files point at files that exist and do not depend on the temporary name.
+    pub fn name_the_target_in_text_files(&self) -> Result<()> {
+        let (from, to) = (
+            self.tmp.path().display().to_string(),
+            self.target.display().to_string(),
+        );
+        let mut stack = vec![self.tmp.path().to_path_buf()];
+        let fail = |p: &Path, e: std::io::Error| {
+            let shown = cleanup::user_facing(&p.display().to_string());
+            Error::file(Path::new(&shown), format!("cannot rewrite: {e}"))
+        };
+        while let Some(dir) = stack.pop() {
+            let mut entries: Vec<_> = std::fs::read_dir(&dir)
+                .map_err(|e| fail(&dir, e))?
+                .map(|e| e.map(|e| e.path()))
+                .collect::<std::io::Result<_>>()
+                .map_err(|e| fail(&dir, e))?;
+            entries.sort();
+            for p in entries {
+                if p.is_dir() {
+                    stack.push(p);
+                    continue;
+                }
+                let text_file = p
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| matches!(e, "json" | "md" | "csv" | "txt"));
+                if !text_file {
+                    continue;
+                }
+                let Ok(text) = std::fs::read_to_string(&p) else {
+                    continue;
+                };
+                if text.contains(&from) {
+                    std::fs::write(&p, text.replace(&from, &to)).map_err(|e| fail(&p, e))?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Renames the finished folder into place (replacing a previous output); under a plan, stages
     /// it.
     pub fn commit(self) -> Result<()> {

@@ -29,5 +29,7 @@ pub fn exec(a: DemoArgs) -> Result<()> {
     show(crate::lift::demo(&out, &mut Bars::default())?.to_string());
     println!();
     show(crate::crowd::demo(&out.join("crowd"), &mut Bars::default())?.to_string());
+    // The files record where the clips they came from are: the folder the user gave.
+    dir.name_the_target_in_text_files()?;
     dir.commit()
 }
