@@ -211,11 +211,15 @@ pub fn simulate(job: &SimulateJob, progress: &mut dyn Progress) -> Result<usize>
 /// The parameter set of a run (the built-in one when `path` is absent), with the config's speed
 /// noise.
 fn run_params(path: Option<&Path>, cfg: &SimulateConfig) -> Result<Params> {
-    let mut params = load_params(path)?;
+    Ok(with_speed_noise(load_params(path)?, cfg))
+}
+
+/// `params` with the config's speed noise, when it sets one.
+fn with_speed_noise(mut params: Params, cfg: &SimulateConfig) -> Params {
     if let Some(s) = cfg.speed_noise {
         params.speed.std = s;
     }
-    Ok(params)
+    params
 }
 
 /// The open world of a simulation: no obstacles, the config's uniform guidance.
@@ -316,16 +320,14 @@ pub fn simulate_frames(
     progress: &mut dyn Progress,
 ) -> Result<Trajectory> {
     cfg.check()?;
-    let mut params = match params {
+    let params = match params {
         Some(p) => {
             p.validate()?;
             p
         }
         None => Params::default(),
     };
-    if let Some(s) = cfg.speed_noise {
-        params.speed.std = s;
-    }
+    let params = with_speed_noise(params, cfg);
     let rows = match herd {
         Herd::Agents(n) => {
             crate::limits::check_count("agents", n, crate::limits::MAX_AGENTS)?;
