@@ -10,7 +10,7 @@ use herdfit::herd::fit::{self, FitJob};
 use herdfit::herd::gradcheck::GradcheckJob;
 use herdfit::herd::import_tracks::{import_tracks, ImportTracksJob};
 use herdfit::herd::synth::{write_clip, SynthJob};
-use herdfit::herd::validate::{self, zone_report, ValidateJob};
+use herdfit::herd::validate::{zone_report, ValidateJob};
 use herdfit::progress::Progress;
 use pyo3::prelude::*;
 use serde::de::DeserializeOwned;
@@ -57,17 +57,11 @@ fn run_job(
         }
         "validate" => {
             let j: ValidateJob = de(py, kind, job)?;
-            detached(py, &mut prog, |p| match zone_report::is_bundle(&j.params) {
-                true => zone_report::run_bundle(&j, p).map(|r| r.1),
-                false => validate::run(&j, p).map(|r| r.1),
-            })
+            detached(py, &mut prog, |p| zone_report::run_either(&j, p))
         }
         "ablate" => {
             let j: AblateJob = de(py, kind, job)?;
-            detached(py, &mut prog, |p| match j.zones {
-                Some(_) => ablate::zoned::run(&j, p).map(|r| r.1),
-                None => ablate::run(&j, p).map(|r| r.1),
-            })
+            detached(py, &mut prog, |p| ablate::zoned::run_either(&j, p))
         }
         "import_tracks" => {
             let j: ImportTracksJob = de(py, kind, job)?;

@@ -5,7 +5,7 @@ use crate::cli::commands::fit::StepFlags;
 use crate::cli::paths::{InDir, InFile, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
-use crate::herd::ablate::{run, zoned, AblateConfig, AblateJob, Switch, SWITCHES};
+use crate::herd::ablate::{zoned, AblateConfig, AblateJob, Switch, SWITCHES};
 use crate::herd::fit::{FitConfig, LossKind, Settle, GUIDANCE_SCALE};
 use crate::herd::validate::ValidateConfig;
 use clap::Args;
@@ -97,11 +97,7 @@ pub fn exec(a: AblateArgs) -> Result<()> {
             switches,
         },
     };
-    let md = match job.zones {
-        Some(_) => zoned::run(&job, &mut Bars::default()).map(|r| r.1),
-        None => run(&job, &mut Bars::default()).map(|r| r.1),
-    }
-    .map_err(|e| with_flags(e, &[]))?;
+    let md = zoned::run_either(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     print!("{md}");
     println!("wrote {}", job.out.display());
     Ok(())

@@ -5,7 +5,7 @@ use crate::cli::paths::{InDir, InFile, InFileOrWord, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::fit::{Settle, GUIDANCE_SCALE};
-use crate::herd::validate::{run, zone_report, Measures, ValidateConfig, ValidateJob};
+use crate::herd::validate::{zone_report, Measures, ValidateConfig, ValidateJob};
 use clap::Args;
 
 #[derive(Args, Debug)]
@@ -98,15 +98,7 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
         },
     };
     // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.
-    let md = if zone_report::is_bundle(&job.params) {
-        zone_report::run_bundle(&job, &mut Bars::default())
-            .map_err(|e| with_flags(e, &[]))?
-            .1
-    } else {
-        run(&job, &mut Bars::default())
-            .map_err(|e| with_flags(e, &[]))?
-            .1
-    };
+    let md = zone_report::run_either(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     print!("{md}");
     println!("wrote {}", job.out.display());
     Ok(())

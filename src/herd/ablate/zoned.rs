@@ -158,6 +158,15 @@ pub fn ablate_zones(
     Ok((out, [held, nf]))
 }
 
+/// Runs an ablation job: zone by zone when `job.zones` is set ([`run`]), else on one parameter set
+/// ([`super::run`]); returns the report's Markdown (what the CLI prints).
+pub fn run_either(job: &AblateJob, progress: &mut dyn Progress) -> Result<String> {
+    match job.zones {
+        Some(_) => run(job, progress).map(|r| r.1),
+        None => super::run(job, progress).map(|r| r.1),
+    }
+}
+
 /// Runs a zone ablation job (`job.zones` set): loads the clip, the zones and the start, runs
 /// [`ablate_zones`] and writes the report folder atomically — `ablation.json`, `ablation.md`,
 /// `errors.png` and each variant's bundle `params-<variant>.json` (`herdfit.param-sets/1`, which

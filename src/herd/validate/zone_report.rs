@@ -42,6 +42,17 @@ pub struct ZoneInfo {
     pub speed: Option<f64>,
 }
 
+/// Runs a validation job whatever its parameter file holds: a zone fit's bundle
+/// (`herdfit.param-sets/1`) zone by zone ([`run_bundle`]), one set as [`super::run`]; returns the
+/// report's Markdown (what the CLI prints).
+pub fn run_either(job: &ValidateJob, progress: &mut dyn Progress) -> Result<String> {
+    if is_bundle(&job.params) {
+        run_bundle(job, progress).map(|r| r.1)
+    } else {
+        super::run(job, progress).map(|r| r.1)
+    }
+}
+
 /// Whether `path` holds a parameter-set bundle (its `schema` says so); unreadable files are
 /// left to the parameter-set reader's message.
 pub fn is_bundle(path: &Path) -> bool {
