@@ -1,6 +1,9 @@
 //! Device selection. Model code never names a backend: it receives a burn [`Device`] and creates
-//! every tensor on it. Today that is burn's ndarray CPU device; a GPU backend is one more arm here
-//! behind a cargo feature.
+//! every tensor on it. [`device`] gives burn's ndarray CPU device ([`Compute::Cpu`], the default)
+//! or, built with the cargo feature `gpu`, burn's wgpu device ([`Compute::Gpu`]: CubeCL over
+//! Vulkan, Metal or DX12; a software Vulkan driver such as Mesa's lavapipe also counts). On the GPU
+//! the forces run as burn tensor ops (the fused op of `herd::sim::fused` is ndarray's) and
+//! perception stays on the CPU, reading each step's state back (DESIGN §9).
 
 use crate::error::{Error, Result};
 use burn::tensor::{Device, FloatDType};
@@ -22,6 +25,69 @@ impl Precision {
             Precision::F64 => FloatDType::F64,
         }
     }
+}
+
+/// Where a run's tensors live (`--device`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Compute {
+    /// burn's ndarray backend on the CPU.
+    #[default]
+    Cpu,
+    /// burn's wgpu backend (cargo feature `gpu`); f32 only.
+    Gpu,
+}
+
+enum_names!(Compute { Cpu = "cpu", Gpu = "gpu" });
+
+impl Compute {
+    /// True for the default, [`Compute::Cpu`] (configs leave the key out of their files then, so
+    /// files written before the key existed keep their bytes).
+    pub fn is_cpu(&self) -> bool {
+        *self == Compute::Cpu
+    }
+}
+
+/// The device `compute` names, computing in `precision`.
+pub fn device(compute: Compute, precision: Precision) -> Result<Device> {
+    match compute {
+        Compute::Cpu => cpu_device(precision),
+        Compute::Gpu => gpu_device(precision),
+    }
+}
+
+/// The wgpu device (the adapter wgpu prefers, or `CUBECL_WGPU_DEFAULT_DEVICE`, e.g. `Cpu` for a
+/// software Vulkan driver), initialised once per process.
+#[cfg(feature = "gpu")]
+pub fn gpu_device(precision: Precision) -> Result<Device> {
+    use std::sync::OnceLock;
+    static DEVICE: OnceLock<std::result::Result<Device, String>> = OnceLock::new();
+    if precision != Precision::F32 {
+        return Err(Error::config(
+            "precision",
+            "the GPU backend computes in f32 (WGSL has no f64): use --precision f32",
+        ));
+    }
+    DEVICE
+        .get_or_init(|| {
+            Device::wgpu_options().init().map_err(|e| {
+                format!(
+                    "no GPU device for --device gpu ({e}); install a Vulkan driver (on Debian, \
+                     mesa-vulkan-drivers gives the software one, lavapipe)"
+                )
+            })
+        })
+        .clone()
+        .map_err(Error::invalid)
+}
+
+/// Without the cargo feature `gpu`: an error saying how to get it.
+#[cfg(not(feature = "gpu"))]
+pub fn gpu_device(_precision: Precision) -> Result<Device> {
+    Err(Error::invalid(
+        "this herdfit was built without the GPU backend: rebuild with `cargo build --release \
+         --features gpu` (or use --device cpu)",
+    ))
 }
 
 /// The CPU device with its default float dtype set to `precision`.

@@ -484,3 +484,25 @@ fn usage_errors_are_one_line_too() {
     assert!(msg.contains("non-zero"), "{msg}");
     assert!(!std::path::Path::new("t.csv").exists());
 }
+
+/// Built without the cargo feature `gpu` (the README's plain build), `--device gpu` says how to
+/// get it, in one line, and writes nothing.
+#[cfg(not(feature = "gpu"))]
+#[test]
+fn device_gpu_without_the_feature_says_how_to_build_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t.csv");
+    let e = fails(&[
+        "simulate",
+        "--agents",
+        "30",
+        "--steps",
+        "5",
+        "--device",
+        "gpu",
+        "--out",
+        s(&out),
+    ]);
+    assert!(e.contains("--features gpu"), "{e}");
+    assert!(!out.exists());
+}

@@ -142,6 +142,15 @@ where
     .try_map(|s: String| s.parse::<T>())
 }
 
+/// `--device`.
+pub const DEVICES: &[(&str, &str)] = &[
+    ("cpu", "burn's ndarray backend on this CPU (the default)"),
+    (
+        "gpu",
+        "burn's wgpu backend (a build with the cargo feature `gpu`; f32); CUBECL_WGPU_DEFAULT_DEVICE picks the adapter, e.g. Cpu for a software Vulkan driver",
+    ),
+];
+
 /// `--precision`.
 pub const PRECISIONS: &[(&str, &str)] = &[("f32", ""), ("f64", "")];
 

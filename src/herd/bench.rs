@@ -1,7 +1,7 @@
 //! `herdfit bench`: wall time per step of simulation and of forward + backward through unrolled
 //! steps on the standard random herd, and the process's peak resident memory.
 
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::data::agents::AgentRow;
 use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::Result;
@@ -42,6 +42,9 @@ pub struct BenchReport {
     pub checkpointing: bool,
     /// Which implementation computed the forces of eq. 3–5.
     pub force_kernel: ForceKernel,
+    /// Where the tensors lived (not written when `cpu`).
+    #[serde(skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -69,19 +72,25 @@ pub fn peak_rss_mb() -> f64 {
 /// Runs the benchmark: `steps` live simulation steps (median per step), then, unless `sim_only`,
 /// `repeats` forward + backward passes through `steps` unrolled steps (median per step) with live
 /// decisions, and as many replaying recorded ones, with the forces computed by `force_kernel`.
-pub fn run_bench(
-    agents: usize,
-    steps: usize,
-    sim_only: bool,
-    repeats: usize,
-    checkpointing: bool,
-    force_kernel: ForceKernel,
-    mut progress: impl FnMut(),
-) -> Result<BenchReport> {
+pub fn run_bench(cfg: &BenchConfig, mut progress: impl FnMut()) -> Result<BenchReport> {
+    let BenchConfig {
+        agents,
+        steps,
+        sim_only,
+        repeats,
+        checkpointing,
+        force_kernel,
+        device: compute,
+    } = cfg.clone();
+    // The fused op is the ndarray backend's: elsewhere the tensor ops compute the forces.
+    let force_kernel = match compute {
+        Compute::Cpu => force_kernel,
+        Compute::Gpu => ForceKernel::Reference,
+    };
     if steps == 0 {
         return Err(crate::Error::config("steps", "must be ≥ 1"));
     }
-    let device = cpu_device(Precision::F32)?;
+    let device = device(compute, Precision::F32)?;
     let (mut model, init) = bench_model(agents, 1)?;
     model.force_kernel = force_kernel;
     let theta_v = model.params.to_vec();
@@ -151,6 +160,7 @@ pub fn run_bench(
         k,
         checkpointing,
         force_kernel,
+        device: compute,
     })
 }
 
@@ -212,8 +222,11 @@ pub struct BenchConfig {
     pub repeats: usize,
     /// burn's balanced gradient checkpointing in the backward pass.
     pub checkpointing: bool,
-    /// Which implementation computes the forces of eq. 3–5.
+    /// Which implementation computes the forces of eq. 3–5 (on the GPU always the tensor ops).
     pub force_kernel: ForceKernel,
+    /// Where the tensors live.
+    #[serde(skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
 }
 
 impl Default for BenchConfig {
@@ -225,6 +238,7 @@ impl Default for BenchConfig {
             repeats: 3,
             checkpointing: false,
             force_kernel: ForceKernel::Fused,
+            device: Compute::Cpu,
         }
     }
 }
@@ -264,15 +278,7 @@ pub fn run(cfg: &BenchConfig, json: &Path, progress: &mut dyn Progress) -> Resul
             2 * cfg.repeats.max(1)
         };
     progress.start("bench", total as u64);
-    let r = run_bench(
-        cfg.agents,
-        cfg.steps,
-        cfg.sim_only,
-        cfg.repeats,
-        cfg.checkpointing,
-        cfg.force_kernel,
-        || progress.inc(1),
-    )?;
+    let r = run_bench(cfg, || progress.inc(1))?;
     progress.finish();
     let text = serde_json::to_string_pretty(&r)
         .map_err(|e| crate::Error::Internal(format!("serialising report: {e}")))?;
@@ -285,9 +291,10 @@ impl std::fmt::Display for BenchReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "bench: {} agents, {} steps: simulation {:.3} ms/step{}{}, peak RSS {:.1} MB (K = {}, {:.1} visible neighbours/agent)",
+            "bench: {} agents, {} steps on the {}: simulation {:.3} ms/step{}{}, peak RSS {:.1} MB (K = {}, {:.1} visible neighbours/agent)",
             self.agents,
             self.steps,
+            self.device,
             self.sim_ms_per_step,
             self.grad_ms_per_step
                 .map_or(String::new(), |g| format!(", forward+backward {g:.3} ms/step")),

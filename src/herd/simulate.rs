@@ -2,7 +2,7 @@
 //! (`frame,time,id,x,y,vx,vy,role`; frame 0 is the initial state), optionally recording or
 //! replaying the run's no-gradient decisions (perception, roles, noise).
 
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::data::agents::{out_of_range, push_traj_frame, read_init_csv, AgentRow, TRAJ_HEADER};
 use crate::data::atomic::{check_writable, AtomicFile};
 use crate::error::{Error, Result};
@@ -29,6 +29,9 @@ pub struct SimulateConfig {
     /// Uniform guidance direction for leaders; without it leaders act as followers.
     pub guidance: Option<[f64; 2]>,
     pub precision: Precision,
+    /// Where the tensors live (left out of files when `cpu`).
+    #[serde(skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
     pub seed: u64,
 }
 
@@ -40,6 +43,7 @@ impl Default for SimulateConfig {
             speed_noise: None,
             guidance: None,
             precision: Precision::F32,
+            device: Compute::Cpu,
             seed: 0,
         }
     }
@@ -252,7 +256,7 @@ fn run_frames(
     progress: &mut dyn Progress,
     frame: &mut FrameSink<'_>,
 ) -> Result<Option<Recording>> {
-    let device = cpu_device(cfg.precision)?;
+    let device = device(cfg.device, cfg.precision)?;
     let model = Model {
         params: run.params,
         world: world_of(cfg),

@@ -1,6 +1,7 @@
 //! `herdfit bench`: flags → [`BenchConfig`] → [`run`] → one line.
 
-use crate::cli::args::with_flags;
+use crate::backend::Compute;
+use crate::cli::args::{choice, with_flags, DEVICES};
 use crate::cli::paths::OutFile;
 use crate::cli::Bars;
 use crate::error::Result;
@@ -28,6 +29,9 @@ pub struct BenchArgs {
     /// (the same values to round-off; slower).
     #[arg(long)]
     pub reference_forces: bool,
+    /// Where the tensors live.
+    #[arg(long, value_parser = choice::<Compute>(DEVICES), default_value_t = Compute::Cpu)]
+    pub device: Compute,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: OutFile,
@@ -41,6 +45,7 @@ pub fn exec(a: BenchArgs) -> Result<()> {
         repeats: a.repeats,
         checkpointing: a.checkpointing,
         force_kernel: ForceKernel::reference_if(a.reference_forces),
+        device: a.device,
     };
     let r = run(&cfg, &a.json, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     println!("{r}");

@@ -1,8 +1,8 @@
 //! `herdfit fit`: flags → [`FitJob`] → [`run`] → the summary.
 
 use super::fit_objective::{default_rollout, Objective, OBJECTIVES, ROLLOUTS, SPEEDS};
-use crate::backend::Precision;
-use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
+use crate::backend::{Compute, Precision};
+use crate::cli::args::{choice, parse_range, with_flags, DEVICES, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
 use crate::cli::Bars;
 use crate::error::Result;
@@ -117,6 +117,9 @@ pub struct FitArgs {
     pub guidance_scale: f64,
     #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
+    /// Where the tensors live (the fields objective; the track objective runs on the CPU).
+    #[arg(long, value_parser = choice::<Compute>(DEVICES), default_value_t = Compute::Cpu)]
+    pub device: Compute,
     /// Global phase: K candidate starts (the given one, then a Latin hypercube over the
     /// parameter box), each refined by the gradient fit, the best on held-out frames kept
     /// (1: the plain fit on every frame).
@@ -229,6 +232,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             replicas: a.replicas,
             guidance_scale: a.guidance_scale,
             force_kernel: crate::herd::sim::ForceKernel::reference_if(a.reference_forces),
+            device: a.device,
             global: GlobalPhase {
                 starts: a.starts,
                 holdout: a.holdout,

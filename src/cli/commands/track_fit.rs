@@ -18,6 +18,9 @@ pub fn exec(a: FitArgs) -> Result<()> {
             "{flag} is an option of the fields objective, not of --objective tracks"
         )))
     };
+    if !a.device.is_cpu() {
+        return refuse("--device gpu");
+    }
     if a.zones.is_some() {
         return refuse("--zones");
     }

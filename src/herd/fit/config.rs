@@ -1,6 +1,6 @@
 //! The settings of a fit ([`FitConfig`]), the objective ([`LossKind`]) and their checks.
 
-use crate::backend::Precision;
+use crate::backend::{Compute, Precision};
 use crate::data::ClipFields;
 use crate::error::{check_counts, Error, Result};
 use crate::herd::boundary::BoundaryChoice;
@@ -63,6 +63,9 @@ pub struct FitConfig {
         skip_serializing_if = "crate::herd::sim::ForceKernel::is_fused"
     )]
     pub force_kernel: crate::herd::sim::ForceKernel,
+    /// Where the tensors live (not written when `cpu`, so checkpoints keep their bytes).
+    #[serde(default, skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
     /// The global phase before the gradient refinement ([`crate::herd::fit::global`]; not
     /// written when off, so checkpoints of single-start fits keep their bytes).
     #[serde(default, skip_serializing_if = "GlobalPhase::is_off")]
@@ -214,6 +217,7 @@ impl Default for FitConfig {
             replicas: 1,
             guidance_scale: GUIDANCE_SCALE,
             force_kernel: crate::herd::sim::ForceKernel::Fused,
+            device: Compute::Cpu,
             global: GlobalPhase::default(),
             frozen: Vec::new(),
             density_weight: 1.0,

@@ -10,7 +10,7 @@ use super::loss::StepTarget;
 use super::loss::{add, density_loss, ensemble_loss_weighted, fields_loss_weighted, step_loss};
 use super::plan::{plan_step, window_loss};
 use super::target::Stencil;
-use crate::backend::cpu_device;
+use crate::backend::device;
 use crate::data::agents::AgentRow;
 use crate::data::boundary::Gates;
 use crate::data::ClipFields;
@@ -187,7 +187,7 @@ impl<'a> FitRun<'a> {
             cfg.check_clip(clip)?;
         }
         init.validate()?;
-        let device = cpu_device(cfg.precision)?;
+        let device = device(cfg.device, cfg.precision)?;
         // Long windows can trade time for memory with burn's balanced gradient checkpointing.
         let ad: Device = if cfg.checkpointing {
             device.clone().autodiff().gradient_checkpointing()

@@ -1,0 +1,260 @@
+//! The GPU backend (cargo feature `gpu`, burn's wgpu backend) against the ndarray CPU backend:
+//! forward steps, gradients through unrolled steps, a gradient check against finite differences
+//! and a short fit, in f32 (issue #53). Run by CI on Mesa's lavapipe, a software Vulkan driver
+//! (`scripts/setup-debian.sh` installs it; `CUBECL_WGPU_DEFAULT_DEVICE=Cpu` picks it): the GPU
+//! path is exercised on a machine without a GPU. A machine without any Vulkan driver fails here
+//! with the device's own message, not silently.
+#![cfg(feature = "gpu")]
+
+use burn::tensor::Device;
+use herdfit::backend::{cpu_device, device, Compute, Precision};
+use herdfit::herd::gradcheck::{autodiff_gradient, finite_difference_gradient, record, rel_err};
+use herdfit::herd::params::Params;
+use herdfit::herd::scenario::{default_scenario, Scenario};
+use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Recording};
+use rand::{Rng, SeedableRng};
+
+/// The f32 tolerance of the parity checks, relative to 1 + |CPU value|: both backends compute in
+/// f32 with the same operations, but the GPU's reductions and transcendental functions round
+/// differently (a few ulps per step, growing through the unrolled steps: 1.9e-4 at worst over
+/// the 20 steps of the seeds below, on lavapipe).
+const F32_TOL: f64 = 1e-3;
+
+fn gpu() -> Device {
+    // Mesa's lavapipe when no hardware adapter is asked for: set before the runtime starts.
+    if std::env::var_os("CUBECL_WGPU_DEFAULT_DEVICE").is_none() {
+        std::env::set_var("CUBECL_WGPU_DEFAULT_DEVICE", "Cpu");
+    }
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    }
+    device(Compute::Gpu, Precision::F32).expect("the wgpu device (a Vulkan driver is installed)")
+}
+
+fn cpu() -> Device {
+    cpu_device(Precision::F32).unwrap()
+}
+
+/// The gradcheck scene (obstacles inside the herd, uniform guidance so agents lead) with random
+/// parameters; the tensor-op forces on both devices (the fused op is ndarray's).
+fn scene(agents: usize, seed: u64) -> Scenario {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let theta: [f64; 12] = std::array::from_fn(|_| rng.gen_range(0.15..0.95));
+    let mut sc = default_scenario(Params::default().with_vec(&theta), agents, seed).unwrap();
+    sc.model.force_kernel = ForceKernel::Reference;
+    sc
+}
+
+fn close(gpu: &[f64], cpu: &[f64], tol: f64, what: &str) -> f64 {
+    assert_eq!(gpu.len(), cpu.len(), "{what}: lengths");
+    let mut worst: f64 = 0.0;
+    for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
+        assert!(g.is_finite(), "{what}[{i}]: GPU {g}");
+        let e = (g - c).abs() / (1.0 + c.abs());
+        assert!(
+            e <= tol,
+            "{what}[{i}]: GPU {g} vs CPU {c} (relative {e:.2e} > {tol:.0e})"
+        );
+        worst = worst.max(e);
+    }
+    worst
+}
+
+/// Positions and headings of `steps` replayed steps, every step.
+fn trajectory(sc: &Scenario, rec: &Recording, steps: usize, dev: &Device) -> Vec<f64> {
+    let theta = theta_tensor(&sc.model.params.to_vec(), dev);
+    let mut out = Vec::new();
+    sc.model
+        .rollout::<rand_chacha::ChaCha8Rng>(
+            &theta,
+            HerdState::from_rows(&sc.init, dev),
+            steps,
+            Decide::Replay(rec),
+            |_, _, s| {
+                let snap = s.snapshot()?;
+                out.extend(snap.pos.iter().chain(&snap.head).flatten());
+                Ok(())
+            },
+        )
+        .unwrap();
+    out
+}
+
+#[test]
+fn gpu_steps_follow_the_cpu_steps_within_f32_tolerance() {
+    let (g, c) = (gpu(), cpu());
+    for seed in [1, 2] {
+        let sc = scene(300, seed);
+        let rec = record(&sc, 20, seed, &c).unwrap();
+        let on_gpu = trajectory(&sc, &rec, 20, &g);
+        let on_cpu = trajectory(&sc, &rec, 20, &c);
+        // 300 agents × 4 values × 20 steps (frame 0 included where the rollout hands it over).
+        assert!(on_cpu.len() >= 300 * 4 * 20, "{}", on_cpu.len());
+        let worst = close(&on_gpu, &on_cpu, F32_TOL, "positions and headings");
+        println!("seed {seed}: worst relative difference {worst:.2e}");
+        // The herd moved: the last frame is not the first.
+        let n = 300 * 4;
+        let moved = on_cpu[..n]
+            .iter()
+            .zip(&on_cpu[on_cpu.len() - n..])
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(moved > 0.5, "the herd did not move: {moved}");
+    }
+}
+
+#[test]
+fn gpu_gradients_through_ten_steps_equal_the_cpu_gradients() {
+    let (g, c) = (gpu(), cpu());
+    for seed in [11, 12] {
+        let sc = scene(250, seed);
+        let rec = record(&sc, 10, seed, &c).unwrap();
+        let theta = sc.model.params.to_vec();
+        let (jg, dg) = autodiff_gradient(&sc, &theta, &rec, 10, &g.clone().autodiff()).unwrap();
+        let (jc, dc) = autodiff_gradient(&sc, &theta, &rec, 10, &c.clone().autodiff()).unwrap();
+        close(&[jg], &[jc], F32_TOL, "J");
+        // Gradients scale with J: tolerance relative to the largest component.
+        let scale = dc.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        assert!(scale > 1e-6, "{dc:?}");
+        let (dg, dc): (Vec<f64>, Vec<f64>) = dg
+            .iter()
+            .zip(&dc)
+            .map(|(a, b)| (a / scale, b / scale))
+            .unzip();
+        let worst = close(&dg, &dc, 1e-3, "∂J/∂θ / max|∂J/∂θ|");
+        println!("seed {seed}: worst gradient difference {worst:.2e} of the largest component");
+    }
+}
+
+#[test]
+fn gpu_autodiff_passes_the_gradient_check_against_cpu_finite_differences() {
+    let g = gpu();
+    // Finite differences in f64 on the CPU are the truth; the GPU's f32 autodiff must meet them.
+    // (f64 tensors need their own process: one precision per process on the CPU device, and the
+    // finite differences here run in f32 with a step large enough for f32.)
+    let c = cpu();
+    let sc = scene(120, 3);
+    let rec = record(&sc, 10, 3, &c).unwrap();
+    let theta = sc.model.params.to_vec();
+    let (_, ad) = autodiff_gradient(&sc, &theta, &rec, 10, &g.autodiff()).unwrap();
+    let fd = finite_difference_gradient(&sc, &theta, &rec, 10, 1e-2, &c, || {}).unwrap();
+    let scale = fd.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    let mut worst: f64 = 0.0;
+    for (p, (a, f)) in ad.iter().zip(&fd).enumerate() {
+        let e = (a - f).abs() / scale;
+        worst = worst.max(e);
+        assert!(
+            e <= 2e-2,
+            "θ[{p}]: GPU autodiff {a} vs finite difference {f} ({e:.2e} of the largest, rel {:.2e})",
+            rel_err(*a, *f)
+        );
+    }
+    println!("gradcheck: GPU autodiff − finite differences at most {worst:.2e} of the largest");
+}
+
+mod common;
+
+/// A 2-epoch fit of the fields objective on a synthetic clip, once per device: the same
+/// parameters within the f32 tolerance (the decisions are made live, on states that differ by
+/// round-off).
+#[test]
+fn a_two_epoch_fit_on_the_gpu_ends_where_the_cpu_fit_ends() {
+    use herdfit::herd::fit::{fit, FitConfig, LossKind};
+    gpu();
+    let dir = tempfile::tempdir().unwrap();
+    let clip = herdfit::data::ClipFields::load(&common::small_clip(dir.path(), 40, 16, 3)).unwrap();
+    let start = Params::neutral();
+    let on = |compute: Compute| {
+        let cfg = FitConfig {
+            frames: 0..12,
+            epochs: 2,
+            window: 4,
+            loss: LossKind::Fields,
+            device: compute,
+            ..FitConfig::default()
+        };
+        fit(&clip, &start, &cfg, None, |_, _, _, _| {}).unwrap()
+    };
+    let (g, c) = (on(Compute::Gpu), on(Compute::Cpu));
+    let (pg, pc) = (g.params.to_vec(), c.params.to_vec());
+    // The fit moved the parameters, by more than the tolerance.
+    let moved = pc.iter().map(|v| (v - 0.5).abs()).fold(0.0, f64::max);
+    assert!(moved > 1e-2, "the fit did not move: {pc:?}");
+    for (p, (a, b)) in pg.iter().zip(&pc).enumerate() {
+        assert!((a - b).abs() <= 1e-3, "θ[{p}]: GPU {a} vs CPU {b}");
+    }
+    let worst = pg
+        .iter()
+        .zip(&pc)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    println!("2-epoch fit: parameters moved up to {moved:.3}, GPU − CPU at most {worst:.2e}");
+    assert_eq!(g.log.len(), c.log.len());
+}
+
+/// `herdfit simulate --device gpu` writes the trajectories the CPU run writes, within the f32
+/// tolerance (decisions made live on each device), and the flags the GPU cannot honour are
+/// refused in one line naming them.
+#[test]
+fn simulate_on_the_gpu_writes_the_cpu_trajectories_and_refuses_what_it_cannot_do() {
+    use common::{fails, ok, s};
+    gpu(); // the software adapter for the child processes too
+    let dir = tempfile::tempdir().unwrap();
+    let run = |device: &str| {
+        let out = dir.path().join(format!("{device}.csv"));
+        ok(&[
+            "simulate",
+            "--agents",
+            "300",
+            "--steps",
+            "50",
+            "--speed-noise",
+            "0",
+            "--device",
+            device,
+            "--out",
+            s(&out),
+        ]);
+        let text = std::fs::read_to_string(out).unwrap();
+        text.lines()
+            .skip(1)
+            .flat_map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                [f[3].parse::<f64>().unwrap(), f[4].parse::<f64>().unwrap()]
+            })
+            .collect::<Vec<f64>>()
+    };
+    let (g, c) = (run("gpu"), run("cpu"));
+    assert_eq!(c.len(), 51 * 300 * 2);
+    close(&g, &c, F32_TOL, "simulated positions");
+    let e = fails(&[
+        "simulate",
+        "--agents",
+        "30",
+        "--steps",
+        "5",
+        "--device",
+        "gpu",
+        "--precision",
+        "f64",
+        "--out",
+        s(&dir.path().join("f64.csv")),
+    ]);
+    assert!(e.contains("--precision") && e.contains("f32"), "{e}");
+    assert!(!dir.path().join("f64.csv").exists());
+    let clip = common::small_clip(dir.path(), 40, 16, 3);
+    let e = fails(&[
+        "fit",
+        s(&clip),
+        "--objective",
+        "tracks",
+        "--device",
+        "gpu",
+        "--out",
+        s(&dir.path().join("p.json")),
+    ]);
+    assert!(
+        e.contains("--device gpu") && e.contains("fields objective"),
+        "{e}"
+    );
+}
