@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # Installs what herdfit needs on a fresh Debian machine that has Rust: the system OpenCV and the
 # clang it is bound with (cargo feature `video`), a font for plots, OpenCV's sample video
-# vtest.avi (opencv-doc) that the extraction tests read, and the Python packages the tests and
+# vtest.avi (opencv-doc) that the extraction tests read, Mesa's Vulkan drivers (lavapipe, a
+# software Vulkan on which tests/gpu.rs runs the GPU backend without a GPU), and the Python packages the tests and
 # notebooks use, and the Khronos glTF validator (npm, into .ci/node_modules) that tests/lift.rs runs
 # on every exported .glb. Idempotent: packages already present are not fetched again.
 set -euo pipefail
 
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config fonts-dejavu-core opencv-doc python3 python3-pip
+  mesa-vulkan-drivers libvulkan1)
 PIP_PACKAGES=(numpy matplotlib nbclient nbformat ipykernel)
 
 missing=()
