@@ -91,7 +91,8 @@ def simulate(
     (``[n, 5]``: id, x, y, vx, vy in BL and BL/s). Returns ``(ids, frames)`` with ``frames`` of
     shape ``[steps + 1, agents, 5]`` (x, y, vx, vy, leader as 1/0); frame 0 is the start. The same
     numbers as ``herdfit simulate`` writes for the same seed. Other settings: ``fps``,
-    ``speed_noise``, ``guidance`` (dx, dy), ``precision`` (``f32``/``f64``)."""
+    ``speed_noise``, ``guidance`` (dx, dy), ``precision`` (``f32``/``f64``), ``device``
+    (``cpu``/``gpu``: burn's wgpu backend, f32)."""
     if isinstance(params, (str, os.PathLike)):
         params = Params.load(params)
     text = None if params is None else params.to_json()

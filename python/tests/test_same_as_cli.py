@@ -42,3 +42,14 @@ def test_short_fit_equals_the_cli_parameters_for_the_same_seed(cli, clip_dir, tm
     # The start was moved: the fit did something.
     assert p.values != herdfit.Params.from_json(json.dumps({**a, "forces": {
         f: {"weight": 0.5, "radial": 0.5, "angular": 0.5} for f in a["forces"]}})).values
+
+
+def test_simulate_on_the_gpu_follows_the_cpu_run(monkeypatch):
+    # The package is built with the GPU backend; CI has Mesa's lavapipe (a software Vulkan).
+    monkeypatch.setenv("CUBECL_WGPU_DEFAULT_DEVICE", "Cpu")
+    _, cpu = herdfit.simulate(agents=100, steps=30, seed=3, speed_noise=0, progress=False)
+    _, gpu = herdfit.simulate(agents=100, steps=30, seed=3, speed_noise=0, device="gpu", progress=False)
+    assert gpu.shape == cpu.shape == (31, 100, 5)
+    # f32 on both, rounded differently: positions within 1e-3 BL, the herd having moved metres.
+    assert np.abs(gpu[:, :, :2] - cpu[:, :, :2]).max() < 1e-3
+    assert np.abs(cpu[-1, :, :2] - cpu[0, :, :2]).max() > 1.0
