@@ -1,4 +1,4 @@
-//! `herdfit ablate`: flags → [`AblateJob`] → [`run`] → the report's Markdown.
+//! `herdfit ablate`: flags → [`AblateJob`] → [`zoned::run_either`] → the report's Markdown.
 
 use crate::cli::args::{choice, with_flags, LOSSES};
 use crate::cli::commands::fit::StepFlags;

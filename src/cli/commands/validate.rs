@@ -1,4 +1,4 @@
-//! `herdfit validate`: flags → [`ValidateJob`] → [`run`] → the report's Markdown.
+//! `herdfit validate`: flags → [`ValidateJob`] → [`zone_report::run_either`] → the report's Markdown.
 
 use crate::cli::args::{choice, parse_range, with_flags, MEASURES};
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutDir};
