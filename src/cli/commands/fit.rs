@@ -1,6 +1,8 @@
 //! `herdfit fit`: flags → [`FitJob`] → [`run`] → the summary.
 
-use super::fit_objective::{default_rollout, Objective, OBJECTIVES, ROLLOUTS, SPEEDS};
+use super::fit_objective::{
+    default_leaders, default_rollout, Objective, LEADERS, OBJECTIVES, ROLLOUTS, SPEEDS,
+};
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
@@ -10,7 +12,7 @@ use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
 };
-use crate::herd::track_fit::{Rollout, Speeds, TrackFitConfig};
+use crate::herd::track_fit::{Leaders, Rollout, Speeds, TrackFitConfig};
 use clap::Args;
 
 /// The gradient descent's flags, shared by `fit` and `ablate`.
@@ -187,6 +189,9 @@ pub struct FitArgs {
     /// error
     #[arg(long, value_name = "W", default_value_t = TrackFitConfig::default().heading_weight)]
     pub heading_weight: f64,
+    /// --objective tracks: whether tracked animals may lead (§5.1)
+    #[arg(long, value_parser = choice::<Leaders>(LEADERS), default_value_t = default_leaders())]
+    pub leaders: Leaders,
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {

@@ -56,6 +56,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             seed: a.seed,
             precision: a.precision,
             guidance_scale: a.guidance_scale,
+            leaders: a.leaders,
             frozen: a.freeze,
             force_kernel: ForceKernel::reference_if(a.reference_forces),
             ..defaults

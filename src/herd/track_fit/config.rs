@@ -25,6 +25,25 @@ pub enum Rollout {
 
 enum_names!(Rollout { Conditioned = "conditioned", Free = "free" });
 
+/// Whether the tracked animals of a window may lead (§5.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Leaders {
+    /// No animal leads: every animal turns by eq. 2 under the forces of eq. 3–5, so θ steers
+    /// them all. Tracked groups are sparse beside a filmed herd: with the §5.1 rule, 97 % of the
+    /// 15 fish's and 99 % of students003's rolled-out animal-steps lead and no set differs from
+    /// another (docs/notes/2026-12-07-track-rollout-leaders.md).
+    #[default]
+    Off,
+    /// The §5.1 rule as a fit from fields runs it: an animal with at most
+    /// `leader_max_neighbours` visible neighbours in its front cone takes the clip's guidance
+    /// direction (its cell's mean velocity, of frames no later than the window's start) and is
+    /// not scored in training; a clip's synthetic herd (`synth`) is made this way.
+    Field,
+}
+
+enum_names!(Leaders { Off = "off", Field = "field" });
+
 /// Where a rolled-out animal's speed comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -79,6 +98,8 @@ pub struct TrackFitConfig {
     pub speeds: Speeds,
     /// Learn eq. 6's speed model from the tracks ([`super::speed`]); off: the start set's.
     pub learn_speed: bool,
+    /// Whether tracked animals may lead (§5.1), following the clip's guidance.
+    pub leaders: Leaders,
 }
 
 impl Default for TrackFitConfig {
@@ -101,6 +122,7 @@ impl Default for TrackFitConfig {
             zero_grad_step: 0.02,
             speeds: Speeds::Expected,
             learn_speed: true,
+            leaders: Leaders::Off,
         }
     }
 }

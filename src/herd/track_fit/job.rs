@@ -121,7 +121,13 @@ pub fn load_inputs(
         .enumerate()
         .map(|(i, p)| {
             let t = tracks.get(i).map(PathBuf::as_path);
-            load_input(p, t, cfg.frames.clone(), cfg.guidance_scale, params)
+            load_input(
+                p,
+                t,
+                cfg.frames.clone(),
+                (cfg.leaders, cfg.guidance_scale),
+                params,
+            )
         })
         .collect()
 }
