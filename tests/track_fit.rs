@@ -6,7 +6,9 @@ use common::{fails, ok, s, small_clip};
 use herdfit::backend::{cpu_device, Precision};
 use herdfit::data::agents::AgentRow;
 use herdfit::herd::params::{param_names, Params, SpeedModel};
-use herdfit::herd::sim::{theta_tensor, Decide, ForceKernel, HerdState, Model, World};
+use herdfit::herd::sim::{
+    theta_tensor, Decide, ForceKernel, ForceTensors, HerdState, Model, World,
+};
 use herdfit::herd::track_fit::{
     fit_tracks, mean_loss, Fix, Rollout, TrackClip, TrackFitConfig, TrackSet,
 };
@@ -382,5 +384,51 @@ fn sparse_tracked_animals_are_steered_by_the_forces_not_the_leader_rule() {
             "leaders: the default set = the zero set {f:?}"
         );
         assert!(o[2] - o[0] > 0.1, "no leaders: the forces act {o:?}");
+    }
+}
+
+/// Eq. 2, d' = N(v·d + Δt F), is undefined for an animal at rest with no force on it (a standing
+/// pedestrian alone): it keeps its heading, on the plain device and through autodiff alike,
+/// instead of a zero heading that never moves again and whose bearings gave the ETH/UCY track
+/// fit a non-finite gradient.
+#[test]
+fn an_animal_at_rest_with_no_force_on_it_keeps_its_heading() {
+    use herdfit::herd::sim::{read_vec, Snapshot};
+    let model = Model {
+        params: Params::default(),
+        world: World::open(),
+        dt: 0.4,
+        force_kernel: ForceKernel::Fused,
+    };
+    let still = Snapshot {
+        pos: vec![[0.0, 0.0], [50.0, 0.0]],
+        head: vec![[0.6, 0.8], [1.0, 0.0]],
+        speed: vec![0.0, 1.0],
+    };
+    // f32: the precision the other tests of this process run in.
+    let plain = cpu_device(Precision::F32).unwrap();
+    for device in [plain.clone(), plain.autodiff()] {
+        let theta = theta_tensor(&model.params.to_vec(), &device);
+        let forces = ForceTensors::new(&theta, &model.params.constants);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut dec = model.decide(&still, &mut rng);
+        dec.xi.iter_mut().for_each(|x| *x = 0.0);
+        let next = model
+            .step(&forces, &HerdState::from_snapshot(&still, &device), &dec)
+            .unwrap();
+        let (hx, hy) = (read_vec(&next.hx).unwrap(), read_vec(&next.hy).unwrap());
+        let f = |v: f64| v as f32 as f64;
+        assert_eq!((hx[0], hy[0]), (f(0.6), f(0.8)), "at rest: its heading");
+        assert!(
+            (hx[1] - 1.0).abs() < 1e-6 && hy[1] == 0.0,
+            "moving: unchanged"
+        );
+        let (x, y, v) = (
+            read_vec(&next.x).unwrap(),
+            read_vec(&next.y).unwrap(),
+            read_vec(&next.speed).unwrap(),
+        );
+        assert!(v[0] > 0.0, "eq. 6 speeds it up towards v_μ");
+        assert!((x[0] - 0.6 * v[0] * 0.4).abs() < 1e-6 && (y[0] - 0.8 * v[0] * 0.4).abs() < 1e-6);
     }
 }

@@ -539,8 +539,23 @@ impl Model {
         let norm = (ux.clone().square() + uy.clone().square())
             .add_scalar(NORM_EPS)
             .sqrt();
-        let mut hx = ux / norm.clone();
-        let mut hy = uy / norm;
+        let mut hx = ux.clone() / norm.clone();
+        let mut hy = uy.clone() / norm;
+        // Eq. 2 leaves d' undefined at u = v·d + Δt F = 0 (an animal at rest with no force on
+        // it, e.g. a standing pedestrian): it keeps d. Checked only where some speed is 0.
+        let speeds = read_vec(&s.speed)?;
+        if speeds.contains(&0.0) {
+            let (u, w) = (read_vec(&ux.reshape([n]))?, read_vec(&uy.reshape([n]))?);
+            let keep: Vec<f64> = (0..n)
+                .map(|i| (speeds[i] == 0.0 && u[i] == 0.0 && w[i] == 0.0) as u8 as f64)
+                .collect();
+            if keep.contains(&1.0) {
+                let m = mat_tensor(keep, n, 1, &device);
+                let free = m.clone().neg().add_scalar(1.0);
+                hx = hx * free.clone() + s.hx.clone().reshape([n, 1]) * m.clone();
+                hy = hy * free + s.hy.clone().reshape([n, 1]) * m;
+            }
+        }
         if dec.leader.iter().any(|&l| l) {
             let follow: Vec<f64> = dec
                 .leader
@@ -553,7 +568,7 @@ impl Model {
             hx = hx * follow.clone() + gx;
             hy = hy * follow + gy;
         }
-        let speed = self.next_speeds(&read_vec(&s.speed)?, dec);
+        let speed = self.next_speeds(&speeds, dec);
         let speed = vec_tensor(speed, &device);
         let hx = hx.reshape([n]);
         let hy = hy.reshape([n]);
