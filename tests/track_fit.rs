@@ -388,9 +388,9 @@ fn sparse_tracked_animals_are_steered_by_the_forces_not_the_leader_rule() {
 }
 
 /// Eq. 2, d' = N(v·d + Δt F), is undefined for an animal at rest with no force on it (a standing
-/// pedestrian alone): it keeps its heading, on the plain device and through autodiff alike,
-/// instead of a zero heading that never moves again and whose bearings gave the ETH/UCY track
-/// fit a non-finite gradient.
+/// pedestrian alone, or one whose force vanishes): it keeps its heading, on the plain device and
+/// through autodiff alike, instead of a (near) zero heading that never moves again and whose
+/// bearings gave the ETH/UCY track fit a non-finite gradient.
 #[test]
 fn an_animal_at_rest_with_no_force_on_it_keeps_its_heading() {
     use herdfit::herd::sim::{read_vec, Snapshot};
@@ -413,9 +413,19 @@ fn an_animal_at_rest_with_no_force_on_it_keeps_its_heading() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let mut dec = model.decide(&still, &mut rng);
         dec.xi.iter_mut().for_each(|x| *x = 0.0);
-        let next = model
-            .step(&forces, &HerdState::from_snapshot(&still, &device), &dec)
+        // No force, and a vanishing one (1e-20 BL/s², which N(u) would turn into a heading of
+        // length 1e-14).
+        let state = HerdState::from_snapshot(&still, &device);
+        let tiny = model
+            .step_with(&forces, &state, &dec, Some(&[[1e-20, 0.0], [0.0, 0.0]]))
             .unwrap();
+        let th = (read_vec(&tiny.hx).unwrap(), read_vec(&tiny.hy).unwrap());
+        assert_eq!(
+            (th.0[0], th.1[0]),
+            (0.6f32 as f64, 0.8f32 as f64),
+            "vanishing force"
+        );
+        let next = model.step(&forces, &state, &dec).unwrap();
         let (hx, hy) = (read_vec(&next.hx).unwrap(), read_vec(&next.hy).unwrap());
         let f = |v: f64| v as f32 as f64;
         assert_eq!((hx[0], hy[0]), (f(0.6), f(0.8)), "at rest: its heading");
