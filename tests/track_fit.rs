@@ -442,3 +442,54 @@ fn an_animal_at_rest_with_no_force_on_it_keeps_its_heading() {
         assert!((x[0] - 0.6 * v[0] * 0.4).abs() < 1e-6 && (y[0] - 0.8 * v[0] * 0.4).abs() < 1e-6);
     }
 }
+
+/// `--starts K`: K candidates (the given start first), each after a short fit scored by the
+/// objective; the full fit starts from the lowest, and the set records them. Out of range: one
+/// line naming the flag, nothing written.
+#[test]
+fn the_global_phase_starts_the_fit_from_the_lowest_of_its_candidates() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = small_clip(d, 30, 20, 4);
+    let out = d.join("p.json");
+    let fit = |starts: &str| {
+        vec![
+            "fit".to_string(),
+            s(&clip).into(),
+            "--objective".into(),
+            "tracks".into(),
+            "--horizon".into(),
+            "0.3".into(),
+            "--epochs".into(),
+            "1".into(),
+            "--start-epochs".into(),
+            "1".into(),
+            "--starts".into(),
+            starts.into(),
+            "--no-uncertainty".into(),
+            "--out".into(),
+            s(&out).into(),
+        ]
+    };
+    let e = fails(&fit("0").iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(e.contains("--starts") && e.contains("out of range"), "{e}");
+    assert!(!out.exists());
+    let printed = ok(&fit("3").iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        printed.contains("global phase: 3 starts × 1 epochs"),
+        "{printed}"
+    );
+    let p: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let g = &p["provenance"]["global"];
+    let c = g["candidates"].as_array().unwrap();
+    assert_eq!(c.len(), 3);
+    assert_eq!(
+        c[0]["start"], p["provenance"]["start"],
+        "the given start first"
+    );
+    let scores: Vec<f64> = c.iter().map(|x| x["score"].as_f64().unwrap()).collect();
+    let best = g["best"].as_u64().unwrap() as usize;
+    assert!(scores.iter().all(|&x| x >= scores[best]), "{scores:?}");
+    assert!(c.iter().skip(1).all(|x| x["start"] != c[0]["start"]));
+}

@@ -189,6 +189,9 @@ pub struct FitArgs {
     /// error
     #[arg(long, value_name = "W", default_value_t = TrackFitConfig::default().heading_weight)]
     pub heading_weight: f64,
+    /// --objective tracks with --starts > 1: epochs of each candidate's short fit
+    #[arg(long, value_name = "N", default_value_t = TrackFitConfig::default().start_epochs)]
+    pub start_epochs: usize,
     /// --objective tracks: whether tracked animals may lead (§5.1)
     #[arg(long, value_parser = choice::<Leaders>(LEADERS), default_value_t = default_leaders())]
     pub leaders: Leaders,

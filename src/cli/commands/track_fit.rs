@@ -21,8 +21,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
     if a.zones.is_some() {
         return refuse("--zones");
     }
-    if a.starts != 1 {
-        return refuse("--starts");
+    if a.holdout != crate::herd::fit::GlobalPhase::default().holdout {
+        return refuse("--holdout");
     }
     if a.checkpoint.is_some() {
         return refuse("--checkpoint");
@@ -57,6 +57,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
             precision: a.precision,
             guidance_scale: a.guidance_scale,
             leaders: a.leaders,
+            starts: a.starts,
+            start_epochs: a.start_epochs,
             frozen: a.freeze,
             force_kernel: ForceKernel::reference_if(a.reference_forces),
             ..defaults
@@ -72,6 +74,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
             &[
                 ("inputs", "CLIP/"),
                 ("frozen", "--freeze"),
+                ("starts", "--starts"),
+                ("start_epochs", "--start-epochs"),
                 ("uncertainty.seeds", "--uncertainty-seeds"),
                 ("uncertainty.step", "--uncertainty-step"),
             ],

@@ -100,6 +100,12 @@ pub struct TrackFitConfig {
     pub learn_speed: bool,
     /// Whether tracked animals may lead (§5.1), following the clip's guidance.
     pub leaders: Leaders,
+    /// Global phase ([`super::global`]): candidate starts (the given one, then a Latin hypercube
+    /// over the box), each refined by `start_epochs` epochs; the lowest objective starts the
+    /// full fit. 1: the plain fit.
+    pub starts: usize,
+    /// Epochs of each candidate's short fit.
+    pub start_epochs: usize,
 }
 
 impl Default for TrackFitConfig {
@@ -123,6 +129,8 @@ impl Default for TrackFitConfig {
             speeds: Speeds::Expected,
             learn_speed: true,
             leaders: Leaders::Off,
+            starts: 1,
+            start_epochs: 2,
         }
     }
 }
@@ -130,7 +138,13 @@ impl Default for TrackFitConfig {
 impl TrackFitConfig {
     /// Checks the settings; errors name the key.
     pub fn check(&self) -> Result<()> {
-        check_counts(&[("epochs", self.epochs)])?;
+        check_counts(&[("epochs", self.epochs), ("start_epochs", self.start_epochs)])?;
+        if !(1..=64).contains(&self.starts) {
+            return Err(Error::config(
+                "starts",
+                format!("{} is out of range 1..=64", self.starts),
+            ));
+        }
         check_guidance_scale(self.guidance_scale)?;
         for (key, v, lo, hi) in [
             ("horizon", self.horizon, 1e-9, 3600.0),

@@ -16,6 +16,7 @@
 //! - [`rollout`]: one window, both rollouts, its loss;
 //! - [`speed`]: eq. 6 from the tracks;
 //! - [`fit`]: the loop, the per-window probes of the identifiability estimate;
+//! - [`global`]: `--starts K`, the best of K short fits starts the full fit;
 //! - [`job`]: `herdfit fit --objective tracks` (files in and out);
 //! - [`eval`], [`report`]: `herdfit validate-tracks`, scores on held-out tracks.
 
@@ -23,6 +24,7 @@ pub mod config;
 pub mod data;
 pub mod eval;
 pub mod fit;
+pub mod global;
 pub mod job;
 pub mod report;
 pub mod rollout;
