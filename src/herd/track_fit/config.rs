@@ -30,9 +30,9 @@ enum_names!(Rollout { Conditioned = "conditioned", Free = "free" });
 #[serde(rename_all = "lowercase")]
 pub enum Leaders {
     /// No animal leads: every animal turns by eq. 2 under the forces of eq. 3–5, so θ steers
-    /// them all. Tracked groups are sparse beside a filmed herd: with the §5.1 rule, 97 % of the
-    /// 15 fish's and 99 % of students003's rolled-out animal-steps lead and no set differs from
-    /// another (docs/notes/2026-12-07-track-rollout-leaders.md).
+    /// them all. Tracked groups are sparse beside a filmed herd: with the §5.1 rule nearly every
+    /// tracked fish and pedestrian has no one in its front cone, leads, and no set differs from
+    /// another (measured in docs/notes/2026-12-07-track-rollout-leaders.md).
     #[default]
     Off,
     /// The §5.1 rule as a fit from fields runs it: an animal with at most

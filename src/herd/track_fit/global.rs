@@ -4,9 +4,9 @@
 //! ([`crate::optim::multistart`]); the refinement with the lowest objective (the mean window loss
 //! over one epoch, [`mean_loss`]) is where the full fit starts.
 //!
-//! The track objective's local minima are far apart in value: on the synthetic recovery clip
-//! the fits that ended in one had objectives 4–15× those that recovered θ*
-//! (docs/notes/2026-12-07-track-fit-results.md), so the objective ranks the candidates.
+//! The track objective's local minima lie well above its good minimum in value (measured on the
+//! synthetic recovery clip in docs/notes/2026-12-07-track-fit-results.md), so the objective
+//! itself ranks the candidates.
 
 use super::config::TrackFitConfig;
 use super::fit::{fit_tracks, mean_loss};
