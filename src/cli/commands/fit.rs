@@ -121,9 +121,10 @@ pub struct FitArgs {
     pub precision: Precision,
     /// Global phase: K candidate starts (the given one, then a Latin hypercube over the
     /// parameter box), each refined by the gradient fit, the best on held-out frames kept
-    /// (1: the plain fit on every frame).
-    #[arg(long, value_name = "K", default_value_t = GlobalPhase::default().starts)]
-    pub starts: usize,
+    /// (1: the plain fit on every frame). Default 1; with --objective tracks 4, each refined by
+    /// --start-epochs and ranked by the objective.
+    #[arg(long, value_name = "K")]
+    pub starts: Option<usize>,
     /// With --starts > 1: fraction of the frames (the last) held out of the refinements to rank
     /// the candidates.
     #[arg(long, value_name = "F", default_value_t = GlobalPhase::default().holdout)]
@@ -238,7 +239,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             guidance_scale: a.guidance_scale,
             force_kernel: crate::herd::sim::ForceKernel::reference_if(a.reference_forces),
             global: GlobalPhase {
-                starts: a.starts,
+                starts: a.starts.unwrap_or(GlobalPhase::default().starts),
                 holdout: a.holdout,
             },
             frozen: a.freeze,

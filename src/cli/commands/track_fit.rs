@@ -57,7 +57,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             precision: a.precision,
             guidance_scale: a.guidance_scale,
             leaders: a.leaders,
-            starts: a.starts,
+            starts: a.starts.unwrap_or(defaults.starts),
             start_epochs: a.start_epochs,
             frozen: a.freeze,
             force_kernel: ForceKernel::reference_if(a.reference_forces),

@@ -102,7 +102,8 @@ pub struct TrackFitConfig {
     pub leaders: Leaders,
     /// Global phase ([`super::global`]): candidate starts (the given one, then a Latin hypercube
     /// over the box), each refined by `start_epochs` epochs; the lowest objective starts the
-    /// full fit. 1: the plain fit.
+    /// full fit. 1: the plain fit. The default was chosen on the synthetic recovery clip
+    /// (docs/notes/2026-12-07-track-rollout-leaders.md).
     pub starts: usize,
     /// Epochs of each candidate's short fit.
     pub start_epochs: usize,
@@ -129,7 +130,7 @@ impl Default for TrackFitConfig {
             speeds: Speeds::Expected,
             learn_speed: true,
             leaders: Leaders::Off,
-            starts: 1,
+            starts: 4,
             start_epochs: 2,
         }
     }
