@@ -72,8 +72,9 @@ def main():
 
     def fit(k):
         out = os.path.join(tmp, f"fit{k}.json")
-        cmd = [a.herdfit, "fit", clip, "--objective", "tracks", "--out", out, "--start",
-               os.path.join(tmp, f"init{k}.json"), "--seed", str(k)] + a.extra.split()
+        # synth's herds are made with the leader rule (§5.1): the fit models it.
+        cmd = [a.herdfit, "fit", clip, "--objective", "tracks", "--leaders", "field", "--out",
+               out, "--start", os.path.join(tmp, f"init{k}.json"), "--seed", str(k)] + a.extra.split()
         print("$ " + " ".join(cmd), file=sys.stderr)
         if a.reuse and os.path.isfile(out):
             print(f"  (reused {out})", file=sys.stderr)

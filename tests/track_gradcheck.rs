@@ -10,7 +10,8 @@ use herdfit::backend::{cpu_device, Precision};
 use herdfit::herd::params::{Params, N_PARAMS};
 use herdfit::herd::sim::{read_vec, theta_tensor, Decide, ForceTensors, Recording};
 use herdfit::herd::track_fit::{
-    load_input, prepare, window_loss, Rollout, Scoring, Speeds, TrackClip, TrackFitConfig, Window,
+    load_input, prepare, window_loss, Leaders, Rollout, Scoring, Speeds, TrackClip, TrackFitConfig,
+    Window,
 };
 use rand::SeedableRng;
 
@@ -58,7 +59,7 @@ fn the_track_loss_gradient_matches_finite_differences_in_f64() {
         0.42, 0.55, 0.63, 0.58, 0.31, 0.47, 0.52, 0.44, 0.61, 0.66, 0.37, 0.58,
     ];
     let start = Params::default().with_vec(&theta);
-    let mut clips = vec![load_input(&path, None, 0..0, 0.0, &start).unwrap()];
+    let mut clips = vec![load_input(&path, None, 0..0, (Leaders::Field, 0.0), &start).unwrap()];
     let cfg = TrackFitConfig {
         precision: Precision::F64,
         ..TrackFitConfig::default()

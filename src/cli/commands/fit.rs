@@ -1,6 +1,8 @@
 //! `herdfit fit`: flags → [`FitJob`] → [`run`] → the summary.
 
-use super::fit_objective::{default_rollout, Objective, OBJECTIVES, ROLLOUTS, SPEEDS};
+use super::fit_objective::{
+    default_leaders, default_rollout, Objective, LEADERS, OBJECTIVES, ROLLOUTS, SPEEDS,
+};
 use crate::backend::{Compute, Precision};
 use crate::cli::args::{choice, parse_range, with_flags, DEVICES, LOSSES, OPTIMIZERS, PRECISIONS};
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
@@ -10,7 +12,7 @@ use crate::herd::fit::job::{run, FitJob};
 use crate::herd::fit::{
     FitConfig, GlobalPhase, LossKind, Optimizer, Settle, UncertaintyConfig, GUIDANCE_SCALE,
 };
-use crate::herd::track_fit::{Rollout, Speeds, TrackFitConfig};
+use crate::herd::track_fit::{Leaders, Rollout, Speeds, TrackFitConfig};
 use clap::Args;
 
 /// The gradient descent's flags, shared by `fit` and `ablate`.
@@ -122,9 +124,10 @@ pub struct FitArgs {
     pub device: Compute,
     /// Global phase: K candidate starts (the given one, then a Latin hypercube over the
     /// parameter box), each refined by the gradient fit, the best on held-out frames kept
-    /// (1: the plain fit on every frame).
-    #[arg(long, value_name = "K", default_value_t = GlobalPhase::default().starts)]
-    pub starts: usize,
+    /// (1: the plain fit on every frame). Default 1; with --objective tracks 4, each refined by
+    /// --start-epochs and ranked by the objective.
+    #[arg(long, value_name = "K")]
+    pub starts: Option<usize>,
     /// With --starts > 1: fraction of the frames (the last) held out of the refinements to rank
     /// the candidates.
     #[arg(long, value_name = "F", default_value_t = GlobalPhase::default().holdout)]
@@ -190,6 +193,12 @@ pub struct FitArgs {
     /// error
     #[arg(long, value_name = "W", default_value_t = TrackFitConfig::default().heading_weight)]
     pub heading_weight: f64,
+    /// --objective tracks with --starts > 1: epochs of each candidate's short fit
+    #[arg(long, value_name = "N", default_value_t = TrackFitConfig::default().start_epochs)]
+    pub start_epochs: usize,
+    /// --objective tracks: whether tracked animals may lead (§5.1)
+    #[arg(long, value_parser = choice::<Leaders>(LEADERS), default_value_t = default_leaders())]
+    pub leaders: Leaders,
 }
 
 pub fn exec(a: FitArgs) -> Result<()> {
@@ -234,7 +243,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             force_kernel: crate::herd::sim::ForceKernel::reference_if(a.reference_forces),
             device: a.device,
             global: GlobalPhase {
-                starts: a.starts,
+                starts: a.starts.unwrap_or(GlobalPhase::default().starts),
                 holdout: a.holdout,
             },
             frozen: a.freeze,

@@ -1,7 +1,7 @@
 //! `fit`'s objective flags: what it scores (`--objective`) and the track objective's choices,
 //! shared by [`super::fit`] (the flags) and [`super::track_fit`] (the run).
 
-use crate::herd::track_fit::{Rollout, TrackFitConfig};
+use crate::herd::track_fit::{Leaders, Rollout, TrackFitConfig};
 
 /// What `fit` scores.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -52,7 +52,24 @@ pub const SPEEDS: &[(&str, &str)] = &[
     ("noisy", "Eq. 6 with its noise, as a simulation runs"),
 ];
 
+/// The values of `--leaders`.
+pub const LEADERS: &[(&str, &str)] = &[
+    (
+        "off",
+        "No tracked animal leads: the forces steer every animal (tracked groups are sparse: with the §5.1 rule nearly every animal leads and no set differs)",
+    ),
+    (
+        "field",
+        "The §5.1 rule: an animal with few visible neighbours ahead follows the clip's guidance field, as synth's herds do",
+    ),
+];
+
 /// `Rollout`'s flag default, for clap.
 pub fn default_rollout() -> Rollout {
     TrackFitConfig::default().rollout
+}
+
+/// `Leaders`' flag default, for clap.
+pub fn default_leaders() -> Leaders {
+    TrackFitConfig::default().leaders
 }

@@ -24,8 +24,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
     if a.zones.is_some() {
         return refuse("--zones");
     }
-    if a.starts != 1 {
-        return refuse("--starts");
+    if a.holdout != crate::herd::fit::GlobalPhase::default().holdout {
+        return refuse("--holdout");
     }
     if a.checkpoint.is_some() {
         return refuse("--checkpoint");
@@ -59,6 +59,9 @@ pub fn exec(a: FitArgs) -> Result<()> {
             seed: a.seed,
             precision: a.precision,
             guidance_scale: a.guidance_scale,
+            leaders: a.leaders,
+            starts: a.starts.unwrap_or(defaults.starts),
+            start_epochs: a.start_epochs,
             frozen: a.freeze,
             force_kernel: ForceKernel::reference_if(a.reference_forces),
             ..defaults
@@ -74,6 +77,8 @@ pub fn exec(a: FitArgs) -> Result<()> {
             &[
                 ("inputs", "CLIP/"),
                 ("frozen", "--freeze"),
+                ("starts", "--starts"),
+                ("start_epochs", "--start-epochs"),
                 ("uncertainty.seeds", "--uncertainty-seeds"),
                 ("uncertainty.step", "--uncertainty-step"),
             ],

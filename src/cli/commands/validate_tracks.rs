@@ -1,6 +1,6 @@
 //! `herdfit validate-tracks`: flags → [`TrackEvalJob`] → [`run`] → the report's Markdown.
 
-use super::fit_objective::ROLLOUTS;
+use super::fit_objective::{LEADERS, ROLLOUTS, SPEEDS};
 use crate::backend::Precision;
 use crate::cli::args::{choice, parse_range, with_flags, PRECISIONS};
 use crate::cli::paths::{InDir, InFile, OutDir};
@@ -8,7 +8,7 @@ use crate::cli::Bars;
 use crate::error::Result;
 use crate::herd::track_fit::eval::TrackEvalConfig;
 use crate::herd::track_fit::report::{run, TrackEvalJob};
-use crate::herd::track_fit::Rollout;
+use crate::herd::track_fit::{Leaders, Rollout, Speeds};
 use clap::Args;
 
 #[derive(Args, Debug)]
@@ -67,6 +67,12 @@ pub struct ValidateTracksArgs {
     /// σ (cells) of the smoothing of the clip's momentum into the leaders' guidance.
     #[arg(long, value_name = "S", default_value_t = TrackEvalConfig::default().guidance_scale, allow_hyphen_values = true)]
     pub guidance_scale: f64,
+    /// Whether tracked animals may lead (§5.1), the same for every set.
+    #[arg(long, value_parser = choice::<Leaders>(LEADERS), default_value_t = TrackEvalConfig::default().leaders)]
+    pub leaders: Leaders,
+    /// The displacement errors' speeds: eq. 6 with its noise or without it (a point forecast).
+    #[arg(long, value_parser = choice::<Speeds>(&SPEEDS[1..]), default_value_t = TrackEvalConfig::default().speeds)]
+    pub speeds: Speeds,
     #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
     /// Output report folder.
@@ -104,6 +110,8 @@ pub fn exec(a: ValidateTracksArgs) -> Result<()> {
             blocks: a.blocks,
             free_run: a.free_run,
             guidance_scale: a.guidance_scale,
+            leaders: a.leaders,
+            speeds: a.speeds,
             precision: a.precision,
             ..TrackEvalConfig::default()
         },
@@ -122,6 +130,7 @@ pub fn exec(a: ValidateTracksArgs) -> Result<()> {
                 ("seeds", "--seeds"),
                 ("observe", "--observe"),
                 ("guidance_scale", "--guidance-scale"),
+                ("speeds", "--speeds"),
             ],
         )
     })?;

@@ -21,7 +21,7 @@
 // `backend.rs`).
 #![allow(deprecated)]
 
-use super::{ForceTensors, HerdState, Model, StepDecisions, NORM_EPS};
+use super::{at_rest, ForceTensors, HerdState, Model, StepDecisions, NORM_EPS};
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::{
     BalancedCheckpointing, CheckpointStrategy, NoCheckpointing,
@@ -340,7 +340,8 @@ struct PlainInputs<'a> {
 
 /// Eq. 2, the leaders' directions and the position update on plain values of type `T`, in the
 /// order of the tensor ops of [`Model::step_with`]: u = v·d + F·Δt (F plus the extra force),
-/// d' = u / √(u_x² + u_y² + ε), d' ← d'·follow + guide where any agent leads, p' = p + d'·(v'·Δt).
+/// d' = u / √(u_x² + u_y² + ε) (d' = d where the agent is at rest, [`at_rest`]),
+/// d' ← d'·follow + guide where any agent leads, p' = p + d'·(v'·Δt).
 fn plain_step_as<T: Elem>(
     model: &Model,
     inp: &PlainInputs<'_>,
@@ -363,6 +364,10 @@ fn plain_step_as<T: Elem>(
         let uy = v * T::of(st.hy[i]) + fy * dt;
         let norm = (ux * ux + uy * uy + eps).sqrt();
         let (mut hx, mut hy) = (ux / norm, uy / norm);
+        if at_rest(inp.speed[i], ux.wide(), uy.wide()) {
+            // At rest with no force on it: d' = d (as the tensor step).
+            (hx, hy) = (T::of(st.hx[i]), T::of(st.hy[i]));
+        }
         if lead {
             let follow = T::of(if dec.leader[i] { 0.0 } else { 1.0 });
             hx = hx * follow + T::of(dec.guide[i][0]);

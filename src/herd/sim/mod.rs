@@ -44,6 +44,15 @@ pub const NEIGHBOUR_SKIN: f64 = 0.5;
 /// Guard of the vector normalisation N(·) of eq. 2 (BL²/s²).
 const NORM_EPS: f64 = 1e-12;
 
+/// Speed (BL/s) below which eq. 2's u = v·d + Δt F may vanish: √[`NORM_EPS`].
+const REST_SPEED: f64 = 1e-6;
+
+/// Whether eq. 2 leaves an agent's heading as it was: speed `v` below [`REST_SPEED`] and
+/// |u|² = `ux`² + `uy`² below [`NORM_EPS`], where N(u) is no direction.
+fn at_rest(v: f64, ux: f64, uy: f64) -> bool {
+    v < REST_SPEED && ux * ux + uy * uy < NORM_EPS
+}
+
 /// Batched herd state: one entry per agent, all on one device.
 #[derive(Clone, Debug)]
 pub struct HerdState {
@@ -539,8 +548,24 @@ impl Model {
         let norm = (ux.clone().square() + uy.clone().square())
             .add_scalar(NORM_EPS)
             .sqrt();
-        let mut hx = ux / norm.clone();
-        let mut hy = uy / norm;
+        let mut hx = ux.clone() / norm.clone();
+        let mut hy = uy.clone() / norm;
+        // Eq. 2 leaves d' undefined where u = v·d + Δt F vanishes (an animal at rest with no
+        // force, or a vanishing one, on it: a standing pedestrian): below |u|² = ε it keeps d.
+        // Checked only where some speed is below √ε.
+        let speeds = read_vec(&s.speed)?;
+        if speeds.iter().any(|&v| v < REST_SPEED) {
+            let (u, w) = (read_vec(&ux.reshape([n]))?, read_vec(&uy.reshape([n]))?);
+            let keep: Vec<f64> = (0..n)
+                .map(|i| at_rest(speeds[i], u[i], w[i]) as u8 as f64)
+                .collect();
+            if keep.contains(&1.0) {
+                let m = mat_tensor(keep, n, 1, &device);
+                let free = m.clone().neg().add_scalar(1.0);
+                hx = hx * free.clone() + s.hx.clone().reshape([n, 1]) * m.clone();
+                hy = hy * free + s.hy.clone().reshape([n, 1]) * m;
+            }
+        }
         if dec.leader.iter().any(|&l| l) {
             let follow: Vec<f64> = dec
                 .leader
@@ -553,7 +578,7 @@ impl Model {
             hx = hx * follow.clone() + gx;
             hy = hy * follow + gy;
         }
-        let speed = self.next_speeds(&read_vec(&s.speed)?, dec);
+        let speed = self.next_speeds(&speeds, dec);
         let speed = vec_tensor(speed, &device);
         let hx = hx.reshape([n]);
         let hy = hy.reshape([n]);

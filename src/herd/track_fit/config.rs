@@ -25,6 +25,25 @@ pub enum Rollout {
 
 enum_names!(Rollout { Conditioned = "conditioned", Free = "free" });
 
+/// Whether the tracked animals of a window may lead (§5.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Leaders {
+    /// No animal leads: every animal turns by eq. 2 under the forces of eq. 3–5, so θ steers
+    /// them all. Tracked groups are sparse beside a filmed herd: with the §5.1 rule nearly every
+    /// tracked fish and pedestrian has no one in its front cone, leads, and no set differs from
+    /// another (measured in docs/notes/2026-12-07-track-rollout-leaders.md).
+    #[default]
+    Off,
+    /// The §5.1 rule as a fit from fields runs it: an animal with at most
+    /// `leader_max_neighbours` visible neighbours in its front cone takes the clip's guidance
+    /// direction (its cell's mean velocity, of frames no later than the window's start) and is
+    /// not scored in training; a clip's synthetic herd (`synth`) is made this way.
+    Field,
+}
+
+enum_names!(Leaders { Off = "off", Field = "field" });
+
 /// Where a rolled-out animal's speed comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -79,6 +98,15 @@ pub struct TrackFitConfig {
     pub speeds: Speeds,
     /// Learn eq. 6's speed model from the tracks ([`super::speed`]); off: the start set's.
     pub learn_speed: bool,
+    /// Whether tracked animals may lead (§5.1), following the clip's guidance.
+    pub leaders: Leaders,
+    /// Global phase ([`super::global`]): candidate starts (the given one, then a Latin hypercube
+    /// over the box), each refined by `start_epochs` epochs; the lowest objective starts the
+    /// full fit. 1: the plain fit. The default was chosen on the synthetic recovery clip
+    /// (docs/notes/2026-12-07-track-rollout-leaders.md).
+    pub starts: usize,
+    /// Epochs of each candidate's short fit.
+    pub start_epochs: usize,
 }
 
 impl Default for TrackFitConfig {
@@ -101,6 +129,9 @@ impl Default for TrackFitConfig {
             zero_grad_step: 0.02,
             speeds: Speeds::Expected,
             learn_speed: true,
+            leaders: Leaders::Off,
+            starts: 4,
+            start_epochs: 2,
         }
     }
 }
@@ -108,7 +139,13 @@ impl Default for TrackFitConfig {
 impl TrackFitConfig {
     /// Checks the settings; errors name the key.
     pub fn check(&self) -> Result<()> {
-        check_counts(&[("epochs", self.epochs)])?;
+        check_counts(&[("epochs", self.epochs), ("start_epochs", self.start_epochs)])?;
+        if !(1..=64).contains(&self.starts) {
+            return Err(Error::config(
+                "starts",
+                format!("{} is out of range 1..=64", self.starts),
+            ));
+        }
         check_guidance_scale(self.guidance_scale)?;
         for (key, v, lo, hi) in [
             ("horizon", self.horizon, 1e-9, 3600.0),

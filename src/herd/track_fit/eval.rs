@@ -10,7 +10,7 @@
 //! A seed fixes each window's noise ξ (eq. 6) for every set: seed s of two sets is a pair with
 //! common random numbers.
 
-use super::config::{steps_of, Rollout, Speeds};
+use super::config::{steps_of, Leaders, Rollout, Speeds};
 use super::rollout::{roll, TrackClip, Window};
 use crate::backend::{cpu_device, Precision};
 use crate::error::{Error, Result};
@@ -45,6 +45,11 @@ pub struct TrackEvalConfig {
     /// σ (cells) of the leaders' guidance smoothing; ∞ is written as "inf", not null.
     #[serde(with = "crate::limits::infinite_ok")]
     pub guidance_scale: f64,
+    /// Whether tracked animals may lead (§5.1): the same for every set scored.
+    pub leaders: Leaders,
+    /// The displacement errors' speeds: eq. 6 with its noise (one sample per seed) or without
+    /// it (the expected speeds: a point forecast); never the tracks' own (the future).
+    pub speeds: Speeds,
     pub precision: Precision,
 }
 
@@ -60,6 +65,8 @@ impl Default for TrackEvalConfig {
             free_run: 10.0,
             still: 0.1,
             guidance_scale: crate::herd::guidance::GUIDANCE_SCALE,
+            leaders: Leaders::Off,
+            speeds: Speeds::Noisy,
             precision: Precision::F32,
         }
     }
@@ -78,6 +85,13 @@ impl TrackEvalConfig {
             return bad(
                 "horizons",
                 "give one or more horizons in (0, 3600] s".into(),
+            );
+        }
+        if self.speeds == Speeds::Tracks {
+            return bad(
+                "speeds",
+                "tracks would move each animal at its future tracked speed: give noisy or expected"
+                    .into(),
             );
         }
         if self.rollouts.is_empty() {
@@ -242,7 +256,7 @@ pub fn score(
                 &clip,
                 &w,
                 rollout,
-                Speeds::Noisy,
+                cfg.speeds,
                 &forces,
                 device,
                 decide,

@@ -130,8 +130,8 @@ fn probe(
     let grad = gradient(l.loss, &th)?;
     if !loss.is_finite() || grad.iter().any(|g| !g.is_finite()) {
         return Err(Error::invalid(format!(
-            "clip #{}, window from frame {}: the loss ({loss}) or its gradient is not finite; \
-             likely cause: extreme positions or speeds in the tracks",
+            "clip #{}, window from frame {} at θ = {theta:?}: the loss ({loss}) or its \
+             gradient is not finite; likely cause: extreme positions or speeds in the tracks",
             w.clip, w.start
         )));
     }

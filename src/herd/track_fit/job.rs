@@ -4,6 +4,7 @@
 
 use super::config::TrackFitConfig;
 use super::fit::{fit_tracks, mean_loss, prepare, window_gradients, TrackLogRow};
+use super::global::{global_start, TrackGlobal};
 use super::speed::SpeedFit;
 use super::{load_input, TrackClip};
 use crate::data::atomic::{check_writable, write_atomic};
@@ -103,6 +104,8 @@ pub struct TrackFitSummary {
     /// fitted set.
     pub objective: [f64; 2],
     pub uncertainty: Option<(Uncertainty, f64)>,
+    /// The global phase's candidates (`--starts` > 1).
+    pub global: Option<TrackGlobal>,
     pub out: PathBuf,
     pub log: PathBuf,
     pub plot: PathBuf,
@@ -121,7 +124,13 @@ pub fn load_inputs(
         .enumerate()
         .map(|(i, p)| {
             let t = tracks.get(i).map(PathBuf::as_path);
-            load_input(p, t, cfg.frames.clone(), cfg.guidance_scale, params)
+            load_input(
+                p,
+                t,
+                cfg.frames.clone(),
+                (cfg.leaders, cfg.guidance_scale),
+                params,
+            )
         })
         .collect()
 }
@@ -167,8 +176,15 @@ pub fn run(job: &TrackFitJob, progress: &mut dyn Progress) -> Result<TrackFitSum
                 .len()
         })
         .sum();
+    let (from, global) = match cfg.starts > 1 {
+        true => {
+            let (p, g) = global_start(&clips, &start, cfg, progress)?;
+            (p, Some(g))
+        }
+        false => (start.clone(), None),
+    };
     progress.start("track fit", (per_epoch * cfg.epochs) as u64);
-    let (fitted, log) = fit_tracks(&clips, &start, cfg, |e, _, l| {
+    let (fitted, log) = fit_tracks(&clips, &from, cfg, |e, _, l| {
         progress.message(&format!("epoch {e} loss {l:.4}"));
         progress.inc(1);
     })?;
@@ -187,7 +203,9 @@ pub fn run(job: &TrackFitJob, progress: &mut dyn Progress) -> Result<TrackFitSum
     };
     let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
     let mut out = fitted.clone();
-    out.provenance = Some(provenance(job, &clips, &start, &speed, objective, &log));
+    let mut prov = provenance(job, &clips, &start, &speed, objective, &log);
+    prov["global"] = serde_json::json!(global);
+    out.provenance = Some(prov);
     out.uncertainty = uncertainty.as_ref().map(|(u, _)| u.clone());
     write_atomic(&log_path, log_csv(&log).as_bytes())?;
     let plot_warning = loss_plot(&plot_path, &log, cfg.epochs)
@@ -204,6 +222,7 @@ pub fn run(job: &TrackFitJob, progress: &mut dyn Progress) -> Result<TrackFitSum
         speed,
         objective,
         uncertainty,
+        global,
         out: job.out.clone(),
         log: log_path,
         plot: plot_path,
@@ -328,6 +347,21 @@ impl std::fmt::Display for TrackFitSummary {
                 100.0 * (1.0 - fit.signal_share)
             )?,
             None => writeln!(f, "speed model: the start set's")?,
+        }
+        if let Some(g) = &self.global {
+            writeln!(
+                f,
+                "global phase: {} starts × {} epochs; objective after each: {} → start {} \
+                 (candidate 1 is the given start)",
+                g.candidates.len(),
+                g.start_epochs,
+                g.candidates
+                    .iter()
+                    .map(|c| format!("{:.5}", c.score))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                g.best + 1
+            )?;
         }
         writeln!(f, "{:<20} {:>8} {:>8}", "parameter", "start", "fitted")?;
         let v = self.params.to_vec();

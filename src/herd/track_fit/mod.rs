@@ -16,6 +16,7 @@
 //! - [`rollout`]: one window, both rollouts, its loss;
 //! - [`speed`]: eq. 6 from the tracks;
 //! - [`fit`]: the loop, the per-window probes of the identifiability estimate;
+//! - [`global`]: `--starts K`, the best of K short fits starts the full fit;
 //! - [`job`]: `herdfit fit --objective tracks` (files in and out);
 //! - [`eval`], [`report`]: `herdfit validate-tracks`, scores on held-out tracks.
 
@@ -23,12 +24,13 @@ pub mod config;
 pub mod data;
 pub mod eval;
 pub mod fit;
+pub mod global;
 pub mod job;
 pub mod report;
 pub mod rollout;
 pub mod speed;
 
-pub use config::{Rollout, Scoring, Speeds, TrackFitConfig};
+pub use config::{Leaders, Rollout, Scoring, Speeds, TrackFitConfig};
 pub use data::{Fix, TrackSet};
 pub use fit::{fit_tracks, mean_loss, prepare, window_gradients, TrackFitResult, TrackLogRow};
 pub use rollout::{roll, window_loss, TrackClip, Window};
@@ -60,12 +62,13 @@ pub fn clip_tracks(dir: &Path) -> Result<PathBuf> {
 
 /// One input of a track fit or evaluation: a clip folder (its obstacles, frame rate and leader
 /// guidance; its tracks from `tracks` or the folder) or a bare tracks file in body lengths (an
-/// open plane, no leaders). `frames` (`0..0`: all) are the frames learnt from or scored.
+/// open plane, no leaders). `frames` (`0..0`: all) are the frames learnt from or scored; with
+/// [`Leaders::Off`] the clip's guidance is left out, so no animal leads.
 pub fn load_input(
     input: &Path,
     tracks: Option<&Path>,
     frames: Range<usize>,
-    guidance_scale: f64,
+    (leaders, guidance_scale): (Leaders, f64),
     params: &Params,
 ) -> Result<TrackClip> {
     let name = input.display().to_string();
@@ -82,7 +85,10 @@ pub fn load_input(
             true => 0,
             false => clip.meta.velocity_window() / 2 + 1,
         };
-        let guidance = guidance_fields(&clip, guidance_scale);
+        let guidance = match leaders {
+            Leaders::Field => guidance_fields(&clip, guidance_scale),
+            Leaders::Off => Vec::new(),
+        };
         (set, clip_model(params.clone(), &clip), guidance, lookahead)
     } else {
         let set = TrackSet::load(tracks.unwrap_or(input), None, None)?;

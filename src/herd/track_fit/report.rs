@@ -2,7 +2,7 @@
 //! constant velocity and the built-in generic and default sets, with paired verdicts over seeds
 //! and over blocks of time, written as `report.json` (`herdfit.track-eval/1`) and `report.md`.
 
-use super::config::{steps_of, Rollout};
+use super::config::{steps_of, Leaders, Rollout, Speeds};
 use super::eval::{constant_velocity, device, free_run_samples, score, Sums, TrackEvalConfig};
 use super::speed::{learn_speed, SpeedFit};
 use super::{load_input, TrackClip};
@@ -217,13 +217,19 @@ pub fn run(job: &TrackEvalJob, progress: &mut dyn Progress) -> Result<TrackEvalR
     let mut speed_sets = Vec::new();
     for (i, p) in job.inputs.iter().enumerate() {
         let t = job.tracks.get(i).map(PathBuf::as_path);
-        let all = load_input(p, t, 0..0, cfg.guidance_scale, &sets[0].2)?;
+        let all = load_input(p, t, 0..0, (cfg.leaders, cfg.guidance_scale), &sets[0].2)?;
         let n = all.tracks.len();
         let frames = job
             .frames
             .clone()
             .unwrap_or(((n as f64 * job.split) as usize)..n);
-        let mut clip = load_input(p, t, frames.clone(), cfg.guidance_scale, &sets[0].2)?;
+        let mut clip = load_input(
+            p,
+            t,
+            frames.clone(),
+            (cfg.leaders, cfg.guidance_scale),
+            &sets[0].2,
+        )?;
         let speed = job.speed_frames.clone().unwrap_or(match frames.start >= 3 {
             true => 0..frames.start,
             false => frames.clone(),
@@ -479,6 +485,18 @@ pub fn markdown(r: &TrackEvalReport) -> String {
         r.config.observe,
         r.config.blocks
     );
+    s.push_str(&format!(
+        "Leaders (§5.1): {}. Displacement errors with eq. 6's speeds {}.\n\n",
+        match r.config.leaders {
+            Leaders::Off => "off, the forces steer every animal",
+            Leaders::Field =>
+                "an animal with few visible neighbours ahead follows the clip's guidance",
+        },
+        match r.config.speeds {
+            Speeds::Expected => "without their noise (a point forecast)",
+            _ => "with their noise (one sample per seed)",
+        }
+    ));
     s.push_str("Sets: ");
     s.push_str(
         &r.sets
