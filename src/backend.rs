@@ -27,6 +27,9 @@ impl Precision {
     }
 }
 
+/// Whether this build has the GPU backend (cargo feature `gpu`).
+pub const GPU_BUILT: bool = cfg!(feature = "gpu");
+
 /// Where a run's tensors live (`--device`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -31,7 +31,8 @@ __all__ = [
 
 
 def features() -> list:
-    """The Cargo features this build has (``video``: OpenCV video extraction and rendering)."""
+    """The Cargo features this build has (``video``: OpenCV video extraction and rendering;
+    ``gpu``: burn's wgpu backend, ``device="gpu"``)."""
     return list(_herdfit.features())
 
 

@@ -22,12 +22,15 @@ use progress::PyProgress;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
-/// Cargo features this build was compiled with (`video`: OpenCV).
+/// Cargo features this build was compiled with (`video`: OpenCV; `gpu`: burn's wgpu backend).
 #[pyfunction]
 fn features() -> Vec<&'static str> {
     let mut f = Vec::new();
     if cfg!(feature = "video") {
         f.push("video");
+    }
+    if herdfit::backend::GPU_BUILT {
+        f.push("gpu");
     }
     f
 }

@@ -12,7 +12,8 @@ from herdfit import tracks as ht
 
 def test_version_and_features():
     assert herdfit.__version__ == "0.1.0"
-    assert set(herdfit.features()) <= {"video"}
+    assert set(herdfit.features()) <= {"video", "gpu"}
+    assert "gpu" in herdfit.features()  # the package is always built with the GPU backend
     assert ("video" in herdfit.missing_features()) == ("video" not in herdfit.features())
 
 
