@@ -21,13 +21,17 @@ use rand::{Rng, SeedableRng};
 const F32_TOL: f64 = 1e-3;
 
 fn gpu() -> Device {
-    // Mesa's lavapipe when no hardware adapter is asked for: set before the runtime starts.
-    if std::env::var_os("CUBECL_WGPU_DEFAULT_DEVICE").is_none() {
-        std::env::set_var("CUBECL_WGPU_DEFAULT_DEVICE", "Cpu");
-    }
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
-    }
+    // Mesa's lavapipe when no hardware adapter is asked for: set once, before the runtime starts
+    // and before any test thread reads the environment.
+    static ENV: std::sync::Once = std::sync::Once::new();
+    ENV.call_once(|| {
+        if std::env::var_os("CUBECL_WGPU_DEFAULT_DEVICE").is_none() {
+            std::env::set_var("CUBECL_WGPU_DEFAULT_DEVICE", "Cpu");
+        }
+        if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+            std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+        }
+    });
     device(Compute::Gpu, Precision::F32).expect("the wgpu device (a Vulkan driver is installed)")
 }
 
