@@ -5,7 +5,7 @@
 //! motion-aligned bounding box — as the mean and STD of each measure and of its error, averaged
 //! over seeds (the paper's Tables 1–5).
 
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::data::agents::AgentRow;
 use crate::data::boundary::Gates;
 use crate::data::ClipFields;
@@ -223,6 +223,9 @@ pub struct HeldOut {
     /// [`ValidateConfig::tracks`], when every run started from the tracked animals.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tracks: Option<String>,
+    /// [`ValidateConfig::device`], when the runs were not on the CPU.
+    #[serde(skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
 }
 
 fn is_auto(b: &BoundaryChoice) -> bool {
@@ -245,8 +248,12 @@ impl HeldOut {
             (Some(t), 0) => format!(", the herd started from the animals tracked in `{t}`"),
             (Some(t), _) => format!(" (each time from the animals tracked in `{t}`)"),
         };
+        let device = match self.device {
+            Compute::Cpu => "",
+            Compute::Gpu => ", simulated on the GPU",
+        };
         format!(
-            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid{horizon}{tracks}",
+            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid{horizon}{tracks}{device}",
             self.clip, self.frames[0], self.frames[1], self.split, self.seeds, self.grid, self.grid
         )
     }
@@ -320,6 +327,9 @@ pub struct ValidateConfig {
     /// ([`reference`](mod@reference)). Not written when herdfit's own.
     #[serde(default, skip_serializing_if = "is_herdfit")]
     pub measures: Measures,
+    /// Where the model's tensors live (`--device`). Not written when `cpu`.
+    #[serde(default, skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
 }
 
 fn is_herdfit(m: &Measures) -> bool {
@@ -341,6 +351,7 @@ impl Default for ValidateConfig {
             boundary: BoundaryChoice::Auto,
             frames: None,
             measures: Measures::Herdfit,
+            device: Compute::Cpu,
         }
     }
 }
@@ -465,7 +476,7 @@ pub fn validate<R: Proceed>(
     let (start, nf) = cfg.held_out_checked(clip)?;
     let anchors = cfg.anchors(clip)?;
     let gates = cfg.boundary.gates(clip)?;
-    let device = cpu_device(Precision::F32)?;
+    let device = device(cfg.device, Precision::F32)?;
     // The leaders' guidance of every frame, the same for every set and seed.
     let guidance = guidance_fields(clip, cfg.guidance_scale);
     let video: Vec<Emergent> = (start..nf).map(|f| emergent(clip, f)).collect();
@@ -576,6 +587,7 @@ pub fn validate<R: Proceed>(
                 seeds,
                 horizon: cfg.horizon,
                 tracks: cfg.tracks.as_ref().map(|t| t.display().to_string()),
+                device: cfg.device,
             },
             ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),
