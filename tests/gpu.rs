@@ -263,9 +263,9 @@ fn simulate_on_the_gpu_writes_the_cpu_trajectories_and_refuses_what_it_cannot_do
     );
 }
 
-/// Every number of the CPU report `c` beside the GPU report `g` within [`F32_TOL`] (relative to 1
-/// + |CPU value|), the same keys (the GPU's may add `device`), wall-clock seconds skipped.
-/// Returns how many numbers were compared.
+/// Every number of the CPU report `c` beside the GPU report `g` within [`F32_TOL`] (relative to
+/// one plus the CPU value's magnitude), the same keys (the GPU's may add `device`), wall-clock
+/// seconds skipped. Returns how many numbers were compared.
 fn same_report(g: &serde_json::Value, c: &serde_json::Value, at: &str) -> usize {
     use serde_json::Value;
     match (g, c) {
