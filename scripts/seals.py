@@ -13,7 +13,7 @@ median of the land's animals into the shoreline (columns 9–14, 27.5–45.9 BL)
 fixed per zone as the paper does: 3.0 BL/s in the water, 0.5 on land (both land zones).
 
 Two zone fits from the same start, with direction-variance matching (E_var, λ_var = 1, the
-default) and without (`--var-weight 0`), each evaluated on the image after settling: density
+default, towards the paper's uniform target of 3000 deg²) and without (`--var-weight 0`), each evaluated on the image after settling: density
 error (cell counts and smoothed), polarization, and the zones' mean speeds — beside the mean of
 the reference's own logs (`errorlog/`, density error per frame over 100 frames).
 """
@@ -31,6 +31,7 @@ DATA = os.environ.get("HERDFIT_SHARED_DATA", os.path.join(REPO, "..", "shared", 
 CLIP = os.path.join(DATA, "herds-from-video", "seals")
 PREFIX = os.path.join(CLIP, "04_20_19_45")
 WATER, LAND = 3.0, 0.5
+DIR_VARIANCE = 3000 * (np.pi / 180) ** 2  # rad²
 
 
 def run(herdfit, *args):
@@ -78,7 +79,9 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     clip = os.path.join(a.out, "clip")
     if not os.path.exists(os.path.join(clip, "clip.json")):
-        run(a.herdfit, "import-reference", PREFIX, "--out", clip)
+        # The image holds no directions: E_var's target is the paper's, a uniform 3000 deg²
+        # "based, by inspection, on random orientation" (§7.2.4), not the files' zeros.
+        run(a.herdfit, "import-reference", PREFIX, "--out", clip, "--dir-variance", f"{DIR_VARIANCE:.6f}")
     zones, cols, (water, shore) = zones_of(clip)
     zpath = os.path.join(a.out, "zones.json")
     json.dump(zones, open(zpath, "w"), indent=1)

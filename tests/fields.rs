@@ -201,6 +201,38 @@ fn cli_synth_import_and_fields_info() {
     );
 }
 
+/// `import-reference --dir-variance V` records the directions' spread a still's files do not
+/// measure (the seals: no per-cell angles), which E_var then targets instead of the files'
+/// zeros; a value that is not a variance is refused naming the flag, writing nothing.
+#[test]
+fn import_reference_records_a_given_direction_spread() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("spread");
+    let prefix = sample_prefix();
+    ok(&[
+        "import-reference",
+        s(&prefix),
+        "--out",
+        s(&out),
+        "--dir-variance",
+        "0.9139",
+    ]);
+    let clip = ClipFields::load(&out).unwrap();
+    assert_eq!(clip.meta.dir_spread, Some(0.9139));
+    let mut plain = import_reference(&prefix).unwrap();
+    assert_eq!(plain.meta.dir_spread, None, "not given: not recorded");
+    plain.meta.dir_spread = Some(0.9139);
+    assert_eq!(clip, plain, "the spread is the only difference");
+    for bad in ["-1", "nan", "inf"] {
+        let o = d.join(format!("bad{bad}"));
+        let flag = format!("--dir-variance={bad}");
+        let e = fails(&["import-reference", s(&prefix), "--out", s(&o), &flag]);
+        assert!(e.contains("--dir-variance"), "{e}");
+        assert!(!o.exists(), "nothing written for {bad}");
+    }
+}
+
 #[test]
 fn bad_clips_and_arguments_fail_cleanly() {
     let (_, syn) = small_synth(7);

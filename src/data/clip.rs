@@ -477,3 +477,16 @@ fn check_npz_sizes(path: &Path) -> Result<()> {
     crate::limits::check_memory("fields.npz", "reading its arrays", total)
         .map_err(|e| e.in_file(path))
 }
+
+/// Checks a given spread of directions (rad² about their mean, [`ClipMeta::dir_spread`]): angles
+/// within ±π of their mean spread at most π²; the error names `key`.
+pub fn check_dir_spread(key: &str, v: f64) -> Result<()> {
+    if v.is_finite() && (0.0..=std::f64::consts::PI.powi(2)).contains(&v) {
+        Ok(())
+    } else {
+        Err(Error::config(
+            key,
+            format!("{v} rad² is out of range 0..=π² (9.87)"),
+        ))
+    }
+}

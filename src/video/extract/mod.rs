@@ -175,12 +175,7 @@ impl ExtractConfig {
             }
         }
         if let Some(v) = self.dir_variance {
-            if !(v.is_finite() && (0.0..=std::f64::consts::PI.powi(2)).contains(&v)) {
-                return Err(Error::config(
-                    "dir_variance",
-                    format!("{v} rad² is out of range 0..=π² (9.87)"),
-                ));
-            }
+            crate::data::clip::check_dir_spread("dir_variance", v)?;
         }
         if self.max_side < 16 {
             return Err(Error::config(
