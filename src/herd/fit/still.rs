@@ -28,6 +28,7 @@ use crate::herd::zoned::ZoneSets;
 use crate::measure::emergent::polarization;
 use crate::measure::fields::{cell_counts, field_errors};
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// The schedule of a fit from a single image.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -134,8 +135,9 @@ pub struct StillRun<'a> {
 }
 
 /// [`still_measures`] of one set, or with `zones` of one set per zone (each agent with its
-/// zone's set and speed, paper §7.2.4), and the mean speed of the agents in each zone (BL/s,
-/// over the averaged steps and the seeds; one value without zones).
+/// zone's set and speed, paper §7.2.4), and the mean speed each zone set (BL/s: the agents'
+/// speeds by the zone they stood in when the step began, over the averaged steps and the seeds;
+/// one value without zones).
 pub fn still_measures_in(
     clip: &ClipFields,
     params: &Params,
@@ -180,6 +182,7 @@ pub fn still_measures_in(
         ])
     };
     for k in 0..seeds.max(1) {
+        let mut before: HashMap<u64, usize> = HashMap::new();
         let (rows0, _) = run_from(
             clip,
             params,
@@ -192,23 +195,32 @@ pub fn still_measures_in(
             &guidance,
             &device,
             |f, state, ids| {
+                // Every frame: each agent's zone (agents in the view only: outside it they
+                // are in no zone), by id.
+                let rows = state.rows(ids)?;
+                let inside: Vec<&AgentRow> = rows
+                    .iter()
+                    .filter(|r| grid.cell_of([r.x, r.y]).is_some())
+                    .collect();
+                let pos: Vec<[f64; 2]> = inside.iter().map(|r| [r.x, r.y]).collect();
+                let zone = zones.map_or_else(|| vec![0; pos.len()], |z| z.zone_of(&pos));
+                let here: HashMap<u64, usize> =
+                    inside.iter().zip(zone).map(|(r, z)| (r.id, z)).collect();
                 if f > cfg.settle {
-                    let rows = state.rows(ids)?;
                     let m = measure(f, state, &rows)?;
                     sum.iter_mut().zip(m).for_each(|(s, v)| *s += v);
                     n += 1.0;
-                    // Agents in the view only (outside it they are in no zone).
-                    let inside: Vec<&AgentRow> = rows
-                        .iter()
-                        .filter(|r| grid.cell_of([r.x, r.y]).is_some())
-                        .collect();
-                    let pos: Vec<[f64; 2]> = inside.iter().map(|r| [r.x, r.y]).collect();
-                    let zone = zones.map_or_else(|| vec![0; pos.len()], |z| z.zone_of(&pos));
-                    for (r, z) in inside.iter().zip(zone) {
-                        speed_sum[z] += r.vx.hypot(r.vy);
-                        speed_n[z] += 1.0;
+                    // A speed belongs to the zone that set it: where the agent stood when the
+                    // step began (eq. 6 draws it there). An agent that crossed a zone's edge
+                    // during the step still moves at the zone it left.
+                    for r in &inside {
+                        if let Some(&z) = before.get(&r.id) {
+                            speed_sum[z] += r.vx.hypot(r.vy);
+                            speed_n[z] += 1.0;
+                        }
                     }
                 }
+                before = here;
                 Ok(())
             },
         )?;

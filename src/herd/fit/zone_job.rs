@@ -176,7 +176,7 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
 
 /// A still's measures with per-zone sets (paper §7.2.4, [`still_measures_in`]): the herd as drawn
 /// from the image, and after settling with the start sets and with the fitted sets; the mean
-/// speed of the agents in each zone (BL/s) with each.
+/// speed each zone set (BL/s) with each.
 #[derive(Clone, Debug, Serialize)]
 pub struct ZoneStill {
     pub what: &'static str,
@@ -204,7 +204,7 @@ impl ZoneStill {
         let ([drawn, before], v0) = still_measures_in(clip, &start.sets[0], Some(start), &run)?;
         let ([_, after], v1) = still_measures_in(clip, &fitted.sets[0], Some(fitted), &run)?;
         Ok(ZoneStill {
-            what: "against the image: density error of cell counts and smoothed (the fit's density term), crowding, polarization (eq. 12), averaged over the steps after settling and over the seeds; zone speeds: mean |v| of the agents in each zone (BL/s)",
+            what: "against the image: density error of cell counts and smoothed (the fit's density term), crowding, polarization (eq. 12), averaged over the steps after settling and over the seeds; zone speeds: mean |v| of the agents by the zone they stood in when the step began, the zone that set their speed (BL/s)",
             drawn,
             start: before,
             fitted: after,
