@@ -170,21 +170,31 @@ def summarise(rep):
                 truemean=m["true_mean_depth"], v=e["v_target"], v_true=rep["truth"]["median_speed"],
                 v_err=e["v_target"] / rep["truth"]["median_speed"] - 1,
                 disagreement=c["disagreement"], structure=c["structure"], trusted=c["trusted"],
-                transverse=c["transverse"],
+                transverse=c["transverse"], foreshortening=e.get("foreshortening"),
                 reasons=c["reasons"])
+
+
+def fore(r):
+    f = r["foreshortening"]
+    return "—" if f is None else f"{f:.2f}"
 
 
 def table(title, rows):
     print(f"\n### {title}\n")
-    print("| case | v_target est. / truth | whole sequence | constant | frame by frame | true mean depth | beats constant | restart disagreement | across the line of sight | trusted |")
-    print("|---|---:|---:|---:|---:|---:|:-:|---:|---:|:-:|")
+    print("| case | v_target est. / truth | whole sequence | constant | frame by frame | true mean depth | beats constant | restart disagreement | across the line of sight | image / plane turning | trusted |")
+    print("|---|---:|---:|---:|---:|---:|:-:|---:|---:|---:|:-:|")
     for name, r in rows:
         print(f"| {name} | {100 * r['v_err']:+.1f} % | {100 * r['seq']:.1f} % | {100 * r['const']:.1f} % | "
               f"{100 * r['fbf']:.1f} % | {100 * r['truemean']:.1f} % | {'yes' if r['seq'] < r['const'] else '**no**'} | "
-              f"{100 * r['disagreement']:.1f} % | {100 * r['transverse']:.0f} % | {'yes' if r['trusted'] else 'no'} |")
+              f"{100 * r['disagreement']:.1f} % | {100 * r['transverse']:.0f} % | {fore(r)} | "
+              f"{'yes' if r['trusted'] else 'no'} |")
     beat = sum(r["seq"] < r["const"] for _, r in rows)
+    lost = [r for _, r in rows if r["seq"] >= r["const"]]
+    won = [r for _, r in rows if r["seq"] < r["const"]]
     vok = sum(abs(r["v_err"]) <= 0.15 for _, r in rows)
     print(f"\n{beat} of {len(rows)} beat the constant; v_target within 15 % on {vok} of {len(rows)}.")
+    print(f"Not trusted: {sum(not r['trusted'] for r in lost)} of {len(lost)} that lose to the constant, "
+          f"{sum(not r['trusted'] for r in won)} of {len(won)} that beat it.")
 
 
 def part2(args, work, flights, fits):

@@ -14,13 +14,19 @@
 //! but looming, and every start then ends at the depths the speed term alone dictates along the
 //! rays. So the lift also reports `transverse`, the median over its velocities of the share of
 //! the speed across the line of sight, |v − (v·r̂) r̂| / |v|: near 1 when the birds cross the
-//! view, small when they fly along it.
+//! view, small when they fly along it. The lift's own velocities can hide it (the speed term
+//! spreads a wrong speed across the view), so the estimate also compares the image tracks'
+//! turning rate with that of the same tracks laid on a horizontal plane (`foreshortening`,
+//! [`super::estimate::plane_turning`]): a flock flying at the camera turns in the image mostly
+//! by foreshortening, and the speed prior, which reads image turns as the birds' turns, then
+//! guesses low.
 //!
 //! The lift is reported as not to be trusted when the restart disagrees by more than
-//! `max_disagreement`, when `transverse` is below `min_transverse`, when more than `max_at_bounds` of the depths sit on a bound (the energy
-//! wanted them further), or when v_target was estimated outside the turning rates its prior was
-//! fitted on. The thresholds were chosen on the jackdaw flight each result is not reported on and
-//! on synthetic flocks (RESULTS).
+//! `max_disagreement`, when `transverse` is below `min_transverse`, when more than
+//! `max_at_bounds` of the depths sit on a bound (the energy wanted them further), when v_target
+//! was estimated outside the turning rates its prior was fitted on, or when it was estimated
+//! from image turns more than `max_foreshortening` times as sharp as the plane's. Which data
+//! chose each threshold: RESULTS, "Lift without `--v-target`".
 
 use super::estimate::{Estimate, Source};
 use super::observe::Observations;
@@ -42,6 +48,9 @@ pub struct ConfidenceConfig {
     /// Smallest `transverse` (median share of the speed across the line of sight) of a trusted
     /// lift.
     pub min_transverse: f64,
+    /// Largest `estimate.foreshortening` (image turning rate over the horizontal plane's) of a
+    /// trusted lift whose v_target was estimated.
+    pub max_foreshortening: f64,
 }
 
 impl Default for ConfidenceConfig {
@@ -51,6 +60,7 @@ impl Default for ConfidenceConfig {
             max_disagreement: 0.1,
             max_at_bounds: 0.01,
             min_transverse: 0.5,
+            max_foreshortening: 1.5,
         }
     }
 }
@@ -62,6 +72,7 @@ impl ConfidenceConfig {
             ("max_disagreement", self.max_disagreement),
             ("max_at_bounds", self.max_at_bounds),
             ("min_transverse", self.min_transverse),
+            ("max_foreshortening", self.max_foreshortening),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(format!("confidence.{k} = {v} must be ≥ 0")));
@@ -186,6 +197,18 @@ pub fn assess(
             "v_target was estimated from a turning rate of {:.3} rad/s, outside the {:.2}–{:.2} \
              rad/s its speed prior was fitted on: give v_target",
             est.turn_rate, cfg.estimate.calibrated[0], cfg.estimate.calibrated[1]
+        ));
+    }
+    let prior_used = est.v_target_source == Source::Estimated;
+    if let Some(f) = est
+        .foreshortening
+        .filter(|f| prior_used && *f > c.max_foreshortening)
+    {
+        reasons.push(format!(
+            "the image tracks turn {f:.1}× as sharply as their paths on a horizontal plane (at \
+             most {:.1}× trusted): the birds fly along the line of sight and the speed prior \
+             reads foreshortening as turns: give v_target",
+            c.max_foreshortening
         ));
     }
     Ok(Confidence {

@@ -107,6 +107,15 @@ pub struct Estimate {
     pub speed_mps: f64,
     /// Whether Ω lies outside `estimate.calibrated` (the speed is then extrapolated).
     pub extrapolated: bool,
+    /// Median turning rate of the tracks laid on a horizontal plane ([`plane_turning`]), rad/s;
+    /// None when too few rays leave the horizon.
+    #[serde(default)]
+    pub plane_turn_rate: Option<f64>,
+    /// `turn_rate` / `plane_turn_rate`: how much more sharply the image tracks turn than their
+    /// paths on the horizontal plane. Well above 1, the image turns are foreshortening of birds
+    /// flying along the line of sight, not turns the speed prior knows.
+    #[serde(default)]
+    pub foreshortening: Option<f64>,
     /// D₀ = speed / angular speed, world units.
     pub depth_guess: f64,
     /// The values the lift used, world units (per frame for v_target), and where they came from.
@@ -135,34 +144,77 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     (!v.is_empty()).then(|| v[v.len() / 2])
 }
 
+/// |v × a| / |v|² of the 2D points `p(j)` at observation `i` (v, a the central differences over
+/// `lag` frames, 2·lag/fps apart); None without a whole ±2·lag window, a point `p` refuses, or
+/// motion.
+fn turn_at(
+    obs: &Observations,
+    i: usize,
+    lag: i64,
+    p: &dyn Fn(usize) -> Option<[f64; 2]>,
+) -> Option<f64> {
+    let dt = 2.0 * lag as f64 / obs.fps;
+    let [a, b, c, e] = [-2, -1, 1, 2].map(|k| step(obs, i, k * lag));
+    let [a, b, c, e, m] = [a?, b?, c?, e?, i].map(p);
+    let [a, b, c, e, m] = [a?, b?, c?, e?, m?];
+    let v = [(c[0] - b[0]) / dt, (c[1] - b[1]) / dt];
+    let acc = [
+        (e[0] - 2.0 * m[0] + a[0]) / (dt * dt),
+        (e[1] - 2.0 * m[1] + a[1]) / (dt * dt),
+    ];
+    let s = v[0] * v[0] + v[1] * v[1];
+    (s > 0.0).then(|| (v[0] * acc[1] - v[1] * acc[0]).abs() / s)
+}
+
+/// The frame count of `lag_s` at the tracks' rate (at least 1).
+fn lag_frames(obs: &Observations, lag_s: f64) -> i64 {
+    ((lag_s * obs.fps).round() as i64).max(1)
+}
+
 /// Median image turning rate (rad/s) and angular speed (rad/s) of the tracks, and the number of
 /// observations with a whole ±2·lag window. Turning rate of a track at i: |v × a| / |v|² with
 /// v, a the central differences over `lag` frames of its pixel positions.
 pub fn turning(obs: &Observations, lag_s: f64) -> (Option<f64>, Option<f64>, usize) {
-    let lag = ((lag_s * obs.fps).round() as i64).max(1);
+    let lag = lag_frames(obs, lag_s);
     let dt = 2.0 * lag as f64 / obs.fps;
+    let pixel = |j: usize| Some(obs.pixel[j]);
     let (mut om, mut w) = (Vec::new(), Vec::new());
     for i in 0..obs.len() {
-        let win = [-2, -1, 1, 2].map(|k| step(obs, i, k * lag));
-        let [Some(a), Some(b), Some(c), Some(e)] = win else {
+        let (Some(b), Some(c)) = (step(obs, i, -lag), step(obs, i, lag)) else {
             continue;
         };
-        let p = |j: usize| obs.pixel[j];
-        let v = [(p(c)[0] - p(b)[0]) / dt, (p(c)[1] - p(b)[1]) / dt];
-        let acc = [
-            (p(e)[0] - 2.0 * p(i)[0] + p(a)[0]) / (dt * dt),
-            (p(e)[1] - 2.0 * p(i)[1] + p(a)[1]) / (dt * dt),
-        ];
-        let s = v[0].hypot(v[1]);
-        if s > 0.0 {
-            om.push((v[0] * acc[1] - v[1] * acc[0]).abs() / (s * s));
+        if step(obs, i, -2 * lag).is_none() || step(obs, i, 2 * lag).is_none() {
+            continue;
         }
+        om.extend(turn_at(obs, i, lag, &pixel));
         let (rb, rc) = (unit(obs.ray[b]), unit(obs.ray[c]));
         let d = [rc[0] - rb[0], rc[1] - rb[1], rc[2] - rb[2]];
         w.push((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() / dt);
     }
     let n = om.len();
     (median(om), median(w), n)
+}
+
+/// Smallest |sine| of a ray's elevation that [`plane_turning`] lays on the horizontal plane.
+const MIN_PLANE_ELEVATION: f64 = 0.02;
+
+/// Median turning rate (rad/s) of the tracks laid on a horizontal plane (world z up, the camera
+/// convention): each viewing ray r meets the plane one unit above (or below) the camera at
+/// (r_x / r_z, r_y / r_z), whatever the plane's height, so the rate does not depend on the
+/// flock's distance. A flock that turns in the horizontal plane turns there as it does in the
+/// world; foreshortening does not bend it. Rays within [`MIN_PLANE_ELEVATION`] of the horizon
+/// are left out. None with fewer than [`MIN_SAMPLES`] rates.
+pub fn plane_turning(obs: &Observations, lag_s: f64) -> Option<f64> {
+    let lag = lag_frames(obs, lag_s);
+    let plane = |j: usize| {
+        let r = obs.ray[j];
+        let l = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        (r[2].abs() > MIN_PLANE_ELEVATION * l).then(|| [r[0] / r[2], r[1] / r[2]])
+    };
+    let om: Vec<f64> = (0..obs.len())
+        .filter_map(|i| turn_at(obs, i, lag, &plane))
+        .collect();
+    (om.len() >= MIN_SAMPLES).then(|| median(om)).flatten()
 }
 
 /// `cfg` itself when v_target and both bounds are set, else `cfg` resolved ([`resolve`]): what
@@ -184,6 +236,7 @@ pub fn resolve(obs: &Observations, cfg: &LiftConfig) -> Result<(LiftConfig, Esti
     let e = &cfg.estimate;
     e.check()?;
     let (turn, ang, samples) = turning(obs, e.lag_s);
+    let plane = plane_turning(obs, e.lag_s).filter(|p| *p > 0.0);
     let need_speed = cfg.v_target.is_none();
     let need_bounds = cfg.d_near.is_none() || cfg.d_far.is_none();
     let fail = |why: String| -> Error {
@@ -240,6 +293,8 @@ pub fn resolve(obs: &Observations, cfg: &LiftConfig) -> Result<(LiftConfig, Esti
         angular_speed: ang,
         speed_mps,
         extrapolated: !(e.calibrated[0]..=e.calibrated[1]).contains(&turn),
+        plane_turn_rate: plane,
+        foreshortening: plane.map(|p| turn / p).filter(|f| f.is_finite()),
         depth_guess,
         v_target,
         v_target_source: if need_speed {

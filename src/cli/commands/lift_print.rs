@@ -64,11 +64,14 @@ pub(super) fn print_estimate(e: &crate::lift::estimate::Estimate, u: &str) {
         Source::Estimated => "estimated",
     };
     println!(
-        "  v_target {:.4} {u}/frame ({}; the tracks turn at {:.3} rad/s, which the speed prior \
+        "  v_target {:.4} {u}/frame ({}; the tracks turn at {:.3} rad/s{}, which the speed prior \
          reads as {:.1} m/s{}); bounds {:.1}–{:.1} {u} ({})",
         e.v_target,
         how(e.v_target_source),
         e.turn_rate,
+        e.foreshortening.map_or(String::new(), |f| format!(
+            ", {f:.2}× their rate on a horizontal plane"
+        )),
         e.speed_mps,
         if e.extrapolated { ", extrapolated" } else { "" },
         e.d_near,
