@@ -4,7 +4,7 @@
 //! through the fused op at 10 and 50 steps (DESIGN §7).
 
 use burn::tensor::{Device, Tensor};
-use herdfit::backend::{cpu_device, Precision};
+use herdfit::backend::{cpu_device, Compute, Precision};
 use herdfit::herd::gradcheck::{gradcheck, record};
 use herdfit::herd::params::Params;
 use herdfit::herd::scenario::{default_scenario, objective, Scenario};
@@ -194,7 +194,15 @@ fn gradcheck_passes_through_the_fused_op_at_10_and_50_steps() {
     assert_eq!(sc.model.force_kernel, ForceKernel::Fused, "the default");
     for steps in [10, 50] {
         let rec = record(&sc, steps, 3, &dev).unwrap();
-        let r = gradcheck(&sc, steps, Precision::F64, 1e-4, &rec, || {}).unwrap();
+        let r = gradcheck(
+            &sc,
+            steps,
+            (Compute::Cpu, Precision::F64),
+            1e-4,
+            &rec,
+            || {},
+        )
+        .unwrap();
         assert_eq!(r.parameters.len(), 12);
         assert!(r.max_rel_err <= 1e-6, "{steps} steps: {r:?}");
         assert!(

@@ -262,3 +262,175 @@ fn simulate_on_the_gpu_writes_the_cpu_trajectories_and_refuses_what_it_cannot_do
         "{e}"
     );
 }
+
+/// Every number of the CPU report `c` beside the GPU report `g` within [`F32_TOL`] (relative to
+/// one plus the CPU value's magnitude), the same keys (the GPU's may add `device`), wall-clock
+/// seconds skipped. Returns how many numbers were compared.
+fn same_report(g: &serde_json::Value, c: &serde_json::Value, at: &str) -> usize {
+    use serde_json::Value;
+    match (g, c) {
+        (Value::Object(g), Value::Object(c)) => {
+            for k in g.keys() {
+                assert!(
+                    c.contains_key(k) || k == "device",
+                    "{at}/{k}: only on the GPU"
+                );
+            }
+            c.iter()
+                .filter(|(k, _)| !k.ends_with("seconds") && !k.ends_with("_s"))
+                .map(|(k, v)| {
+                    let gv = g
+                        .get(k)
+                        .unwrap_or_else(|| panic!("{at}/{k}: missing on the GPU"));
+                    same_report(gv, v, &format!("{at}/{k}"))
+                })
+                .sum()
+        }
+        (Value::Array(g), Value::Array(c)) => {
+            assert_eq!(g.len(), c.len(), "{at}: lengths");
+            let n = g.iter().zip(c).enumerate();
+            n.map(|(i, (g, c))| same_report(g, c, &format!("{at}[{i}]")))
+                .sum()
+        }
+        (Value::Number(g), Value::Number(c)) => {
+            let (g, c) = (g.as_f64().unwrap(), c.as_f64().unwrap());
+            close(&[g], &[c], F32_TOL, at);
+            1
+        }
+        _ => {
+            assert_eq!(g, c, "{at}");
+            0
+        }
+    }
+}
+
+fn json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Positions x, y of every row of a herdfit trajectories CSV (columns 3 and 4).
+fn positions(path: &std::path::Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip(1)
+        .flat_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            [f[3].parse::<f64>().unwrap(), f[4].parse::<f64>().unwrap()]
+        })
+        .collect()
+}
+
+/// `--device gpu` on every other verb that simulates the herd model (`synth`, `validate`,
+/// `ablate`, `author`, `gradcheck`): each writes what its CPU run writes within the f32
+/// tolerance, and its report says where it ran.
+#[test]
+fn every_verb_that_simulates_takes_device_gpu_and_writes_the_cpu_results() {
+    use common::{ok, s};
+    gpu(); // the software adapter for the child processes too
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = common::small_clip(d, 40, 16, 3);
+    let out = |name: &str, device: &str| d.join(format!("{name}-{device}"));
+    for device in ["cpu", "gpu"] {
+        let synth = out("synth", device);
+        let args = ["--grid-size", "8x6", "--cell-size", "3", "--seed", "3"];
+        let mut a = vec!["synth", "--agents", "40", "--frame-count", "16"];
+        a.extend(args);
+        a.extend(["--device", device, "--out", s(&synth)]);
+        ok(&a);
+        let v = out("validate", device);
+        let params = clip.join("truth.json");
+        ok(&[
+            "validate",
+            s(&clip),
+            "--params",
+            s(&params),
+            "--seeds",
+            "2",
+            "--no-video",
+            "--device",
+            device,
+            "--out",
+            s(&v),
+        ]);
+        let ab = out("ablate", device);
+        ok(&[
+            "ablate",
+            s(&clip),
+            "--switches",
+            "occlusion",
+            "--epochs",
+            "1",
+            "--seeds",
+            "1",
+            "--device",
+            device,
+            "--out",
+            s(&ab),
+        ]);
+        let mut scene = json(std::path::Path::new("scenes/pasture.json"));
+        scene["duration"] = serde_json::json!(1);
+        let scene_path = d.join("pasture.json");
+        // Its parameter sets resolve beside it.
+        if !d.join("pasture").exists() {
+            let sets = std::fs::canonicalize("scenes/pasture").unwrap();
+            std::os::unix::fs::symlink(sets, d.join("pasture")).unwrap();
+        }
+        std::fs::write(&scene_path, scene.to_string()).unwrap();
+        let a = out("author", device);
+        ok(&["author", s(&scene_path), "--device", device, "--out", s(&a)]);
+        if device == "gpu" {
+            let gc = d.join("gradcheck.json");
+            ok(&[
+                "gradcheck",
+                "--agents",
+                "40",
+                "--steps",
+                "5",
+                "--precision",
+                "f32",
+                "--device",
+                "gpu",
+                "--json",
+                s(&gc),
+            ]);
+            let report = json(&gc);
+            assert_eq!(report["device"], "gpu");
+            let worst = report["max_rel_err"].as_f64().unwrap();
+            println!("gradcheck --device gpu: max rel err {worst:.2e}");
+            // The f32 tolerance of the library-level check above (the smallest gradient,
+            // obstacle.weight ≈ 5e-4, carries the finite differences' f32 rounding).
+            assert!(worst <= 2e-2, "gradcheck on the GPU: {worst}");
+        }
+    }
+    let traj = |name: &str, device: &str| positions(&out(name, device).join("trajectories.csv"));
+    for name in ["synth", "author"] {
+        let (g, c) = (traj(name, "gpu"), traj(name, "cpu"));
+        assert!(c.len() >= 2 * 40 * 16, "{name}: {} values", c.len());
+        let worst = close(&g, &c, F32_TOL, name);
+        // Another backend rounds differently somewhere: equal bytes would mean the flag was
+        // ignored and both runs were the CPU's.
+        assert!(
+            worst > 0.0,
+            "{name}: the GPU run equals the CPU run bit for bit"
+        );
+        println!("{name} --device gpu: positions within {worst:.2e} of the CPU run");
+    }
+    let report = |name: &str, file: &str, device: &str| json(&out(name, device).join(file));
+    let (g, c) = (
+        report("validate", "report.json", "gpu"),
+        report("validate", "report.json", "cpu"),
+    );
+    assert_eq!(g["device"], "gpu", "the report says where it ran");
+    assert_eq!(report("author", "report.json", "gpu")["device"], "gpu");
+    let n = same_report(&g, &c, "validate");
+    let (ga, ca) = (
+        report("ablate", "ablation.json", "gpu"),
+        report("ablate", "ablation.json", "cpu"),
+    );
+    let m = same_report(&ga, &ca, "ablate");
+    assert!(
+        n > 50 && m > 20,
+        "numbers compared: validate {n}, ablate {m}"
+    );
+}

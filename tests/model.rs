@@ -1,7 +1,7 @@
 //! The herd model on hand-made herds of 2–4 agents: forces against hand-computed values, the
 //! leader rule, bearings at φ = 0 and φ = π, and exact replay. All tests here run in f64.
 
-use herdfit::backend::{cpu_device, Precision};
+use herdfit::backend::{cpu_device, Compute, Precision};
 use herdfit::data::agents::AgentRow;
 use herdfit::herd::params::Params;
 use herdfit::herd::sim::{
@@ -353,7 +353,7 @@ fn gradcheck_in_process_matches_finite_differences() {
     use herdfit::herd::gradcheck::{default_scenario, gradcheck, record};
     let sc = default_scenario(Params::default(), 60, 1).unwrap();
     let rec = record(&sc, 6, 1, &device()).unwrap();
-    let r = gradcheck(&sc, 6, Precision::F64, 1e-4, &rec, || {}).unwrap();
+    let r = gradcheck(&sc, 6, (Compute::Cpu, Precision::F64), 1e-4, &rec, || {}).unwrap();
     assert_eq!(r.parameters.len(), 12);
     assert!(r.max_rel_err < 1e-6, "{r:?}");
     // Every parameter, obstacles included, actually moves the objective.

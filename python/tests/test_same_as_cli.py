@@ -53,3 +53,15 @@ def test_simulate_on_the_gpu_follows_the_cpu_run(monkeypatch):
     # f32 on both, rounded differently: positions within 1e-3 BL, the herd having moved metres.
     assert np.abs(gpu[:, :, :2] - cpu[:, :, :2]).max() < 1e-3
     assert np.abs(cpu[-1, :, :2] - cpu[0, :, :2]).max() > 1.0
+
+
+def test_validate_on_the_gpu_reports_the_cpu_errors(monkeypatch, clip_dir, tmp_path):
+    # ``device`` reaches the validation's config like any other key; its report says where it ran.
+    monkeypatch.setenv("CUBECL_WGPU_DEFAULT_DEVICE", "Cpu")
+    params = clip_dir / "truth.json"
+    cpu = herdfit.validate(clip_dir, params, tmp_path / "cpu", seeds=2, progress=False)
+    gpu = herdfit.validate(clip_dir, params, tmp_path / "gpu", seeds=2, device="gpu", progress=False)
+    assert gpu["device"] == "gpu" and "device" not in cpu
+    for g, c in zip(gpu["sets"][0]["rows"], cpu["sets"][0]["rows"]):
+        assert g["measure"] == c["measure"]
+        assert abs(g["error"]["mean"] - c["error"]["mean"]) <= 1e-3 * (1 + abs(c["error"]["mean"])), g["measure"]

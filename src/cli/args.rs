@@ -1,6 +1,7 @@
 //! Flag parsing shared by the commands: value parsers (pairs, ranges, grids, colours) and the
 //! flag groups several verbs take.
 
+use crate::backend::Compute;
 use crate::cli::paths::{InFile, OutFile};
 use crate::error::Error;
 use crate::herd::boundary::BoundaryChoice;
@@ -150,6 +151,14 @@ pub const DEVICES: &[(&str, &str)] = &[
         "burn's wgpu backend (a build with the cargo feature `gpu`; f32); CUBECL_WGPU_DEFAULT_DEVICE picks the adapter, e.g. Cpu for a software Vulkan driver",
     ),
 ];
+
+/// `--device`, on every verb that simulates the herd model.
+#[derive(Args, Debug, Clone, Copy)]
+pub struct DeviceArg {
+    /// Where the model's tensors live (perception stays on the CPU).
+    #[arg(long, value_parser = choice::<Compute>(DEVICES), default_value_t = Compute::Cpu)]
+    pub device: Compute,
+}
 
 /// `--precision`.
 pub const PRECISIONS: &[(&str, &str)] = &[("f32", ""), ("f64", "")];

@@ -146,6 +146,7 @@ pub fn demo(out: &Path, progress: &mut dyn Progress) -> Result<DemoSummary> {
                 boundary: Default::default(),
                 frames: None,
                 measures: Default::default(),
+                device: Default::default(),
             },
         },
         progress,

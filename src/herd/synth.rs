@@ -1,7 +1,7 @@
 //! Synthetic clips with known truth: simulate the herd model with given parameters, rasterise the
 //! trajectories into clip fields, keep the parameters as `truth.json`.
 
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::data::agents::{push_traj_frame, AgentRow, TRAJ_HEADER};
 use crate::data::atomic::AtomicDir;
 use crate::data::cells::read_cells;
@@ -236,6 +236,9 @@ pub struct SynthJob {
     pub heading_deg: f64,
     pub seed: u64,
     pub precision: Precision,
+    /// Where the model's tensors live (`--device`). Not written when `cpu`.
+    #[serde(default, skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
     /// The clip folder written: fields.npz, clip.json, truth.json, trajectories.csv (+
     /// camera.json with a video).
     pub out: PathBuf,
@@ -280,6 +283,7 @@ impl Default for SynthJob {
             heading_deg: 0.0,
             seed: 0,
             precision: Precision::F32,
+            device: Compute::Cpu,
             out: PathBuf::from("clip"),
             video: None,
             zone_sets: None,
@@ -343,7 +347,7 @@ pub fn write_clip(job: &SynthJob, progress: &mut dyn Progress) -> Result<Synth> 
         crate::data::atomic::check_writable(&ground_path(img))?;
     }
     AtomicDir::create(&job.out)?; // fail early on an unusable output folder
-    let device = cpu_device(job.precision)?;
+    let device = device(job.device, job.precision)?;
     let cfg = SynthConfig {
         params: params.clone(),
         agents: job.agents,

@@ -1,6 +1,6 @@
 //! `herdfit ablate`: flags → [`AblateJob`] → [`zoned::run_either`] → the report's Markdown.
 
-use crate::cli::args::{choice, with_flags, LOSSES};
+use crate::cli::args::{choice, with_flags, DeviceArg, LOSSES};
 use crate::cli::commands::fit::StepFlags;
 use crate::cli::paths::{InDir, InFile, OutDir};
 use crate::cli::Bars;
@@ -57,6 +57,8 @@ pub struct AblateArgs {
     /// Compare the seeds' mean prediction with the clip in the validation.
     #[arg(long)]
     pub ensemble_mean: bool,
+    #[command(flatten)]
+    pub device: DeviceArg,
 }
 
 pub fn exec(a: AblateArgs) -> Result<()> {
@@ -83,6 +85,7 @@ pub fn exec(a: AblateArgs) -> Result<()> {
                 replicas: a.replicas,
                 guidance_scale: a.guidance_scale,
                 settle,
+                device: a.device.device,
                 ..FitConfig::default()
             }),
             validate: ValidateConfig {
@@ -92,6 +95,7 @@ pub fn exec(a: AblateArgs) -> Result<()> {
                 settle,
                 guidance_scale: a.guidance_scale,
                 ensemble_mean: a.ensemble_mean,
+                device: a.device.device,
                 ..ValidateConfig::default()
             },
             switches,

@@ -1,6 +1,6 @@
 //! `herdfit author`: flags → [`AuthorJob`] → [`run`] → one line.
 
-use crate::cli::args::with_flags;
+use crate::cli::args::{with_flags, DeviceArg};
 use crate::cli::paths::{InFile, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
@@ -20,6 +20,8 @@ pub struct AuthorArgs {
     /// Video scale: pixels per body length.
     #[arg(long, value_name = "PX", default_value_t = 8.0)]
     pub px_per_bl: f64,
+    #[command(flatten)]
+    pub device: DeviceArg,
 }
 
 pub fn exec(a: AuthorArgs) -> Result<()> {
@@ -28,6 +30,7 @@ pub fn exec(a: AuthorArgs) -> Result<()> {
         out: a.out.into(),
         video: a.video,
         px_per_bl: a.px_per_bl,
+        device: a.device.device,
     };
     let summary = run(&job, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     println!("{summary}");

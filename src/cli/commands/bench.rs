@@ -1,7 +1,6 @@
 //! `herdfit bench`: flags → [`BenchConfig`] → [`run`] → one line.
 
-use crate::backend::Compute;
-use crate::cli::args::{choice, with_flags, DEVICES};
+use crate::cli::args::{with_flags, DeviceArg};
 use crate::cli::paths::OutFile;
 use crate::cli::Bars;
 use crate::error::Result;
@@ -29,9 +28,8 @@ pub struct BenchArgs {
     /// (the same values to round-off; slower).
     #[arg(long)]
     pub reference_forces: bool,
-    /// Where the tensors live.
-    #[arg(long, value_parser = choice::<Compute>(DEVICES), default_value_t = Compute::Cpu)]
-    pub device: Compute,
+    #[command(flatten)]
+    pub device: DeviceArg,
     /// Output report (JSON).
     #[arg(long, value_name = "OUT.json")]
     pub json: OutFile,
@@ -45,7 +43,7 @@ pub fn exec(a: BenchArgs) -> Result<()> {
         repeats: a.repeats,
         checkpointing: a.checkpointing,
         force_kernel: ForceKernel::reference_if(a.reference_forces),
-        device: a.device,
+        device: a.device.device,
     };
     let r = run(&cfg, &a.json, &mut Bars::default()).map_err(|e| with_flags(e, &[]))?;
     println!("{r}");

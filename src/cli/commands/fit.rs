@@ -3,8 +3,10 @@
 use super::fit_objective::{
     default_leaders, default_rollout, Objective, LEADERS, OBJECTIVES, ROLLOUTS, SPEEDS,
 };
-use crate::backend::{Compute, Precision};
-use crate::cli::args::{choice, parse_range, with_flags, DEVICES, LOSSES, OPTIMIZERS, PRECISIONS};
+use crate::backend::Precision;
+use crate::cli::args::{
+    choice, parse_range, with_flags, DeviceArg, LOSSES, OPTIMIZERS, PRECISIONS,
+};
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
 use crate::cli::Bars;
 use crate::error::Result;
@@ -119,9 +121,8 @@ pub struct FitArgs {
     pub guidance_scale: f64,
     #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
-    /// Where the tensors live (the fields objective; the track objective runs on the CPU).
-    #[arg(long, value_parser = choice::<Compute>(DEVICES), default_value_t = Compute::Cpu)]
-    pub device: Compute,
+    #[command(flatten)]
+    pub device: DeviceArg,
     /// Global phase: K candidate starts (the given one, then a Latin hypercube over the
     /// parameter box), each refined by the gradient fit, the best on held-out frames kept
     /// (1: the plain fit on every frame). Default 1; with --objective tracks 4, each refined by
@@ -241,7 +242,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             replicas: a.replicas,
             guidance_scale: a.guidance_scale,
             force_kernel: crate::herd::sim::ForceKernel::reference_if(a.reference_forces),
-            device: a.device,
+            device: a.device.device,
             global: GlobalPhase {
                 starts: a.starts.unwrap_or(GlobalPhase::default().starts),
                 holdout: a.holdout,

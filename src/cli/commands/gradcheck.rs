@@ -1,7 +1,7 @@
 //! `herdfit gradcheck`: flags → [`GradcheckJob`] → [`run`] → the table.
 
 use crate::backend::Precision;
-use crate::cli::args::{choice, with_flags, RunArgs, LOSSES, OBJECTIVES, PRECISIONS};
+use crate::cli::args::{choice, with_flags, DeviceArg, RunArgs, LOSSES, OBJECTIVES, PRECISIONS};
 use crate::cli::paths::{InDir, OutFile};
 use crate::cli::Bars;
 use crate::error::Result;
@@ -18,6 +18,8 @@ pub struct GradcheckArgs {
     pub steps: usize,
     #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F64)]
     pub precision: Precision,
+    #[command(flatten)]
+    pub device: DeviceArg,
     /// Step h of the 4-point central difference (default 1e-4 in f64, 1e-2 in f32).
     #[arg(long, value_name = "H")]
     pub fd_step: Option<f64>,
@@ -48,6 +50,7 @@ pub fn exec(a: GradcheckArgs) -> Result<()> {
         config: GradcheckConfig {
             steps: a.steps,
             precision: a.precision,
+            device: a.device.device,
             fd_step: a.fd_step,
             seed: a.seed,
             objective: a.objective,

@@ -1,7 +1,7 @@
 //! `herdfit simulate`: flags → [`SimulateJob`] → [`simulate`].
 
-use crate::backend::{Compute, Precision};
-use crate::cli::args::{choice, parse_pair, with_flags, RunArgs, DEVICES, PRECISIONS};
+use crate::backend::Precision;
+use crate::cli::args::{choice, parse_pair, with_flags, DeviceArg, RunArgs, PRECISIONS};
 use crate::cli::paths::OutFile;
 use crate::cli::Bars;
 use crate::error::Result;
@@ -27,9 +27,8 @@ pub struct SimulateArgs {
     pub guidance: Option<(f64, f64)>,
     #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
-    /// Where the tensors live.
-    #[arg(long, value_parser = choice::<Compute>(DEVICES), default_value_t = Compute::Cpu)]
-    pub device: Compute,
+    #[command(flatten)]
+    pub device: DeviceArg,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Output trajectories: frame,time,id,x,y,vx,vy,role.
@@ -47,7 +46,7 @@ pub fn exec(a: SimulateArgs) -> Result<()> {
             speed_noise: a.speed_noise,
             guidance: a.guidance.map(|(x, y)| [x, y]),
             precision: a.precision,
-            device: a.device,
+            device: a.device.device,
             seed: a.seed,
         },
     };

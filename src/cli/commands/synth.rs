@@ -1,7 +1,7 @@
 //! `herdfit synth`: flags → [`SynthJob`] → [`write_clip`] → one line.
 
 use crate::backend::Precision;
-use crate::cli::args::{choice, parse_grid, parse_rgb, with_flags, PRECISIONS};
+use crate::cli::args::{choice, parse_grid, parse_rgb, with_flags, DeviceArg, PRECISIONS};
 use crate::cli::paths::{InFile, OutDir, OutFile};
 use crate::cli::Bars;
 use crate::error::Result;
@@ -41,6 +41,8 @@ pub struct SynthArgs {
     pub seed: u64,
     #[arg(long, value_parser = choice::<Precision>(PRECISIONS), default_value_t = Precision::F32)]
     pub precision: Precision,
+    #[command(flatten)]
+    pub device: DeviceArg,
     /// Also render the overhead view as an MJPG AVI (needs the `video` feature).
     #[arg(long, alias = "video", value_name = "OUT.avi")]
     pub video_file: Option<OutFile>,
@@ -90,6 +92,7 @@ pub fn exec(a: SynthArgs) -> Result<()> {
         heading_deg: a.heading,
         seed: a.seed,
         precision: a.precision,
+        device: a.device.device,
         out: a.out.into(),
         video: a.video_file.map(|p| (p.into(), video)),
         zone_sets: a.zone_sets.map(Into::into),

@@ -18,7 +18,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             "{flag} is an option of the fields objective, not of --objective tracks"
         )))
     };
-    if !a.device.is_cpu() {
+    if !a.device.device.is_cpu() {
         return refuse("--device gpu");
     }
     if a.zones.is_some() {

@@ -1,6 +1,6 @@
 //! `herdfit validate`: flags → [`ValidateJob`] → [`zone_report::run_either`] → the report's Markdown.
 
-use crate::cli::args::{choice, parse_range, with_flags, MEASURES};
+use crate::cli::args::{choice, parse_range, with_flags, DeviceArg, MEASURES};
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutDir};
 use crate::cli::Bars;
 use crate::error::Result;
@@ -69,6 +69,8 @@ pub struct ValidateArgs {
     /// Skip the side-by-side video.
     #[arg(long)]
     pub no_video: bool,
+    #[command(flatten)]
+    pub device: DeviceArg,
     /// Output report folder.
     #[arg(long, value_name = "REPORT/")]
     pub out: OutDir,
@@ -95,6 +97,7 @@ pub fn exec(a: ValidateArgs) -> Result<()> {
             boundary,
             frames: a.frames.map(|(x, y)| [x, y]),
             measures: a.measures,
+            device: a.device.device,
         },
     };
     // A zone fit's bundle (herdfit.param-sets/1) is validated zone by zone.

@@ -3,7 +3,7 @@
 //! optionally `herd.avi`.
 
 use super::{run as simulate_scene, AuthorRun, Scene};
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::data::agents::{push_traj_frame, AgentRow, TRAJ_HEADER};
 use crate::data::atomic::AtomicDir;
 use crate::error::{Error, Result};
@@ -27,6 +27,9 @@ pub struct AuthorJob {
     pub video: bool,
     /// Video scale: pixels per body length.
     pub px_per_bl: f64,
+    /// Where the model's tensors live (`--device`). Not written when `cpu`.
+    #[serde(default, skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
 }
 
 impl Default for AuthorJob {
@@ -36,6 +39,7 @@ impl Default for AuthorJob {
             out: PathBuf::from("author"),
             video: false,
             px_per_bl: 8.0,
+            device: Compute::Cpu,
         }
     }
 }
@@ -112,7 +116,7 @@ pub fn run(job: &AuthorJob, progress: &mut dyn Progress) -> Result<AuthorSummary
     job.check()?;
     let scene = Scene::load(&job.scene)?;
     let out = AtomicDir::create(&job.out)?;
-    let device = cpu_device(Precision::F32)?;
+    let device = device(job.device, Precision::F32)?;
     let steps = (scene.file.duration * scene.file.fps).round() as u64;
     progress.start("author", steps);
     let r = simulate_scene(&scene, &device, || progress.inc(1))?;
@@ -136,6 +140,9 @@ pub fn run(job: &AuthorJob, progress: &mut dyn Progress) -> Result<AuthorSummary
         "regions": region_measures(&r, scene.params.len()),
         "predator": r.predator,
     });
+    if !job.device.is_cpu() {
+        report["device"] = serde_json::json!(job.device);
+    }
     // Through the scene's sources and sinks: what entered, what left (left, right, bottom,
     // top) and the count in the world frame by frame.
     if let Some(c) = &r.crossings {

@@ -6,7 +6,7 @@ use super::global::fit_zones_global;
 use super::job::{plot_or_warn, FitJob};
 use super::log::write_log;
 use super::still::{stationary_clip, still_measures_in, StillConfig, StillMeasures, StillRun};
-use crate::backend::cpu_device;
+use crate::backend::device;
 use crate::data::agents::AgentRow;
 use crate::data::atomic::check_writable;
 use crate::data::ClipFields;
@@ -223,7 +223,7 @@ fn errors_of(
     job: &FitJob,
     tracked: Option<&[AgentRow]>,
 ) -> Result<(f64, f64)> {
-    let device = cpu_device(job.config.precision)?;
+    let device = device(job.config.device, job.config.precision)?;
     let guidance = guidance_fields(clip, job.config.guidance_scale);
     let gates = job.config.boundary.gates(clip)?;
     let (mut d, mut v, mut n) = (0.0, 0.0, 0.0);

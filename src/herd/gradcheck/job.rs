@@ -1,7 +1,7 @@
 //! `herdfit gradcheck` as a library call: which objective, on which herd or clip, written where.
 
 use super::{default_scenario, gradcheck, record, GradReport, LossScenario, Scenario};
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{cpu_device, Compute, Precision};
 use crate::data::agents::read_init_csv;
 use crate::data::atomic::{check_writable, write_atomic};
 use crate::data::ClipFields;
@@ -33,6 +33,9 @@ pub struct GradcheckConfig {
     /// Unrolled steps.
     pub steps: usize,
     pub precision: Precision,
+    /// Where the tensors live (`--device`); the GPU computes in f32. Not written when `cpu`.
+    #[serde(default, skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
     /// Step h of the 4-point central difference (default 1e-4 in f64, 1e-2 in f32).
     pub fd_step: Option<f64>,
     pub seed: u64,
@@ -48,6 +51,7 @@ impl Default for GradcheckConfig {
         GradcheckConfig {
             steps: 10,
             precision: Precision::F64,
+            device: Compute::Cpu,
             fd_step: None,
             seed: 0,
             objective: Objective::Herd,
@@ -137,7 +141,7 @@ pub fn run(job: &GradcheckJob, progress: &mut dyn Progress) -> Result<GradReport
         )
         .map_err(|e| e.in_file(&path))?;
         progress.start("gradcheck", 13);
-        let report = sc.check(cfg.precision, cfg.h(), || progress.inc(1))?;
+        let report = sc.check((cfg.device, cfg.precision), cfg.h(), || progress.inc(1))?;
         progress.finish();
         report
     } else {
@@ -162,9 +166,14 @@ pub fn run(job: &GradcheckJob, progress: &mut dyn Progress) -> Result<GradReport
             rec.save(p)?;
         }
         progress.start("gradcheck", 13);
-        let report = gradcheck(&sc, cfg.steps, cfg.precision, cfg.h(), &rec, || {
-            progress.inc(1)
-        })?;
+        let report = gradcheck(
+            &sc,
+            cfg.steps,
+            (cfg.device, cfg.precision),
+            cfg.h(),
+            &rec,
+            || progress.inc(1),
+        )?;
         progress.finish();
         report
     };
@@ -179,8 +188,8 @@ impl std::fmt::Display for GradReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(
             f,
-            "gradcheck: {} agents, {} unrolled steps, {:?}, J = {:.6e}, h = {:e}",
-            self.agents, self.steps, self.precision, self.objective, self.fd_step
+            "gradcheck: {} agents, {} unrolled steps, {:?} on {}, J = {:.6e}, h = {:e}",
+            self.agents, self.steps, self.precision, self.device, self.objective, self.fd_step
         )?;
         writeln!(
             f,

@@ -3,7 +3,7 @@
 //! evaluation.
 
 use super::{rel_err, GradReport, GradRow};
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::data::agents::AgentRow;
 use crate::error::{Error, Result};
 use crate::herd::params::{param_names, Params, N_PARAMS};
@@ -159,11 +159,11 @@ impl LossScenario {
     /// Gradient check of the loss: autodiff vs 4-point central differences.
     pub fn check(
         &self,
-        precision: Precision,
+        (compute, precision): (Compute, Precision),
         h: f64,
         mut progress: impl FnMut(),
     ) -> Result<GradReport> {
-        let device = cpu_device(precision)?;
+        let device = device(compute, precision)?;
         let theta = self.model.params.to_vec();
         let ad = device.clone().autodiff();
         let (loss, t) = self.loss(&theta, &ad)?;
@@ -196,6 +196,7 @@ impl LossScenario {
             steps: self.plans[0].len(),
             agents: self.init[0].len(),
             precision,
+            device: compute,
             objective: value,
             fd_step: h,
             parameters,

@@ -2,7 +2,7 @@
 //! to all 12 parameters, by reverse-mode autodiff and by central finite differences with the
 //! same (replayed) perception, roles and noise.
 
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::error::{Error, Result};
 use crate::herd::params::{param_names, N_PARAMS};
 use crate::herd::sim::{read_vec, theta_tensor, Decide, HerdState, Recording};
@@ -114,6 +114,9 @@ pub struct GradReport {
     pub steps: usize,
     pub agents: usize,
     pub precision: Precision,
+    /// Where the tensors lived (`--device`). Not written when `cpu`.
+    #[serde(skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
     pub objective: f64,
     pub fd_step: f64,
     pub parameters: Vec<GradRow>,
@@ -125,11 +128,12 @@ pub fn rel_err(a: f64, f: f64) -> f64 {
     (a - f).abs() / a.abs().max(f.abs()).max(1e-12)
 }
 
-/// Runs the check: records (or takes) the decisions, then autodiff and finite differences.
+/// Runs the check on the device `compute` names in `precision`: records (or takes) the
+/// decisions, then autodiff and finite differences.
 pub fn gradcheck(
     sc: &Scenario,
     steps: usize,
-    precision: Precision,
+    (compute, precision): (Compute, Precision),
     fd_step: f64,
     rec: &Recording,
     mut progress: impl FnMut(),
@@ -137,7 +141,7 @@ pub fn gradcheck(
     if !(fd_step.is_finite() && fd_step > 0.0) {
         return Err(Error::config("fd_step", "must be > 0"));
     }
-    let device = cpu_device(precision)?;
+    let device = device(compute, precision)?;
     let theta = sc.model.params.to_vec();
     let (value, ad) = autodiff_gradient(sc, &theta, rec, steps, &device)?;
     progress();
@@ -163,6 +167,7 @@ pub fn gradcheck(
         steps,
         agents: sc.init.len(),
         precision,
+        device: compute,
         objective: value,
         fd_step,
         parameters,

@@ -5,7 +5,7 @@
 //! motion-aligned bounding box — as the mean and STD of each measure and of its error, averaged
 //! over seeds (the paper's Tables 1–5).
 
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Compute, Precision};
 use crate::data::agents::AgentRow;
 use crate::data::boundary::Gates;
 use crate::data::ClipFields;
@@ -21,6 +21,7 @@ use crate::measure::rasterise;
 use crate::progress::Proceed;
 use serde::Serialize;
 
+mod held_out;
 pub mod paired;
 mod population;
 pub mod reference;
@@ -28,6 +29,7 @@ mod report;
 pub mod zone_report;
 pub mod zones;
 
+pub use held_out::HeldOut;
 pub use population::{BoundaryReport, Population};
 pub use reference::Measures;
 pub use report::{markdown, run, ValidateJob};
@@ -205,51 +207,8 @@ impl SetReport {
 /// Schema tag of validation reports (`report.json`).
 pub const VALIDATION_SCHEMA: &str = "herdfit.validation/1";
 
-/// What every validation report states of its run (flattened into its JSON): the schema, the
-/// clip, the held-out frames, the split, the coarse grid and the seeds.
-#[derive(Clone, Debug, Serialize)]
-pub struct HeldOut {
-    /// [`VALIDATION_SCHEMA`], or the zone report's.
-    pub schema: String,
-    pub clip: String,
-    pub frames: [usize; 2],
-    pub split: f64,
-    /// The coarse grid of the errors ([`ValidateConfig::coarse_grid`]).
-    pub grid: usize,
-    pub seeds: usize,
-    /// [`ValidateConfig::horizon`], when the herd was drawn afresh every so many frames.
-    #[serde(skip_serializing_if = "is_zero")]
-    pub horizon: usize,
-    /// [`ValidateConfig::tracks`], when every run started from the tracked animals.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub tracks: Option<String>,
-}
-
 fn is_auto(b: &BoundaryChoice) -> bool {
     *b == BoundaryChoice::Auto
-}
-
-fn is_zero(x: &usize) -> bool {
-    *x == 0
-}
-
-impl HeldOut {
-    /// "Clip `C`, held-out frames a..b (split s), k seed(s), errors on a g×g coarse grid".
-    pub fn summary(&self) -> String {
-        let horizon = match self.horizon {
-            0 => String::new(),
-            h => format!(", the herd drawn afresh from the clip every {h} frames"),
-        };
-        let tracks = match (&self.tracks, self.horizon) {
-            (None, _) => String::new(),
-            (Some(t), 0) => format!(", the herd started from the animals tracked in `{t}`"),
-            (Some(t), _) => format!(" (each time from the animals tracked in `{t}`)"),
-        };
-        format!(
-            "Clip `{}`, held-out frames {}..{} (split {}), {} seed(s), errors on a {}×{} coarse grid{horizon}{tracks}",
-            self.clip, self.frames[0], self.frames[1], self.split, self.seeds, self.grid, self.grid
-        )
-    }
 }
 
 /// The whole report.
@@ -320,6 +279,9 @@ pub struct ValidateConfig {
     /// ([`reference`](mod@reference)). Not written when herdfit's own.
     #[serde(default, skip_serializing_if = "is_herdfit")]
     pub measures: Measures,
+    /// Where the model's tensors live (`--device`). Not written when `cpu`.
+    #[serde(default, skip_serializing_if = "Compute::is_cpu")]
+    pub device: Compute,
 }
 
 fn is_herdfit(m: &Measures) -> bool {
@@ -341,6 +303,7 @@ impl Default for ValidateConfig {
             boundary: BoundaryChoice::Auto,
             frames: None,
             measures: Measures::Herdfit,
+            device: Compute::Cpu,
         }
     }
 }
@@ -465,7 +428,7 @@ pub fn validate<R: Proceed>(
     let (start, nf) = cfg.held_out_checked(clip)?;
     let anchors = cfg.anchors(clip)?;
     let gates = cfg.boundary.gates(clip)?;
-    let device = cpu_device(Precision::F32)?;
+    let device = device(cfg.device, Precision::F32)?;
     // The leaders' guidance of every frame, the same for every set and seed.
     let guidance = guidance_fields(clip, cfg.guidance_scale);
     let video: Vec<Emergent> = (start..nf).map(|f| emergent(clip, f)).collect();
@@ -576,6 +539,7 @@ pub fn validate<R: Proceed>(
                 seeds,
                 horizon: cfg.horizon,
                 tracks: cfg.tracks.as_ref().map(|t| t.display().to_string()),
+                device: cfg.device,
             },
             ensemble_mean: cfg.ensemble_mean,
             video_per_frame: video.iter().map(Emergent::values).collect(),

@@ -113,6 +113,7 @@ pub fn run_bundle(job: &ValidateJob, progress: &mut dyn Progress) -> Result<(Zon
             seeds: job.config.seeds,
             horizon: 0,
             tracks: job.config.tracks.as_ref().map(|t| t.display().to_string()),
+            device: job.config.device,
         },
         ensemble_mean: job.config.ensemble_mean,
         zones: z

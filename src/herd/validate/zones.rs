@@ -5,7 +5,7 @@
 //! and aspect ratio of the fields inside the zone, eq. 12–13).
 
 use super::{stat, Stat, ValidateConfig};
-use crate::backend::{cpu_device, Precision};
+use crate::backend::{device, Precision};
 use crate::data::ClipFields;
 use crate::error::{Error, Result};
 use crate::herd::eval::run_from;
@@ -107,7 +107,7 @@ pub fn validate_zones<R: Proceed>(
             cfg.warmup
         )));
     }
-    let device = cpu_device(Precision::F32)?;
+    let device = device(cfg.device, Precision::F32)?;
     let guidance = guidance_fields(clip, cfg.guidance_scale);
     let first = start - cfg.warmup;
     let gates = cfg.boundary.gates(clip)?;
