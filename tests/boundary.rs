@@ -154,33 +154,20 @@ fn entries_appear_only_outside_the_grid_at_entry_gates_heading_in() {
     assert_eq!(a.ids.len(), 39);
 }
 
-/// Agents at `pos`, all heading along `head`, ids 0.. .
-fn herd_at(pos: &[[f64; 2]], head: [f64; 2]) -> (Vec<[f64; 2]>, Vec<[f64; 2]>, Vec<f64>, Vec<u64>) {
-    let n = pos.len();
-    (
-        pos.to_vec(),
-        vec![head; n],
-        vec![3.0; n],
-        (0..n as u64).collect(),
-    )
-}
-
 #[test]
 fn the_excess_over_the_videos_count_leaves_from_the_exit_cells_nearest_the_edge_first() {
-    // The corridor's video holds 40 animals; the run holds 44: 36 in the middle of the view,
-    // 5 in the exit cell (0, 3) heading out at x = 0.1 … 0.9, one there heading in, one heading
-    // out in cell (0, 6), which is no exit gate, and one outside the grid heading back in.
+    // The corridor's video holds 40 animals; the run holds 43: 36 in the middle of the view,
+    // 5 in the exit cell (0, 3) heading out at x = 0.1 … 0.9, one there heading in, and one
+    // heading out in cell (0, 6), which is no exit gate.
     let clip = corridor(20, 0.5, -3.0);
     let gates = Gates::new(vec![gate(19, 3, Side::Right)], vec![gate(0, 3, Side::Left)]);
     let mut pos: Vec<[f64; 2]> = (0..36).map(|i| [5.0 + 0.25 * i as f64, 3.5]).collect();
     pos.extend([[0.9, 3.2], [0.5, 3.4], [0.1, 3.6], [0.3, 3.5], [0.7, 3.3]]);
-    let (mut pos, mut head, mut sp, mut ids) = herd_at(&pos, [-1.0, 0.0]);
-    for (p, h) in [([0.05, 3.5], [1.0, 0.0]), ([0.2, 6.5], [-1.0, 0.0])] {
-        pos.push(p);
-        head.push(h);
-        sp.push(3.0);
-        ids.push(ids.len() as u64);
-    }
+    let mut head = vec![[-1.0, 0.0]; pos.len()];
+    pos.extend([[0.05, 3.5], [0.2, 6.5]]);
+    head.extend([[1.0, 0.0], [-1.0, 0.0]]);
+    let mut sp = vec![3.0; pos.len()];
+    let mut ids: Vec<u64> = (0..pos.len() as u64).collect();
     assert_eq!(ids.len(), 43);
     let mut s = Stream::new(&clip, &gates, SpeedModel::default(), 3, 100);
     let mut a = Agents {

@@ -42,6 +42,9 @@ use serde::Serialize;
 use std::cell::RefCell;
 use std::rc::Rc;
 
+mod choice;
+pub use choice::BoundaryChoice;
+
 /// Share of a clip's mean count that must cross its edge over the clip (in or out) for the clip
 /// to be open.
 pub const OPEN_SHARE: f64 = 0.1;
@@ -169,8 +172,8 @@ impl Agents<'_> {
     fn remove(&mut self, drop: &[bool]) -> usize {
         let before = self.ids.len();
         let mut keep = 0;
-        for i in 0..before {
-            if drop[i] {
+        for (i, &gone) in drop.iter().enumerate() {
+            if gone {
                 continue;
             }
             self.pos[keep] = self.pos[i];
@@ -272,7 +275,7 @@ impl<'a> Stream<'a> {
         let [w, h] = g.size();
         let (x0, y0) = (g.origin[0], g.origin[1]);
         let mut drop = vec![false; a.ids.len()];
-        for i in 0..a.ids.len() {
+        for (i, gone) in drop.iter_mut().enumerate() {
             let p = a.pos[i];
             let q = [p[0].clamp(x0, x0 + w), p[1].clamp(y0, y0 + h)];
             let out = [p[0] - q[0], p[1] - q[1]];
@@ -290,7 +293,7 @@ impl<'a> Stream<'a> {
                     3
                 };
                 self.crossings.left[side] += 1;
-                drop[i] = true;
+                *gone = true;
             }
         }
         a.remove(&drop)
@@ -316,7 +319,7 @@ impl<'a> Stream<'a> {
             return 0;
         };
         let excess = a.ids.len() as f64 - target;
-        if !(excess > 0.0) || self.gates.exits.is_empty() {
+        if excess.is_nan() || excess <= 0.0 || self.gates.exits.is_empty() {
             return 0;
         }
         // Rounded stochastically, as the entries' shortfall is.
@@ -559,67 +562,4 @@ pub fn edit_rows(
         return rows;
     }
     s.rows(&ids)
-}
-
-/// How a run treats the edge of a clip's grid (`--boundary`; the key `boundary`).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub enum BoundaryChoice {
-    /// The gates derived from the clip's flux ([`gates_of_clip`]): closed when nothing crosses.
-    #[default]
-    Auto,
-    /// Closed whatever the clip shows: nothing enters or leaves.
-    Closed,
-    /// The gates of a `herdfit.boundary/1` file.
-    File(std::path::PathBuf),
-}
-
-impl BoundaryChoice {
-    /// The gates of `clip` under this choice; a file's errors name it.
-    pub fn gates(&self, clip: &ClipFields) -> Result<Gates> {
-        match self {
-            BoundaryChoice::Auto => Ok(gates_of_clip(clip)),
-            BoundaryChoice::Closed => Ok(Gates::closed()),
-            BoundaryChoice::File(p) => {
-                let g = Gates::load(p)?;
-                g.check(clip.meta.nx, clip.meta.ny, &clip.obstacles)
-                    .map_err(|e| e.in_file(p))?;
-                Ok(g)
-            }
-        }
-    }
-}
-
-impl std::str::FromStr for BoundaryChoice {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "" => Err("expected auto, closed or a herdfit.boundary/1 file".into()),
-            "auto" => Ok(BoundaryChoice::Auto),
-            "closed" => Ok(BoundaryChoice::Closed),
-            p => Ok(BoundaryChoice::File(p.into())),
-        }
-    }
-}
-
-impl std::fmt::Display for BoundaryChoice {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            BoundaryChoice::Auto => write!(f, "auto"),
-            BoundaryChoice::Closed => write!(f, "closed"),
-            BoundaryChoice::File(p) => write!(f, "{}", p.display()),
-        }
-    }
-}
-
-impl Serialize for BoundaryChoice {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
-        s.serialize_str(&self.to_string())
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for BoundaryChoice {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        let s = String::deserialize(d)?;
-        s.parse().map_err(serde::de::Error::custom)
-    }
 }
