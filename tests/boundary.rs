@@ -155,6 +155,62 @@ fn entries_appear_only_outside_the_grid_at_entry_gates_heading_in() {
 }
 
 #[test]
+fn the_excess_over_the_videos_count_leaves_from_the_exit_cells_nearest_the_edge_first() {
+    // The corridor's video holds 40 animals; the run holds 43: 36 in the middle of the view,
+    // 5 in the exit cell (0, 3) heading out at x = 0.1 … 0.9, one there heading in, and one
+    // heading out in cell (0, 6), which is no exit gate.
+    let clip = corridor(20, 0.5, -3.0);
+    let gates = Gates::new(vec![gate(19, 3, Side::Right)], vec![gate(0, 3, Side::Left)]);
+    let mut pos: Vec<[f64; 2]> = (0..36).map(|i| [5.0 + 0.25 * i as f64, 3.5]).collect();
+    pos.extend([[0.9, 3.2], [0.5, 3.4], [0.1, 3.6], [0.3, 3.5], [0.7, 3.3]]);
+    let mut head = vec![[-1.0, 0.0]; pos.len()];
+    pos.extend([[0.05, 3.5], [0.2, 6.5]]);
+    head.extend([[1.0, 0.0], [-1.0, 0.0]]);
+    let mut sp = vec![3.0; pos.len()];
+    let mut ids: Vec<u64> = (0..pos.len() as u64).collect();
+    assert_eq!(ids.len(), 43);
+    let mut s = Stream::new(&clip, &gates, SpeedModel::default(), 3, 100);
+    let mut a = Agents {
+        pos: &mut pos,
+        head: &mut head,
+        speed: &mut sp,
+        ids: &mut ids,
+    };
+    // 43 − 40 = 3 leave early: the three heading out nearest the left edge (ids 38, 39, 37).
+    assert_eq!(s.trim(5, &mut a), 3);
+    assert_eq!(a.ids.len(), 40);
+    for gone in [37, 38, 39] {
+        assert!(!a.ids.contains(&gone), "agent {gone} at the edge stayed");
+    }
+    for kept in [36, 40, 41, 42] {
+        assert!(a.ids.contains(&kept), "agent {kept} was removed");
+    }
+    assert_eq!(s.crossings.early, 3);
+    assert_eq!(s.crossings.left, [3, 0, 0, 0]);
+    // At the video's count, nobody more leaves early.
+    assert_eq!(s.trim(5, &mut a), 0);
+    assert_eq!(a.ids.len(), 40);
+}
+
+#[test]
+fn a_count_that_falls_faster_than_the_stream_drains_is_followed_in_validate() {
+    // The video's count falls by 12.5 % in one frame (40 → 35: a detection drop, no flux) and
+    // stays there; the run follows it within ±10 % in every frame.
+    let mut clip = corridor(200, 0.5, -3.0);
+    clip.density
+        .slice_mut(ndarray::s![100.., 2..6, ..])
+        .fill(0.4375);
+    let (sim, video) = counts(&clip, BoundaryChoice::Auto);
+    assert_eq!((video[99], video[100]), (40.0, 35.0));
+    for (f, (s, v)) in sim.iter().zip(&video).enumerate() {
+        assert!(
+            (s - v).abs() <= 0.1 * v,
+            "frame {f}: {s} agents in view, the video holds {v}"
+        );
+    }
+}
+
+#[test]
 fn a_boundary_file_overrides_the_derived_gates_and_is_checked() {
     let dir = tempfile::tempdir().unwrap();
     let clip = corridor(20, 0.6, -3.0);

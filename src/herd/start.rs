@@ -146,7 +146,7 @@ pub fn population_control(
 }
 
 /// Between windows through the open boundary `gates` ([`crate::herd::boundary`]): agents that
-/// left the grid are removed; when the density error exceeds `threshold`, agents move from the
+/// left the grid are removed, and the excess over frame `f`'s count leaves at the exit gates; when the density error exceeds `threshold`, agents move from the
 /// most over-filled cells to the most under-filled ones (the paper's §6.1 control, the count
 /// unchanged); then the count's shortfall against frame `f` enters at the entry gates, each new
 /// agent placed to cross its gate within `ahead` seconds. Returns the rows and what crossed.
@@ -164,7 +164,7 @@ pub fn population_control_open(
 ) -> (Vec<AgentRow>, crate::herd::boundary::Crossings) {
     use crate::herd::boundary::{edit_rows, Stream};
     let mut stream = Stream::new(clip, gates, speed.clone(), rng.gen(), *next_id);
-    let mut rows = edit_rows(rows, |a| stream.leave(a) > 0);
+    let mut rows = edit_rows(rows, |a| stream.leave(a) + stream.trim(f, a) > 0);
     let (err, _) = field_errors(clip, f, &rows);
     if err > threshold {
         let g = clip.grid();

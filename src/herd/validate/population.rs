@@ -20,6 +20,9 @@ pub struct Population {
     pub entered: f64,
     /// Agents removed after leaving the grid, per run, per side (left, right, bottom, top).
     pub left: [f64; 4],
+    /// Of those, agents removed in an exit cell before crossing its edge (the run holding more
+    /// than the video's count), per run.
+    pub early: f64,
     /// Agents inside the grid at each held-out frame.
     pub count: Vec<f64>,
 }
@@ -35,6 +38,7 @@ impl Population {
     /// Adds one run with weight `w` (1/seeds).
     pub(super) fn add(&mut self, run: &SimRun, w: f64) {
         self.entered += w * run.crossings.entered as f64;
+        self.early += w * run.crossings.early as f64;
         for (a, b) in self.left.iter_mut().zip(run.crossings.left) {
             *a += w * b as f64;
         }

@@ -10,6 +10,10 @@
 //!   `--boundary FILE` overrides the derived gates (`herdfit.boundary/1`).
 //! - **Exits.** After each step an agent outside the grid is removed when it moves away from the
 //!   grid (its heading has a non-negative component along the way out) or is more than a cell out.
+//!   A clip's run also keeps the video's count on the way down: while it holds more agents than
+//!   the video's count, the excess leaves early from the exit gates' cells, nearest the edge
+//!   first ([`Stream::trim`]). Without this the herd's tail trails a stream draining faster than
+//!   its own flux through the exit says (the video's count is not conserved by its fields).
 //! - **Entries.** New agents enter only at entry gates, never inside the view: the run keeps the
 //!   count the video holds at each frame (the paper: "new agents are generated in predefined entry
 //!   cells to maintain a population count consistent with the video"), so after each step the
@@ -37,6 +41,9 @@ use rand_distr::StandardNormal;
 use serde::Serialize;
 use std::cell::RefCell;
 use std::rc::Rc;
+
+mod choice;
+pub use choice::BoundaryChoice;
 
 /// Share of a clip's mean count that must cross its edge over the clip (in or out) for the clip
 /// to be open.
@@ -128,8 +135,12 @@ pub fn gates_of_clip(clip: &ClipFields) -> Gates {
 pub struct Crossings {
     /// Agents that entered at the entry gates.
     pub entered: usize,
-    /// Agents removed after leaving the grid, per side (left, right, bottom, top).
+    /// Agents removed after leaving the grid, per side (left, right, bottom, top), including
+    /// those removed early.
     pub left: [usize; 4],
+    /// Of those, agents removed in an exit cell before crossing its edge, the run holding more
+    /// than the video's count ([`Stream::trim`]).
+    pub early: usize,
 }
 
 impl Crossings {
@@ -141,6 +152,7 @@ impl Crossings {
     /// Adds another run's crossings.
     pub fn add(&mut self, o: &Crossings) {
         self.entered += o.entered;
+        self.early += o.early;
         for (a, b) in self.left.iter_mut().zip(o.left) {
             *a += b;
         }
@@ -153,6 +165,29 @@ pub struct Agents<'a> {
     pub head: &'a mut Vec<P2>,
     pub speed: &'a mut Vec<f64>,
     pub ids: &'a mut Vec<u64>,
+}
+
+impl Agents<'_> {
+    /// Removes the agents marked in `drop`, keeping the others in order; returns how many.
+    fn remove(&mut self, drop: &[bool]) -> usize {
+        let before = self.ids.len();
+        let mut keep = 0;
+        for (i, &gone) in drop.iter().enumerate() {
+            if gone {
+                continue;
+            }
+            self.pos[keep] = self.pos[i];
+            self.head[keep] = self.head[i];
+            self.speed[keep] = self.speed[i];
+            self.ids[keep] = self.ids[i];
+            keep += 1;
+        }
+        self.pos.truncate(keep);
+        self.head.truncate(keep);
+        self.speed.truncate(keep);
+        self.ids.truncate(keep);
+        before - keep
+    }
 }
 
 /// Where a run's new agents come from.
@@ -228,7 +263,7 @@ impl<'a> Stream<'a> {
     /// removes the agents that left the grid and lets new ones in, each placed to cross its
     /// gate within `dt` seconds. Returns whether anything changed.
     pub fn apply(&mut self, f: usize, dt: f64, a: &mut Agents) -> bool {
-        let removed = self.leave(a);
+        let removed = self.leave(a) + self.trim(f, a);
         let entered = self.enter(f, dt, a);
         removed > 0 || entered > 0
     }
@@ -239,9 +274,8 @@ impl<'a> Stream<'a> {
         let g = self.grid();
         let [w, h] = g.size();
         let (x0, y0) = (g.origin[0], g.origin[1]);
-        let before = a.ids.len();
-        let mut keep = 0;
-        for i in 0..a.ids.len() {
+        let mut drop = vec![false; a.ids.len()];
+        for (i, gone) in drop.iter_mut().enumerate() {
             let p = a.pos[i];
             let q = [p[0].clamp(x0, x0 + w), p[1].clamp(y0, y0 + h)];
             let out = [p[0] - q[0], p[1] - q[1]];
@@ -259,19 +293,75 @@ impl<'a> Stream<'a> {
                     3
                 };
                 self.crossings.left[side] += 1;
+                *gone = true;
+            }
+        }
+        a.remove(&drop)
+    }
+
+    /// The count the run keeps at frame `f`: the video's, for a clip; none for a scene (whose
+    /// count only entries keep).
+    fn target(&self, f: usize) -> Option<f64> {
+        match &self.inflow {
+            Inflow::Clip(clip) if f < clip.frames() => Some(clip.count(f)),
+            _ => None,
+        }
+    }
+
+    /// While the run holds more agents than the video's count at frame `f`, the excess leaves
+    /// through the exit gates: agents in an exit gate's cell heading out through its edge (a
+    /// non-negative component along the outward normal), nearest the edge first, are removed
+    /// (and counted in [`Crossings::early`]). The count then falls with the video's where it falls
+    /// faster than the herd's flux through the exit carries it, as entries raise it where it
+    /// rises faster; no agent elsewhere is touched. Returns how many.
+    pub fn trim(&mut self, f: usize, a: &mut Agents) -> usize {
+        let Some(target) = self.target(f) else {
+            return 0;
+        };
+        let excess = a.ids.len() as f64 - target;
+        if excess.is_nan() || excess <= 0.0 || self.gates.exits.is_empty() {
+            return 0;
+        }
+        // Rounded stochastically, as the entries' shortfall is.
+        let n =
+            excess.floor() as usize + usize::from(self.rng.gen::<f64>() < excess - excess.floor());
+        let g = self.grid();
+        let far = [g.origin[0] + g.size()[0], g.origin[1] + g.size()[1]];
+        // (distance to the edge, agent, side) of every agent that may leave early.
+        let mut out: Vec<(f64, usize, usize)> = Vec::new();
+        for i in 0..a.ids.len() {
+            let Some((ix, iy)) = g.cell_of(a.pos[i]) else {
+                continue;
+            };
+            for gate in self.gates.exits.iter().filter(|e| e.cell == [ix, iy]) {
+                let n = gate.side.normal();
+                if a.head[i][0] * n[0] + a.head[i][1] * n[1] < 0.0 {
+                    continue;
+                }
+                let p = a.pos[i];
+                let (d, side) = match gate.side {
+                    Side::Left => (p[0] - g.origin[0], 0),
+                    Side::Right => (far[0] - p[0], 1),
+                    Side::Bottom => (p[1] - g.origin[1], 2),
+                    Side::Top => (far[1] - p[1], 3),
+                };
+                out.push((d, i, side));
+            }
+        }
+        out.sort_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)));
+        let mut drop = vec![false; a.ids.len()];
+        let mut taken = 0;
+        for &(_, i, side) in &out {
+            // A corner cell may be two exits: each agent leaves once.
+            if taken == n || drop[i] {
                 continue;
             }
-            a.pos[keep] = a.pos[i];
-            a.head[keep] = a.head[i];
-            a.speed[keep] = a.speed[i];
-            a.ids[keep] = a.ids[i];
-            keep += 1;
+            drop[i] = true;
+            taken += 1;
+            self.crossings.left[side] += 1;
+            self.crossings.early += 1;
         }
-        a.pos.truncate(keep);
-        a.head.truncate(keep);
-        a.speed.truncate(keep);
-        a.ids.truncate(keep);
-        before - keep
+        a.remove(&drop)
     }
 
     /// How many enter after the steps that brought the run to frame `f` (`dt` seconds), and
@@ -472,67 +562,4 @@ pub fn edit_rows(
         return rows;
     }
     s.rows(&ids)
-}
-
-/// How a run treats the edge of a clip's grid (`--boundary`; the key `boundary`).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub enum BoundaryChoice {
-    /// The gates derived from the clip's flux ([`gates_of_clip`]): closed when nothing crosses.
-    #[default]
-    Auto,
-    /// Closed whatever the clip shows: nothing enters or leaves.
-    Closed,
-    /// The gates of a `herdfit.boundary/1` file.
-    File(std::path::PathBuf),
-}
-
-impl BoundaryChoice {
-    /// The gates of `clip` under this choice; a file's errors name it.
-    pub fn gates(&self, clip: &ClipFields) -> Result<Gates> {
-        match self {
-            BoundaryChoice::Auto => Ok(gates_of_clip(clip)),
-            BoundaryChoice::Closed => Ok(Gates::closed()),
-            BoundaryChoice::File(p) => {
-                let g = Gates::load(p)?;
-                g.check(clip.meta.nx, clip.meta.ny, &clip.obstacles)
-                    .map_err(|e| e.in_file(p))?;
-                Ok(g)
-            }
-        }
-    }
-}
-
-impl std::str::FromStr for BoundaryChoice {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "" => Err("expected auto, closed or a herdfit.boundary/1 file".into()),
-            "auto" => Ok(BoundaryChoice::Auto),
-            "closed" => Ok(BoundaryChoice::Closed),
-            p => Ok(BoundaryChoice::File(p.into())),
-        }
-    }
-}
-
-impl std::fmt::Display for BoundaryChoice {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            BoundaryChoice::Auto => write!(f, "auto"),
-            BoundaryChoice::Closed => write!(f, "closed"),
-            BoundaryChoice::File(p) => write!(f, "{}", p.display()),
-        }
-    }
-}
-
-impl Serialize for BoundaryChoice {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
-        s.serialize_str(&self.to_string())
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for BoundaryChoice {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        let s = String::deserialize(d)?;
-        s.parse().map_err(serde::de::Error::custom)
-    }
 }
