@@ -202,7 +202,7 @@ const MIN_PLANE_ELEVATION: f64 = 0.02;
 /// convention): each viewing ray r meets the plane one unit above (or below) the camera at
 /// (r_x / r_z, r_y / r_z), whatever the plane's height, so the rate does not depend on the
 /// flock's distance. A flock that turns in the horizontal plane turns there as it does in the
-/// world; foreshortening does not bend it. Rays within [`MIN_PLANE_ELEVATION`] of the horizon
+/// world; foreshortening does not bend it. Rays within `MIN_PLANE_ELEVATION` (0.02 rad) of the horizon
 /// are left out. None with fewer than [`MIN_SAMPLES`] rates.
 pub fn plane_turning(obs: &Observations, lag_s: f64) -> Option<f64> {
     let lag = lag_frames(obs, lag_s);
