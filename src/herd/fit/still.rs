@@ -195,8 +195,11 @@ pub fn still_measures_in(
             &guidance,
             &device,
             |f, state, ids| {
-                // Every frame: each agent's zone (agents in the view only: outside it they
-                // are in no zone), by id.
+                // From the last settling frame on: each agent's zone (agents in the view only:
+                // outside it they are in no zone), by id; the settling steps measure nothing.
+                if f < cfg.settle {
+                    return Ok(());
+                }
                 let rows = state.rows(ids)?;
                 let inside: Vec<&AgentRow> = rows
                     .iter()
