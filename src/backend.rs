@@ -2,7 +2,8 @@
 //! every tensor on it. [`device`] gives burn's ndarray CPU device ([`Compute::Cpu`], the default)
 //! or, built with the cargo feature `gpu`, burn's wgpu device ([`Compute::Gpu`]: CubeCL over
 //! Vulkan, Metal or DX12; a software Vulkan driver such as Mesa's lavapipe also counts). On the GPU
-//! the forces run as burn tensor ops (the fused op of `herd::sim::fused` is ndarray's) and
+//! the forces of eq. 3–5 run as the fused op's CubeCL kernels (`herd::sim::fused_cube`; the
+//! tensor ops with `ForceKernel::Reference`), the rest of the step as burn tensor ops, and
 //! perception stays on the CPU, reading each step's state back (DESIGN §9).
 
 use crate::error::{Error, Result};

@@ -179,7 +179,15 @@ fn a_two_epoch_fit_on_the_gpu_ends_where_the_cpu_fit_ends() {
         };
         fit(&clip, &start, &cfg, None, |_, _, _, _| {}).unwrap()
     };
-    let (g, c) = (on(Compute::Gpu), on(Compute::Cpu));
+    let before = herdfit::herd::sim::cube_op_passes();
+    let g = on(Compute::Gpu);
+    let after = herdfit::herd::sim::cube_op_passes();
+    // The forces (forward and backward) went through the CubeCL op, not the tensor ops.
+    assert!(
+        after.0 > before.0 && after.1 > before.1,
+        "the GPU fit ran no CubeCL force op: {before:?} → {after:?}"
+    );
+    let c = on(Compute::Cpu);
     let (pg, pc) = (g.params.to_vec(), c.params.to_vec());
     // The fit moved the parameters, by more than the tolerance.
     let moved = pc.iter().map(|v| (v - 0.5).abs()).fold(0.0, f64::max);
@@ -272,7 +280,7 @@ fn same_report(g: &serde_json::Value, c: &serde_json::Value, at: &str) -> usize 
         (Value::Object(g), Value::Object(c)) => {
             for k in g.keys() {
                 assert!(
-                    c.contains_key(k) || k == "device",
+                    c.contains_key(k) || k == "device" || k == "force_op",
                     "{at}/{k}: only on the GPU"
                 );
             }
@@ -395,6 +403,8 @@ fn every_verb_that_simulates_takes_device_gpu_and_writes_the_cpu_results() {
                 s(&gc),
             ]);
             let report = json(&gc);
+            // The gradients went through the fused op's CubeCL kernels.
+            assert_eq!(report["force_op"], "cubecl", "{report}");
             assert_eq!(report["device"], "gpu");
             let worst = report["max_rel_err"].as_f64().unwrap();
             println!("gradcheck --device gpu: max rel err {worst:.2e}");

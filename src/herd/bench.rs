@@ -82,11 +82,6 @@ pub fn run_bench(cfg: &BenchConfig, mut progress: impl FnMut()) -> Result<BenchR
         force_kernel,
         device: compute,
     } = cfg.clone();
-    // The fused op is the ndarray backend's: elsewhere the tensor ops compute the forces.
-    let force_kernel = match compute {
-        Compute::Cpu => force_kernel,
-        Compute::Gpu => ForceKernel::Reference,
-    };
     if steps == 0 {
         return Err(crate::Error::config("steps", "must be ≥ 1"));
     }

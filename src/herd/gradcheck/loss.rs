@@ -166,7 +166,9 @@ impl LossScenario {
         let device = device(compute, precision)?;
         let theta = self.model.params.to_vec();
         let ad = device.clone().autodiff();
+        let before = crate::herd::sim::fused_op_passes();
         let (loss, t) = self.loss(&theta, &ad)?;
+        let force_op = (compute == Compute::Gpu).then(|| crate::herd::sim::ForceOp::since(before));
         let value = read_vec(&loss.clone().detach())?[0];
         let grads = loss.backward();
         let g = read_vec(
@@ -201,6 +203,7 @@ impl LossScenario {
             fd_step: h,
             parameters,
             max_rel_err,
+            force_op,
         })
     }
 }

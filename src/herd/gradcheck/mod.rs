@@ -121,6 +121,10 @@ pub struct GradReport {
     pub fd_step: f64,
     pub parameters: Vec<GradRow>,
     pub max_rel_err: f64,
+    /// Which implementation computed the forces of the autodiff pass; written for `--device gpu`
+    /// only (on the CPU it follows `force_kernel`, and CPU reports keep their bytes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_op: Option<crate::herd::sim::ForceOp>,
 }
 
 /// Relative error |a − f| / max(|a|, |f|, 1e-12).
@@ -143,7 +147,9 @@ pub fn gradcheck(
     }
     let device = device(compute, precision)?;
     let theta = sc.model.params.to_vec();
+    let before = crate::herd::sim::fused_op_passes();
     let (value, ad) = autodiff_gradient(sc, &theta, rec, steps, &device)?;
+    let force_op = (compute == Compute::Gpu).then(|| crate::herd::sim::ForceOp::since(before));
     progress();
     let fd = finite_difference_gradient(sc, &theta, rec, steps, fd_step, &device, progress)?;
     let parameters: Vec<GradRow> = param_names()
@@ -172,5 +178,6 @@ pub fn gradcheck(
         fd_step,
         parameters,
         max_rel_err,
+        force_op,
     })
 }

@@ -14,7 +14,8 @@
 //! (`Tensor::try_into_primitive::<Autodiff<NdArray, C>>()`), register a step that implements
 //! burn-autodiff's `Backward` trait, and wrap the result back (`Tensor::from_primitive`). The op
 //! is therefore available on the ndarray backend (with or without autodiff, with either
-//! checkpointing strategy); on any other backend [`fused_forces`] returns `None` and the caller
+//! checkpointing strategy) and, with the cargo feature `gpu`, on burn's Cube backend as CubeCL
+//! kernels (`fused_cube`); on any other backend [`fused_forces`] returns `None` and the caller
 //! uses the tensor-op reference.
 
 // The design card fixes burn's ndarray backend, which burn 0.22 marks deprecated (as in
@@ -38,13 +39,15 @@ use herdfit_kernels::{
     PairTerms, N_COEF, P2,
 };
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// Which implementation computes the forces of eq. 3–5.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ForceKernel {
-    /// The fused operation where the backend supports it (ndarray), the tensor ops elsewhere.
+    /// The fused operation where the backend supports it (ndarray; Cube with the cargo feature
+    /// `gpu`), the tensor ops elsewhere.
     #[default]
     Fused,
     /// Always the tensor-op reference implementation.
@@ -64,6 +67,42 @@ impl ForceKernel {
     /// The default, [`ForceKernel::Fused`].
     pub fn is_fused(&self) -> bool {
         *self == ForceKernel::Fused
+    }
+}
+
+/// Which implementation computed the forces of a run, as a report names it (`force_op`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ForceOp {
+    /// The fused op on the ndarray backend (this module).
+    Ndarray,
+    /// The fused op's CubeCL kernels (`fused_cube`, cargo feature `gpu`).
+    Cubecl,
+    /// The tensor ops of [`Model::reference_forces`].
+    TensorOps,
+}
+
+/// Forward passes of the ndarray op in this process.
+static NDARRAY_PASSES: AtomicU64 = AtomicU64::new(0);
+
+/// Forward passes of the fused op in this process: `[ndarray, CubeCL]`. Read before and after a
+/// run, [`ForceOp::since`] says which implementation computed its forces.
+pub fn fused_op_passes() -> [u64; 2] {
+    [NDARRAY_PASSES.load(Ordering::Relaxed), cube_passes()]
+}
+
+impl ForceOp {
+    /// The op that ran since the counts `before` ([`fused_op_passes`]): a fused op if one ran
+    /// (the CubeCL one first), the tensor ops otherwise.
+    pub fn since(before: [u64; 2]) -> Self {
+        let now = fused_op_passes();
+        if now[1] > before[1] {
+            ForceOp::Cubecl
+        } else if now[0] > before[0] {
+            ForceOp::Ndarray
+        } else {
+            ForceOp::TensorOps
+        }
     }
 }
 
@@ -248,6 +287,7 @@ where
     DispatchTensor: DispatchKindConversion<Autodiff<NdArray, C>>,
 {
     let prims = primitives::<Autodiff<NdArray, C>>(f, s)?;
+    NDARRAY_PASSES.fetch_add(1, Ordering::Relaxed);
     let dtype = prims[0].primitive().dtype();
     let coef_rows = prims[4].primitive().shape()[0];
     let values = prims.each_ref().map(|p| read(p.primitive().clone()));
@@ -272,6 +312,7 @@ where
 /// On a plain ndarray device: the forward pass only.
 fn on_ndarray(f: &ForceTensors, s: &HerdState, dec: &StepDecisions) -> Option<Tensor<2>> {
     let prims = primitives::<NdArray>(f, s)?;
+    NDARRAY_PASSES.fetch_add(1, Ordering::Relaxed);
     let dtype = prims[0].dtype();
     let coef_rows = prims[4].shape()[0];
     let state = saved(prims.map(read), coef_rows, dtype, dec);
@@ -280,7 +321,7 @@ fn on_ndarray(f: &ForceTensors, s: &HerdState, dec: &StepDecisions) -> Option<Te
 }
 
 /// The forces of eq. 3–5 by the fused op, as `[n, 1]` tensors (x and y), or `None` where the
-/// tensors do not live on the ndarray backend.
+/// tensors live on neither the ndarray backend nor (cargo feature `gpu`) burn's Cube backend.
 pub fn fused_forces(
     f: &ForceTensors,
     s: &HerdState,
@@ -288,11 +329,34 @@ pub fn fused_forces(
 ) -> Option<(Tensor<2>, Tensor<2>)> {
     let out = if s.x.device().is_autodiff() {
         on_autodiff::<NoCheckpointing>(f, s, dec)
-            .or_else(|| on_autodiff::<BalancedCheckpointing>(f, s, dec))?
+            .or_else(|| on_autodiff::<BalancedCheckpointing>(f, s, dec))
     } else {
-        on_ndarray(f, s, dec)?
+        on_ndarray(f, s, dec)
     };
+    let out = out.or_else(|| on_cube(f, s, dec))?;
     Some((out.clone().narrow(1, 0, 1), out.narrow(1, 1, 1)))
+}
+
+/// The CubeCL op of [`super::fused_cube`] (built with the cargo feature `gpu`).
+#[cfg(feature = "gpu")]
+fn on_cube(f: &ForceTensors, s: &HerdState, dec: &StepDecisions) -> Option<Tensor<2>> {
+    super::fused_cube::cube_forces(f, s, dec)
+}
+
+/// Without the cargo feature `gpu` no other backend has the op.
+#[cfg(not(feature = "gpu"))]
+fn on_cube(_: &ForceTensors, _: &HerdState, _: &StepDecisions) -> Option<Tensor<2>> {
+    None
+}
+
+#[cfg(feature = "gpu")]
+fn cube_passes() -> u64 {
+    super::fused_cube::cube_op_passes().0
+}
+
+#[cfg(not(feature = "gpu"))]
+fn cube_passes() -> u64 {
+    0
 }
 
 /// The element type of a plain step: it computes in the tensors' own type (f32 or f64), so every
