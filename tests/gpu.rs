@@ -35,19 +35,30 @@ fn gpu() -> Device {
     device(Compute::Gpu, Precision::F32).expect("the wgpu device (a Vulkan driver is installed)")
 }
 
+/// The tests that run the CubeCL force op in this process take turns: its pass counters
+/// ([`herdfit::herd::sim::cube_op_passes`]) are per process, and a test that reads them must
+/// see its own passes only.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn cpu() -> Device {
     cpu_device(Precision::F32).unwrap()
 }
 
 /// The gradcheck scene (obstacles inside the herd, uniform guidance so agents lead) with random
-/// parameters; the tensor-op forces on both devices (the fused op is ndarray's).
-fn scene(agents: usize, seed: u64) -> Scenario {
+/// parameters, the forces computed by `kernel` on both devices (`Fused`: the ndarray op on the
+/// CPU, the CubeCL op on the GPU; `Reference`: the tensor ops on both).
+fn scene(agents: usize, seed: u64, kernel: ForceKernel) -> Scenario {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let theta: [f64; 12] = std::array::from_fn(|_| rng.gen_range(0.15..0.95));
     let mut sc = default_scenario(Params::default().with_vec(&theta), agents, seed).unwrap();
-    sc.model.force_kernel = ForceKernel::Reference;
+    sc.model.force_kernel = kernel;
     sc
 }
+
+const KERNELS: [ForceKernel; 2] = [ForceKernel::Fused, ForceKernel::Reference];
 
 fn close(gpu: &[f64], cpu: &[f64], tol: f64, what: &str) -> f64 {
     assert_eq!(gpu.len(), cpu.len(), "{what}: lengths");
@@ -86,16 +97,17 @@ fn trajectory(sc: &Scenario, rec: &Recording, steps: usize, dev: &Device) -> Vec
 
 #[test]
 fn gpu_steps_follow_the_cpu_steps_within_f32_tolerance() {
+    let _turn = one_at_a_time();
     let (g, c) = (gpu(), cpu());
-    for seed in [1, 2] {
-        let sc = scene(300, seed);
+    for (seed, kernel) in [1, 2].into_iter().flat_map(|s| KERNELS.map(|k| (s, k))) {
+        let sc = scene(300, seed, kernel);
         let rec = record(&sc, 20, seed, &c).unwrap();
         let on_gpu = trajectory(&sc, &rec, 20, &g);
         let on_cpu = trajectory(&sc, &rec, 20, &c);
         // 300 agents × 4 values × 20 steps (frame 0 included where the rollout hands it over).
         assert!(on_cpu.len() >= 300 * 4 * 20, "{}", on_cpu.len());
         let worst = close(&on_gpu, &on_cpu, F32_TOL, "positions and headings");
-        println!("seed {seed}: worst relative difference {worst:.2e}");
+        println!("seed {seed}, {kernel:?}: worst relative difference {worst:.2e}");
         // The herd moved: the last frame is not the first.
         let n = 300 * 4;
         let moved = on_cpu[..n]
@@ -109,9 +121,10 @@ fn gpu_steps_follow_the_cpu_steps_within_f32_tolerance() {
 
 #[test]
 fn gpu_gradients_through_ten_steps_equal_the_cpu_gradients() {
+    let _turn = one_at_a_time();
     let (g, c) = (gpu(), cpu());
-    for seed in [11, 12] {
-        let sc = scene(250, seed);
+    for (seed, kernel) in [11, 12].into_iter().flat_map(|s| KERNELS.map(|k| (s, k))) {
+        let sc = scene(250, seed, kernel);
         let rec = record(&sc, 10, seed, &c).unwrap();
         let theta = sc.model.params.to_vec();
         let (jg, dg) = autodiff_gradient(&sc, &theta, &rec, 10, &g.clone().autodiff()).unwrap();
@@ -126,18 +139,22 @@ fn gpu_gradients_through_ten_steps_equal_the_cpu_gradients() {
             .map(|(a, b)| (a / scale, b / scale))
             .unzip();
         let worst = close(&dg, &dc, 1e-3, "∂J/∂θ / max|∂J/∂θ|");
-        println!("seed {seed}: worst gradient difference {worst:.2e} of the largest component");
+        println!(
+            "seed {seed}, {kernel:?}: worst gradient difference {worst:.2e} of the largest component"
+        );
     }
 }
 
 #[test]
 fn gpu_autodiff_passes_the_gradient_check_against_cpu_finite_differences() {
+    let _turn = one_at_a_time();
     let g = gpu();
     // Finite differences in f64 on the CPU are the truth; the GPU's f32 autodiff must meet them.
     // (f64 tensors need their own process: one precision per process on the CPU device, and the
     // finite differences here run in f32 with a step large enough for f32.)
     let c = cpu();
-    let sc = scene(120, 3);
+    // The default force kernel: the CubeCL op on the GPU.
+    let sc = scene(120, 3, ForceKernel::Fused);
     let rec = record(&sc, 10, 3, &c).unwrap();
     let theta = sc.model.params.to_vec();
     let (_, ad) = autodiff_gradient(&sc, &theta, &rec, 10, &g.autodiff()).unwrap();
@@ -157,12 +174,14 @@ fn gpu_autodiff_passes_the_gradient_check_against_cpu_finite_differences() {
 }
 
 mod common;
+mod gpu_op;
 
 /// A 2-epoch fit of the fields objective on a synthetic clip, once per device: the same
 /// parameters within the f32 tolerance (the decisions are made live, on states that differ by
 /// round-off).
 #[test]
 fn a_two_epoch_fit_on_the_gpu_ends_where_the_cpu_fit_ends() {
+    let _turn = one_at_a_time();
     use herdfit::herd::fit::{fit, FitConfig, LossKind};
     gpu();
     let dir = tempfile::tempdir().unwrap();

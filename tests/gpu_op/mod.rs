@@ -1,11 +1,11 @@
-//! The fused force op of eq. 3–5 as CubeCL kernels (`--device gpu`, cargo feature `gpu`) against
-//! the ndarray fused op and the tensor-op reference on the CPU: forces and gradients (positions,
-//! headings, and θ through the coefficients) on recorded steps of a small herd, in f32, on
-//! Mesa's lavapipe in CI (`CUBECL_WGPU_DEFAULT_DEVICE=Cpu`, as in `tests/gpu.rs`).
-#![cfg(feature = "gpu")]
+//! The fused force op of eq. 3–5 as CubeCL kernels (`--device gpu`) against the ndarray fused
+//! op and the tensor-op reference on the CPU: forces and gradients (positions, headings, and θ
+//! through the coefficients) on recorded steps of a small herd, in f32, on lavapipe in CI (a
+//! module of `tests/gpu.rs`: its device, no test binary of its own to link).
 
+use super::{gpu, one_at_a_time};
 use burn::tensor::{Device, Tensor};
-use herdfit::backend::{cpu_device, device, Compute, Precision};
+use herdfit::backend::{cpu_device, Precision};
 use herdfit::herd::params::Params;
 use herdfit::herd::scenario::{default_scenario, Scenario};
 use herdfit::herd::sim::{
@@ -19,19 +19,6 @@ use rand::{Rng, SeedableRng};
 /// magnitude of each compared quantity (f32 on both sides; the GPU's atan2 and exp round
 /// differently from the CPU kernel's, which computes in f64 and rounds once).
 const OP_TOL: f64 = 1e-5;
-
-fn gpu() -> Device {
-    static ENV: std::sync::Once = std::sync::Once::new();
-    ENV.call_once(|| {
-        if std::env::var_os("CUBECL_WGPU_DEFAULT_DEVICE").is_none() {
-            std::env::set_var("CUBECL_WGPU_DEFAULT_DEVICE", "Cpu");
-        }
-        if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-            std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
-        }
-    });
-    device(Compute::Gpu, Precision::F32).expect("the wgpu device (a Vulkan driver is installed)")
-}
 
 /// 60 agents of the gradcheck scene (obstacles inside the herd, occlusion on) with random
 /// parameters; the last agent is moved far from the others, so it has no neighbours.
@@ -142,9 +129,6 @@ fn worst(got: &[f64], want: &[f64], what: &str) -> f64 {
     w
 }
 
-/// The op counters are per process: the tests that read them run one at a time.
-static COUNTERS: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
 const NAMES: [&str; 6] = ["F", "∂L/∂x", "∂L/∂y", "∂L/∂hx", "∂L/∂hy", "∂L/∂θ"];
 
 #[test]
@@ -153,7 +137,7 @@ fn cube_force_op_forces_and_gradients_match_the_ndarray_op_and_the_reference() {
         gpu().autodiff(),
         cpu_device(Precision::F32).unwrap().autodiff(),
     );
-    let _one = COUNTERS.lock().unwrap_or_else(|e| e.into_inner());
+    let _turn = one_at_a_time();
     let sc = scene(5);
     assert!(sc.model.perception_config().occlusion, "occlusion is on");
     let radius = sc.model.perception_config().radius;
@@ -230,7 +214,7 @@ fn cube_force_op_forces_and_gradients_match_the_ndarray_op_and_the_reference() {
 #[test]
 fn force_kernel_reference_on_the_gpu_bypasses_the_cube_op() {
     let g = gpu().autodiff();
-    let _one = COUNTERS.lock().unwrap_or_else(|e| e.into_inner());
+    let _turn = one_at_a_time();
     let sc = scene(6);
     let recorded = steps(&sc, 1, 6);
     let before = cube_op_passes();
@@ -241,4 +225,9 @@ fn force_kernel_reference_on_the_gpu_bypasses_the_cube_op() {
     for k in 0..6 {
         worst(&fused[k], &reference[k], NAMES[k]);
     }
+    // Another computation, not the CubeCL op's bytes under another name.
+    assert_ne!(
+        fused[0], reference[0],
+        "Reference forces equal the CubeCL op's bit for bit"
+    );
 }
