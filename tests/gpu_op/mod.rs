@@ -6,8 +6,7 @@
 use super::{gpu, one_at_a_time};
 use burn::tensor::{Device, Tensor};
 use herdfit::backend::{cpu_device, Precision};
-use herdfit::herd::params::Params;
-use herdfit::herd::scenario::{default_scenario, Scenario};
+use herdfit::herd::scenario::Scenario;
 use herdfit::herd::sim::{
     cube_op_passes, theta_tensor, Decide, ForceKernel, ForceTensors, HerdState, Snapshot,
     StepDecisions,
@@ -20,12 +19,10 @@ use rand::{Rng, SeedableRng};
 /// differently from the CPU kernel's, which computes in f64 and rounds once).
 const OP_TOL: f64 = 1e-5;
 
-/// 60 agents of the gradcheck scene (obstacles inside the herd, occlusion on) with random
-/// parameters; the last agent is moved far from the others, so it has no neighbours.
+/// 60 agents of the gradcheck scene (obstacles inside the herd, occlusion on; the default force
+/// kernel), the last moved far from the others, so it has no neighbours.
 fn scene(seed: u64) -> Scenario {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let theta: [f64; 12] = std::array::from_fn(|_| rng.gen_range(0.15..0.95));
-    let mut sc = default_scenario(Params::default().with_vec(&theta), 60, seed).unwrap();
+    let mut sc = super::scene(60, seed, ForceKernel::Fused);
     let last = sc.init.len() - 1;
     sc.init[last].x += 500.0;
     sc.init[last].y += 500.0;

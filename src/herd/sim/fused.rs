@@ -22,6 +22,7 @@
 // `backend.rs`).
 #![allow(deprecated)]
 
+use super::op_inputs::primitives;
 use super::{at_rest, ForceTensors, HerdState, Model, StepDecisions, NORM_EPS};
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::{
@@ -256,25 +257,6 @@ fn saved(values: [Vec<f64>; 5], coef_rows: usize, dtype: DType, dec: &StepDecisi
         dtype,
         kept: None,
     }
-}
-
-/// The five inputs of the op in parent order — x, y, hx, hy (`[n]`) and the coefficients
-/// (`[1, 12]` or `[n, 12]`) — as primitives of backend `B`, or `None` if they live elsewhere.
-fn primitives<B: burn::backend::Backend>(
-    f: &ForceTensors,
-    s: &HerdState,
-) -> Option<[FloatTensor<B>; 5]>
-where
-    DispatchTensor: DispatchKindConversion<B>,
-{
-    let one = |t: &Tensor<1>| t.clone().try_into_primitive::<B>().ok();
-    Some([
-        one(&s.x)?,
-        one(&s.y)?,
-        one(&s.hx)?,
-        one(&s.hy)?,
-        f.coef.clone().try_into_primitive::<B>().ok()?,
-    ])
 }
 
 /// On an autodiff device with checkpointing strategy `C`: the op with its backward step.

@@ -4,10 +4,9 @@
 //! 1. [`Model::decide`] — perception, roles and OU noise, **no gradient** (kernels crate). The
 //!    result, [`StepDecisions`], can be recorded and replayed ([`Recording`]).
 //! 2. [`Model::forces`] — the Gaussian-weighted forces of eq. 3–5, by one fused operation with a
-//!    hand-written backward ([`fused_forces`]: ndarray backend, and CubeCL kernels on the GPU
-//!    backend with the cargo feature `gpu`) or as tensor ops over the padded
-//!    neighbour lists ([`Model::reference_forces`]); either way gradients flow to the 12
-//!    parameters.
+//!    hand-written backward ([`fused_forces`]: ndarray, or CubeCL kernels with the feature `gpu`)
+//!    or as tensor ops over the padded neighbour lists ([`Model::reference_forces`]); either way
+//!    gradients flow to the 12 parameters.
 //! 3. [`Model::step`] — the direction update of eq. 2, the OU speed of eq. 6 and the position
 //!    update.
 //!
@@ -18,6 +17,7 @@ mod fused;
 #[cfg(feature = "gpu")]
 mod fused_cube;
 mod herd;
+mod op_inputs;
 mod reference;
 mod rollout;
 mod world;
@@ -473,10 +473,9 @@ impl Model {
     /// FC = Σ WR·WA·(p_j − p_i), FV = −Σ WR·WA·(p_j − p_i), FA = Σ WR·WA·d_j,
     /// FO = −Σ_o WR·WA·(q_o − p_i); F = Ω (W_C FC + W_V FV + W_A FA + W_O FO).
     ///
-    /// With [`ForceKernel::Fused`] on the ndarray backend (or burn's Cube backend, cargo feature
-    /// `gpu`) this is one operation with a hand-written backward ([`fused_forces`]); otherwise
-    /// the tensor ops of
-    /// [`Model::reference_forces`].
+    /// With [`ForceKernel::Fused`] on the ndarray backend (or burn's Cube backend, feature `gpu`)
+    /// this is one operation with a hand-written backward ([`fused_forces`]); otherwise the tensor
+    /// ops of [`Model::reference_forces`].
     pub fn forces(
         &self,
         f: &ForceTensors,

@@ -19,6 +19,7 @@
 
 mod kernel;
 
+use super::op_inputs::primitives;
 use super::{ForceTensors, HerdState, StepDecisions};
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::{
@@ -298,22 +299,6 @@ fn saved(inputs: [CubeTensor; 5], dec: &StepDecisions) -> Option<Saved> {
     );
     Some(Saved { inputs, lists })
 }
-
-fn primitives<B: burn::backend::Backend>(f: &ForceTensors, s: &HerdState) -> Option<[FloatT<B>; 5]>
-where
-    DispatchTensor: DispatchKindConversion<B>,
-{
-    let one = |t: &Tensor<1>| t.clone().try_into_primitive::<B>().ok();
-    Some([
-        one(&s.x)?,
-        one(&s.y)?,
-        one(&s.hx)?,
-        one(&s.hy)?,
-        f.coef.clone().try_into_primitive::<B>().ok()?,
-    ])
-}
-
-type FloatT<B> = burn::backend::tensor::FloatTensor<B>;
 
 /// On an autodiff device with checkpointing strategy `C`: the op with its backward step.
 fn on_autodiff<C: CheckpointStrategy>(
