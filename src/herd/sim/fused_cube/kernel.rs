@@ -43,6 +43,53 @@ fn bearing(dx: f32, dy: f32, hx: f32, hy: f32, code: u32) -> Bearing {
     }
 }
 
+/// One neighbour pair's terms (eq. 4): the offset u = p_j − p_i, its bearing, d², φ² and the
+/// exponentials e_F = exp(α_F d² + γ_F φ²) of the forces C, V, A.
+#[derive(CubeType, Clone, Copy)]
+struct NbTerms {
+    dx: f32,
+    dy: f32,
+    p: Bearing,
+    d2: f32,
+    phi2: f32,
+    e0: f32,
+    e1: f32,
+    e2: f32,
+}
+
+/// [`NbTerms`] of agent i (at `(xi, yi)`, heading `(hxi, hyi)`, coefficients from `coef[c..]`)
+/// and neighbour j on the branch `code`.
+#[allow(clippy::too_many_arguments)]
+#[cube]
+fn neighbour_terms(
+    x: &[f32],
+    y: &[f32],
+    coef: &[f32],
+    c: usize,
+    xi: f32,
+    yi: f32,
+    hxi: f32,
+    hyi: f32,
+    j: usize,
+    code: u32,
+) -> NbTerms {
+    let dx = x[j] - xi;
+    let dy = y[j] - yi;
+    let p = bearing(dx, dy, hxi, hyi, code);
+    let d2 = dx * dx + dy * dy;
+    let phi2 = p.phi * p.phi;
+    NbTerms {
+        dx,
+        dy,
+        p,
+        d2,
+        phi2,
+        e0: (coef[c + 4] * d2 + coef[c + 8] * phi2).exp(),
+        e1: (coef[c + 5] * d2 + coef[c + 9] * phi2).exp(),
+        e2: (coef[c + 6] * d2 + coef[c + 10] * phi2).exp(),
+    }
+}
+
 /// Forward pass (eq. 3–5): `out[2i] = F_x`, `out[2i + 1] = F_y` for agent `i`. `stride` is 0 for
 /// one set of coefficients shared by all agents, 12 for one set per agent.
 #[allow(clippy::too_many_arguments)]
@@ -73,18 +120,11 @@ pub fn forces_forward_kernel(
         let mut fy = 0.0f32;
         for e in nb_start[i] as usize..nb_start[i + 1] as usize {
             let j = nb[e] as usize;
-            let dx = x[j] - xi;
-            let dy = y[j] - yi;
-            let p = bearing(dx, dy, hxi, hyi, nb_code[e]);
-            let d2 = dx * dx + dy * dy;
-            let phi2 = p.phi * p.phi;
-            let e0 = (coef[c + 4] * d2 + coef[c + 8] * phi2).exp();
-            let e1 = (coef[c + 5] * d2 + coef[c + 9] * phi2).exp();
-            let e2 = (coef[c + 6] * d2 + coef[c + 10] * phi2).exp();
-            let cp = coef[c] * e0 - coef[c + 1] * e1;
-            let ca = coef[c + 2] * e2;
-            fx += cp * dx + ca * hx[j];
-            fy += cp * dy + ca * hy[j];
+            let t = neighbour_terms(x, y, coef, c, xi, yi, hxi, hyi, j, nb_code[e]);
+            let cp = coef[c] * t.e0 - coef[c + 1] * t.e1;
+            let ca = coef[c + 2] * t.e2;
+            fx += cp * t.dx + ca * hx[j];
+            fy += cp * t.dy + ca * hy[j];
         }
         for e in ob_start[i] as usize..ob_start[i + 1] as usize {
             let dx = ob_xy[2 * e] - xi;
@@ -201,26 +241,19 @@ pub fn forces_backward_own(
         }
         for e in nb_start[i] as usize..nb_start[i + 1] as usize {
             let j = nb[e] as usize;
-            let dx = x[j] - xi;
-            let dy = y[j] - yi;
-            let p = bearing(dx, dy, hxi, hyi, nb_code[e]);
-            let d2 = dx * dx + dy * dy;
-            let phi2 = p.phi * p.phi;
-            let e0 = (coef[c + 4] * d2 + coef[c + 8] * phi2).exp();
-            let e1 = (coef[c + 5] * d2 + coef[c + 9] * phi2).exp();
-            let e2 = (coef[c + 6] * d2 + coef[c + 10] * phi2).exp();
-            let c0 = coef[c] * e0;
-            let c1 = coef[c + 1] * e1;
-            let c2 = coef[c + 2] * e2;
+            let t = neighbour_terms(x, y, coef, c, xi, yi, hxi, hyi, j, nb_code[e]);
+            let c0 = coef[c] * t.e0;
+            let c1 = coef[c + 1] * t.e1;
+            let c2 = coef[c + 2] * t.e2;
             // F_i += (c_C − c_V)·u + c_A·d_j.
-            let gu = ux * dx + uy * dy;
+            let gu = ux * t.dx + uy * t.dy;
             let ga = ux * hx[j] + uy * hy[j];
-            coef_backward(cg, r, 0usize, gu, e0, c0, d2, phi2);
-            coef_backward(cg, r, 1usize, -gu, e1, c1, d2, phi2);
-            coef_backward(cg, r, 2usize, ga, e2, c2, d2, phi2);
+            coef_backward(cg, r, 0usize, gu, t.e0, c0, t.d2, t.phi2);
+            coef_backward(cg, r, 1usize, -gu, t.e1, c1, t.d2, t.phi2);
+            coef_backward(cg, r, 2usize, ga, t.e2, c2, t.d2, t.phi2);
             let gd2 = gu * c0 * coef[c + 4] + (-gu) * c1 * coef[c + 5] + ga * c2 * coef[c + 6];
             let gphi2 = gu * c0 * coef[c + 8] + (-gu) * c1 * coef[c + 9] + ga * c2 * coef[c + 10];
-            let g = pair_backward(dx, dy, p, gd2, gphi2, hxi, hyi);
+            let g = pair_backward(t.dx, t.dy, t.p, gd2, gphi2, hxi, hyi);
             ghx += g.hx;
             ghy += g.hy;
             let gdx = g.dx + (c0 - c1) * ux;

@@ -145,6 +145,33 @@ impl DeviceLists {
     }
 }
 
+/// Launches a per-agent kernel of [`kernel`] on `saved` ([`Saved`]): one thread per agent, the
+/// op's inputs and pair lists in the kernels' shared parameter order, then `extra`, then the
+/// coefficient stride.
+macro_rules! launch_per_agent {
+    ($kernel:ident, $saved:expr, $($extra:expr),+ $(,)?) => {{
+        let (s, l) = ($saved, &$saved.lists);
+        kernel::$kernel::launch(
+            &s.inputs[0].client,
+            l.cubes(l.n),
+            CubeDim::new_1d(THREADS),
+            s.input(0),
+            s.input(1),
+            s.input(2),
+            s.input(3),
+            s.input(4),
+            l.nb_start.arg(),
+            l.nb.arg(),
+            l.nb_code.arg(),
+            l.ob_start.arg(),
+            l.ob_xy.arg(),
+            l.ob_code.arg(),
+            $($extra,)+
+            s.stride(),
+        )
+    }};
+}
+
 /// The op's inputs on the device (contiguous f32) and its lists: the state of the backward step.
 #[derive(Debug)]
 struct Saved {
@@ -183,24 +210,7 @@ impl Saved {
         let l = &self.lists;
         let client = &self.inputs[0].client;
         let out = empty(client, 2 * l.n);
-        kernel::forces_forward_kernel::launch(
-            client,
-            l.cubes(l.n),
-            CubeDim::new_1d(THREADS),
-            self.input(0),
-            self.input(1),
-            self.input(2),
-            self.input(3),
-            self.input(4),
-            l.nb_start.arg(),
-            l.nb.arg(),
-            l.nb_code.arg(),
-            l.ob_start.arg(),
-            l.ob_xy.arg(),
-            l.ob_code.arg(),
-            out.arg(),
-            self.stride(),
-        );
+        launch_per_agent!(forces_forward_kernel, self, out.arg());
         self.tensor(out, vec![l.n, 2])
     }
 
@@ -215,26 +225,13 @@ impl Saved {
             empty(client, N_COEF * l.n),
             empty(client, 4 * l.pairs),
         );
-        kernel::forces_backward_own::launch(
-            client,
-            l.cubes(l.n),
-            CubeDim::new_1d(THREADS),
-            self.input(0),
-            self.input(1),
-            self.input(2),
-            self.input(3),
-            self.input(4),
-            l.nb_start.arg(),
-            l.nb.arg(),
-            l.nb_code.arg(),
-            l.ob_start.arg(),
-            l.ob_xy.arg(),
-            l.ob_code.arg(),
+        launch_per_agent!(
+            forces_backward_own,
+            self,
             up.into_buffer_arg(),
             own.arg(),
             cg.arg(),
-            to_nb.arg(),
-            self.stride(),
+            to_nb.arg()
         );
         let g: [Buf; 4] = std::array::from_fn(|_| empty(client, l.n));
         kernel::forces_backward_gather::launch(
