@@ -77,6 +77,21 @@ fn learn(dir: &Path, src: &Path, extra: &[&str]) -> PathBuf {
     model
 }
 
+/// `crowd simulate MODEL --entries SRC --out OUT EXTRA…`: its summary line and `out`.
+fn simulate(model: &Path, src: &Path, out: &Path, extra: &[&str]) -> (String, PathBuf) {
+    let mut a = vec![
+        "crowd",
+        "simulate",
+        s(model),
+        "--entries",
+        s(src),
+        "--out",
+        s(out),
+    ];
+    a.extend_from_slice(extra);
+    (ok(&a), out.to_path_buf())
+}
+
 /// A JSON file.
 fn json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
@@ -96,21 +111,9 @@ fn entries_leave_when_the_real_ones_did_and_a_layout_s_obstacle_holds() {
     )
     .unwrap();
     let sim = |name: &str, extra: &[&str]| {
-        let out = dir.path().join(name);
-        let mut a = vec![
-            "crowd",
-            "simulate",
-            s(&model),
-            "--entries",
-            s(&src),
-            "--seed",
-            "2",
-            "--out",
-            s(&out),
-        ];
+        let mut a = vec!["--seed", "2"];
         a.extend_from_slice(extra);
-        ok(&a);
-        rows(&out)
+        rows(&simulate(&model, &src, &dir.path().join(name), &a).1)
     };
     let free = sim("free.csv", &[]);
     // Everyone is present exactly as long as the real walker was: 30 frames, from its entry.
@@ -256,18 +259,7 @@ fn walking_groups_keep_the_distance_they_entered_at() {
     let model = learn(dir.path(), &src, &[]);
     // Worst change of a pair's distance from its first shared frame, over all pairs.
     let drift = |name: &str, extra: &[&str]| -> (f64, String) {
-        let out = dir.path().join(name);
-        let mut a = vec![
-            "crowd",
-            "simulate",
-            s(&model),
-            "--entries",
-            s(&src),
-            "--out",
-            s(&out),
-        ];
-        a.extend_from_slice(extra);
-        let text = ok(&a);
+        let (text, out) = simulate(&model, &src, &dir.path().join(name), extra);
         let r = rows(&out);
         let mut worst = 0.0f64;
         for i in 0..16u64 {
