@@ -77,6 +77,21 @@ fn learn(dir: &Path, src: &Path, extra: &[&str]) -> PathBuf {
     model
 }
 
+/// `crowd simulate MODEL --entries SRC --out OUT EXTRA…`: its summary line and `out`.
+fn simulate(model: &Path, src: &Path, out: &Path, extra: &[&str]) -> (String, PathBuf) {
+    let mut a = vec![
+        "crowd",
+        "simulate",
+        s(model),
+        "--entries",
+        s(src),
+        "--out",
+        s(out),
+    ];
+    a.extend_from_slice(extra);
+    (ok(&a), out.to_path_buf())
+}
+
 /// A JSON file.
 fn json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
@@ -96,21 +111,9 @@ fn entries_leave_when_the_real_ones_did_and_a_layout_s_obstacle_holds() {
     )
     .unwrap();
     let sim = |name: &str, extra: &[&str]| {
-        let out = dir.path().join(name);
-        let mut a = vec![
-            "crowd",
-            "simulate",
-            s(&model),
-            "--entries",
-            s(&src),
-            "--seed",
-            "2",
-            "--out",
-            s(&out),
-        ];
+        let mut a = vec!["--seed", "2"];
         a.extend_from_slice(extra);
-        ok(&a);
-        rows(&out)
+        rows(&simulate(&model, &src, &dir.path().join(name), &a).1)
     };
     let free = sim("free.csv", &[]);
     // Everyone is present exactly as long as the real walker was: 30 frames, from its entry.
@@ -223,4 +226,62 @@ fn held_out_eth_ucy_scenes_split_in_time_are_imitated_within_twice_the_halves() 
 fn the_paper_preset_leaving_at_goals_fails_the_split_in_time_check() {
     let (r, _, text) = holdout("crowds_zara03", &["--preset", "paper", "--leave-at-goal"]);
     assert!(r[2] > 4.0, "turning ratio {}\n{text}", r[2]);
+}
+
+/// ETH/UCY text of `n` pairs walking along +x (2.5 Hz, 30 frames each, a pair every 6 frames):
+/// the two of a pair 0.6 m apart across the corridor, each weaving on its own (±0.1 m).
+fn pairs(dir: &Path, n: usize) -> PathBuf {
+    let mut t = String::new();
+    for i in 0..n {
+        for m in 0..2 {
+            let id = 2 * i + m;
+            let y0 = if i % 2 == 0 { -1.0 } else { 1.0 } + 0.6 * m as f64;
+            for k in 0..30 {
+                let weave = 0.1 * ((k as f64 * 0.7 + id as f64 * 1.9).sin());
+                let f = 10 * (6 * i + k);
+                t.push_str(&format!(
+                    "{f}\t{id}\t{:.3}\t{:.3}\n",
+                    0.5 * k as f64,
+                    y0 + weave
+                ));
+            }
+        }
+    }
+    let p = dir.join("pairs.txt");
+    std::fs::write(&p, t).unwrap();
+    p
+}
+
+#[test]
+fn walking_groups_keep_the_distance_they_entered_at() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = pairs(dir.path(), 16);
+    let model = learn(dir.path(), &src, &[]);
+    // Worst change of a pair's distance from its first shared frame, over all pairs.
+    let drift = |name: &str, extra: &[&str]| -> (f64, String) {
+        let (text, out) = simulate(&model, &src, &dir.path().join(name), extra);
+        let r = rows(&out);
+        let mut worst = 0.0f64;
+        for i in 0..16u64 {
+            let (a, b) = (&r[&(2 * i)], &r[&(2 * i + 1)]);
+            let d: Vec<f64> = a
+                .iter()
+                .filter_map(|&(f, x, y)| {
+                    let &(_, u, v) = b.iter().find(|q| q.0 == f)?;
+                    Some((x - u).hypot(y - v))
+                })
+                .collect();
+            assert!(d.len() >= 25, "{name}: pair {i} shares {} frames", d.len());
+            worst = d.iter().fold(worst, |w, x| w.max((x - d[0]).abs()));
+        }
+        eprintln!("{name}: {text}worst drift {worst:.3} m");
+        (worst, text)
+    };
+    let (held, text) = drift("held.csv", &[]);
+    assert!(text.contains("16 walking groups of 32 agents"), "{text}");
+    // The second of a pair takes the first one's steps: the distance does not change.
+    assert!(held < 1e-9, "held pairs drift {held} m");
+    let (free, text) = drift("free.csv", &["--together", "0"]);
+    assert!(text.contains("0 walking groups of 0 agents"), "{text}");
+    assert!(free > 0.05, "pairs walking on their own drift {free} m");
 }

@@ -5,7 +5,7 @@
 //! leave at their goals. Output: `herdfit.tracks/1` rows with the behaviour as role.
 
 use super::behaviour::{INTERACTION, LINE, LOCOMOTION};
-use super::entries::deadline;
+use super::entries::{deadline, walking_groups};
 pub use super::entries::{entries_from_layout, entries_from_tracks, typical_speed, Entry};
 use super::features::{unit, V2};
 use super::layout::Layout;
@@ -19,6 +19,7 @@ use crate::progress::Progress;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// Settings of `crowd simulate`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -50,6 +51,13 @@ pub struct SimConfig {
     /// do not bring agents home. 60°, fixed a priori: at the edge of the cone an agent
     /// still closes on its goal at half its speed.
     pub goal_cone_deg: f64,
+    /// Walking groups ([`walking_groups`]): entries that appear within `together_seconds` and
+    /// `together` (units) of each other and are last seen as close in time and place walk together;
+    /// each step its members draw their actions from one shared random stream, so that the same
+    /// real steps are drawn for the same states. 0: off.
+    pub together: f64,
+    /// Seconds apart that group members may enter and leave ([`SimConfig::together`]).
+    pub together_seconds: f64,
 }
 
 impl Default for SimConfig {
@@ -64,6 +72,8 @@ impl Default for SimConfig {
             line_service: 4.0,
             min_distance: 0.3,
             goal_cone_deg: 60.0,
+            together: 1.0,
+            together_seconds: 0.8,
         }
     }
 }
@@ -78,6 +88,7 @@ impl SimConfig {
             (self.timeout, "timeout"),
             (self.line_spacing, "line_spacing"),
             (self.line_service, "line_service"),
+            (self.together_seconds, "together_seconds"),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(Error::invalid(format!("{k} = {v} must be > 0")));
@@ -96,6 +107,7 @@ impl SimConfig {
             0.0,
             crate::limits::MAX_COORD,
         )?;
+        crate::limits::within("together", self.together, 0.0, crate::limits::MAX_COORD)?;
         Ok(())
     }
 }
@@ -142,6 +154,8 @@ pub struct SimResult {
     /// Groups formed and agents that joined a line.
     pub groups_formed: usize,
     pub line_joins: usize,
+    /// Walking groups among the entries ([`SimConfig::together`]) and the agents in them.
+    pub walking_groups: (usize, usize),
 }
 
 /// Behaviour-machine state of one agent.
@@ -398,6 +412,11 @@ pub fn simulate(
         line_joins: 0,
     };
     let keep = model.config.features.intent_window + 2;
+    let together = walking_groups(
+        entries,
+        cfg.together,
+        (cfg.together_seconds / dt).round() as usize,
+    );
     let (mut agents, mut minds): (Vec<Agent>, Vec<Mind>) = (Vec::new(), Vec::new());
     let mut rows = Vec::new();
     let mut roles: Vec<String> = Vec::new();
@@ -413,6 +432,7 @@ pub fn simulate(
             ];
             let mut a = Agent::new(e.id, vec![back, e.position], h, e.goal, cfg.seed, dt);
             a.due = e.leave.map(|l| l.saturating_sub(t));
+            a.group = together[next];
             agents.push(a);
             minds.push(Mind {
                 goal: e.goal,
@@ -450,6 +470,9 @@ pub fn simulate(
             near,
             not_grouped(&minds),
         );
+        if cfg.together > 0.0 {
+            hold_groups(&mut agents, &mut plans);
+        }
         stop_at_places(&agents, &mut plans, &in_line(&minds), dt);
         for ((a, p), role) in agents.iter().zip(&plans).zip(&roles) {
             rows.push(TrackRow {
@@ -487,6 +510,14 @@ pub fn simulate(
         timed_out,
         groups_formed: machine.groups_formed,
         line_joins: machine.line_joins,
+        walking_groups: (
+            together
+                .iter()
+                .zip(entries)
+                .filter(|(g, e)| **g == Some(e.id))
+                .count(),
+            together.iter().flatten().count(),
+        ),
     })
 }
 
@@ -539,4 +570,25 @@ fn not_grouped(minds: &[Mind]) -> Vec<bool> {
 /// Per agent: whether it queues in a line.
 fn in_line(minds: &[Mind]) -> Vec<bool> {
     minds.iter().map(|m| m.line.is_some()).collect()
+}
+
+/// Walking groups keep together: the first member to enter leads (its learnt step, steered to its
+/// goal, as planned) and every other member present takes the leader's step, so each keeps the
+/// place beside the leader it entered at. A member whose leader has left walks on its own.
+fn hold_groups(agents: &mut [Agent], plans: &mut [Planned]) {
+    let lead: HashMap<u64, usize> = agents
+        .iter()
+        .enumerate()
+        .filter(|(_, a)| a.group == Some(a.id))
+        .map(|(i, a)| (a.id, i))
+        .collect();
+    for (a, i) in agents.iter_mut().zip(0..) {
+        let Some(g) = a.group.filter(|&g| g != a.id) else {
+            continue;
+        };
+        match lead.get(&g) {
+            Some(&l) => plans[i].velocity = plans[l].velocity,
+            None => a.group = None,
+        }
+    }
 }

@@ -39,6 +39,8 @@ pub struct Agent {
     pub due: Option<usize>,
     /// Seeded per agent.
     pub rng: ChaCha8Rng,
+    /// The walking group it belongs to ([`super::entries::walking_groups`]): its leader's id.
+    pub group: Option<u64>,
 }
 
 impl Agent {
@@ -71,6 +73,7 @@ impl Agent {
             goal,
             due: None,
             rng,
+            group: None,
         }
     }
 }

@@ -17,6 +17,19 @@ use crate::error::{Error, Result};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
 
+/// Walking groups among real tracks' entries ([`SimConfig::together`]).
+#[derive(Args, Debug)]
+pub struct TogetherFlags {
+    /// Walking groups: entries that appear and are last seen within this distance (units) and
+    /// `--together-seconds` of each other walk together, the others taking the first one's steps
+    /// (0: off).
+    #[arg(long, value_name = "M", default_value_t = SimConfig::default().together)]
+    pub together: f64,
+    /// Seconds apart that walking-group members may enter and leave.
+    #[arg(long, value_name = "S", default_value_t = SimConfig::default().together_seconds)]
+    pub together_seconds: f64,
+}
+
 /// The crowd verbs.
 #[derive(Subcommand, Debug)]
 pub enum CrowdCommand {
@@ -103,6 +116,8 @@ pub struct SimulateArgs {
     /// Hard minimum distance between agents after each step (units; 0: off).
     #[arg(long, value_name = "M", default_value_t = SimConfig::default().min_distance)]
     pub min_distance: f64,
+    #[command(flatten)]
+    pub together: TogetherFlags,
     /// Top-view PNG of the middle frame.
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<OutFile>,
@@ -192,6 +207,8 @@ pub struct HoldoutArgs {
     /// Hard minimum distance between simulated agents (units; 0: off).
     #[arg(long, value_name = "M", default_value_t = SimConfig::default().min_distance)]
     pub min_distance: f64,
+    #[command(flatten)]
+    pub together: TogetherFlags,
     /// The simulated second part (herdfit.tracks/1 CSV + sidecar).
     #[arg(long, value_name = "SIM.csv")]
     pub out: Option<OutTracks>,
@@ -291,6 +308,8 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
         behaviours: !a.no_behaviours,
         goal_cone_deg: a.goal_cone,
         min_distance: a.min_distance,
+        together: a.together.together,
+        together_seconds: a.together.together_seconds,
         ..SimConfig::default()
     };
     let mut bars = crate::cli::Bars::default();
@@ -340,13 +359,15 @@ fn simulate_cmd(a: SimulateArgs) -> Result<()> {
     }
     run.tracks.save(&a.out)?;
     println!(
-        "crowd simulate: {} agents, {} agent-steps in {:.2} s ({:.0}/s); {} arrived, {} timed out, {} groups, {} joined a line; wrote {}",
+        "crowd simulate: {} agents, {} agent-steps in {:.2} s ({:.0}/s); {} arrived, {} timed out, {} walking groups of {} agents, {} groups formed, {} joined a line; wrote {}",
         entries.len(),
         run.agent_steps,
         secs,
         run.agent_steps as f64 / secs.max(1e-9),
         run.arrived,
         run.timed_out,
+        run.walking_groups.0,
+        run.walking_groups.1,
         run.groups_formed,
         run.line_joins,
         a.out.display()
@@ -460,6 +481,8 @@ fn holdout_cmd(a: HoldoutArgs) -> Result<()> {
             seed: a.seed,
             goal_cone_deg: a.goal_cone,
             min_distance: a.min_distance,
+            together: a.together.together,
+            together_seconds: a.together.together_seconds,
             ..base.sim.clone()
         },
         split: a.split,
@@ -468,7 +491,7 @@ fn holdout_cmd(a: HoldoutArgs) -> Result<()> {
     };
     // --split, --goal-cone and --min-distance always set their keys (they have defaults).
     let given = |k: &str| match k {
-        "split" | "goal_cone" | "min_distance" => true,
+        "split" | "goal_cone" | "min_distance" | "together" | "together_seconds" => true,
         k => a.flags.given(k),
     };
     cfg.check()
