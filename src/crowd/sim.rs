@@ -108,6 +108,12 @@ impl SimConfig {
             crate::limits::MAX_COORD,
         )?;
         crate::limits::within("together", self.together, 0.0, crate::limits::MAX_COORD)?;
+        crate::limits::within(
+            "together_seconds",
+            self.together_seconds,
+            0.0,
+            crate::limits::MAX_SECONDS,
+        )?;
         Ok(())
     }
 }

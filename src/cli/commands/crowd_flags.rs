@@ -11,7 +11,7 @@ use clap::Args;
 use std::path::Path;
 
 /// Config keys (as the library's messages start) and the flags that set them.
-const FLAGS: [(&str, &str); 15] = [
+const FLAGS: [(&str, &str); 17] = [
     ("features.radius", "--radius"),
     ("action.k", "--k"),
     ("pca_dims", "--pca-dims"),
@@ -27,6 +27,8 @@ const FLAGS: [(&str, &str); 15] = [
     ("cell", "--cell"),
     ("seed", "--seed"),
     ("split", "--split"),
+    ("together", "--together"),
+    ("together_seconds", "--together-seconds"),
 ];
 
 /// A library error about a config key renamed to the flag that set it (issue #47: crowd errors
