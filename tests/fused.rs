@@ -116,13 +116,7 @@ fn gradients(model: &Model, sc: &Scenario, rec: &Recording, steps: usize, ad: &D
     // The fused path really is taken on this (autodiff) device.
     let f = ForceTensors::new(&theta, &model.params.constants);
     assert!(fused_forces(&f, &s, &rec.steps[0]).is_some());
-    let s = HerdState {
-        x: s.x.require_grad(),
-        y: s.y.require_grad(),
-        hx: s.hx.require_grad(),
-        hy: s.hy.require_grad(),
-        speed: s.speed,
-    };
+    let s = s.require_grad();
     let end = model
         .rollout::<rand_chacha::ChaCha8Rng>(
             &theta,

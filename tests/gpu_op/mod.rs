@@ -86,14 +86,7 @@ fn forces_and_gradients(
         let scale = Tensor::<2>::from_data(burn::tensor::TensorData::new(v, [n, 12]), dev);
         f.coef = f.coef.repeat_dim(0, n) * scale;
     }
-    let s = HerdState::from_snapshot(snap, dev);
-    let s = HerdState {
-        x: s.x.require_grad(),
-        y: s.y.require_grad(),
-        hx: s.hx.require_grad(),
-        hy: s.hy.require_grad(),
-        speed: s.speed,
-    };
+    let s = HerdState::from_snapshot(snap, dev).require_grad();
     let (fx, fy) = model.forces(&f, &s, dec);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let w = |rng: &mut rand_chacha::ChaCha8Rng| {

@@ -135,6 +135,18 @@ pub fn read_vec(t: &Tensor<1>) -> Result<Vec<f64>> {
 }
 
 impl HerdState {
+    /// The same state with positions and headings tracked by autodiff (speeds carry no gradient,
+    /// eq. 6), for gradients with respect to the initial state.
+    pub fn require_grad(self) -> Self {
+        HerdState {
+            x: self.x.require_grad(),
+            y: self.y.require_grad(),
+            hx: self.hx.require_grad(),
+            hy: self.hy.require_grad(),
+            speed: self.speed,
+        }
+    }
+
     /// Builds a state from agent rows: velocity gives heading and speed (a standing agent faces +x).
     pub fn from_rows(rows: &[AgentRow], device: &Device) -> Self {
         Self::from_snapshot(&Snapshot::of_rows(rows), device)
