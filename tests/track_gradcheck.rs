@@ -67,18 +67,20 @@ fn the_track_loss_gradient_matches_finite_differences_in_f64() {
     prepare(&mut clips, &start, &cfg).unwrap();
     let clip = &clips[0];
     let w = clip.windows(0, 10, 10, 2)[0];
+    // The spacing term (sorted nearest-neighbour distances) on in two of the four.
     let cases = [
-        (Rollout::Conditioned, Speeds::Noisy),
-        (Rollout::Conditioned, Speeds::Tracks),
-        (Rollout::Free, Speeds::Noisy),
-        (Rollout::Free, Speeds::Tracks),
+        (Rollout::Conditioned, Speeds::Noisy, 2.0),
+        (Rollout::Conditioned, Speeds::Tracks, 0.0),
+        (Rollout::Free, Speeds::Noisy, 2.0),
+        (Rollout::Free, Speeds::Tracks, 0.0),
     ];
-    for (rollout, speeds) in cases {
+    for (rollout, speeds, spacing_weight) in cases {
         let how = Scoring {
             rollout,
             speeds,
             heading_weight: 1.0,
             min_speed: 0.1,
+            spacing_weight,
         };
         let nf = clip.starters(w.start).len();
         let mut rec = Recording::new(nf);

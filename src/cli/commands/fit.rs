@@ -194,6 +194,11 @@ pub struct FitArgs {
     /// error
     #[arg(long, value_name = "W", default_value_t = TrackFitConfig::default().heading_weight)]
     pub heading_weight: f64,
+    /// --objective tracks: weight of the spacing term (the sorted nearest-neighbour distances,
+    /// simulated against tracked, mean squared difference in BL²) beside the position error; 0:
+    /// off
+    #[arg(long, value_name = "W", default_value_t = TrackFitConfig::default().spacing_weight)]
+    pub spacing_weight: f64,
     /// --objective tracks with --starts > 1: epochs of each candidate's short fit
     #[arg(long, value_name = "N", default_value_t = TrackFitConfig::default().start_epochs)]
     pub start_epochs: usize,
@@ -209,6 +214,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
         horizon: a.horizon,
         stride: a.stride,
         heading_weight: a.heading_weight,
+        spacing_weight: a.spacing_weight,
         ..TrackFitConfig::default()
     }
     .check()
@@ -219,6 +225,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
                 ("horizon", "--horizon"),
                 ("stride", "--stride"),
                 ("heading_weight", "--heading-weight"),
+                ("spacing_weight", "--spacing-weight"),
             ],
         )
     })?;

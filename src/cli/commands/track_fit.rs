@@ -52,6 +52,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             stride: a.stride,
             speeds: a.train_speeds,
             heading_weight: a.heading_weight,
+            spacing_weight: a.spacing_weight,
             epochs: a.steps.epochs,
             lr: a.steps.lr,
             optimizer: a.steps.optimizer,

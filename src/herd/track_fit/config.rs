@@ -78,6 +78,10 @@ pub struct TrackFitConfig {
     pub heading_weight: f64,
     /// A tracked heading is scored only where the animal moves faster than this (BL/s).
     pub min_speed: f64,
+    /// Weight of the spacing term ([`super::spacing`]: mean squared difference, BL², of the
+    /// sorted nearest-neighbour distances, simulated against tracked) beside the position
+    /// error; 0: off.
+    pub spacing_weight: f64,
     pub epochs: usize,
     pub lr: f64,
     pub optimizer: Optimizer,
@@ -117,6 +121,7 @@ impl Default for TrackFitConfig {
             stride: 0.25,
             heading_weight: 1.0,
             min_speed: 0.1,
+            spacing_weight: 0.0,
             epochs: 8,
             lr: 0.02,
             optimizer: Optimizer::Adam,
@@ -151,6 +156,7 @@ impl TrackFitConfig {
             ("horizon", self.horizon, 1e-9, 3600.0),
             ("stride", self.stride, 0.0, 3600.0),
             ("heading_weight", self.heading_weight, 0.0, 1e6),
+            ("spacing_weight", self.spacing_weight, 0.0, 1e6),
             ("min_speed", self.min_speed, 0.0, crate::limits::MAX_SPEED),
             ("lr", self.lr, 1e-12, 1.0),
             ("zero_grad_step", self.zero_grad_step, 0.0, 1.0),
@@ -188,6 +194,7 @@ impl TrackFitConfig {
             speeds: self.speeds,
             heading_weight: self.heading_weight,
             min_speed: self.min_speed,
+            spacing_weight: self.spacing_weight,
         }
     }
 
@@ -211,4 +218,6 @@ pub struct Scoring {
     pub heading_weight: f64,
     /// Headings are scored where the animal moves faster than this (BL/s).
     pub min_speed: f64,
+    /// Weight of the spacing term ([`super::spacing`]); 0: off.
+    pub spacing_weight: f64,
 }

@@ -254,7 +254,7 @@ fn provenance(
             |s| serde_json::json!({"learnt": "from the tracks (eq. 6)", "fit": s}),
         ),
         "objective_value": {
-            "what": "mean window loss (mean squared position error, BL², + heading_weight × mean squared heading error) over one epoch of windows with the fit's seed",
+            "what": "mean window loss (mean squared position error, BL², + heading_weight × mean squared heading error + spacing_weight × mean squared difference of the sorted nearest-neighbour distances, BL²) over one epoch of windows with the fit's seed",
             "start": objective[0],
             "fitted": objective[1],
         },
@@ -372,9 +372,13 @@ impl std::fmt::Display for TrackFitSummary {
             write!(f, "{}", summary(u, &v))?;
             writeln!(f, "  (estimated in {secs:.1} s)")?;
         }
+        let spacing = match c.spacing_weight {
+            w if w > 0.0 => format!(" + {w} × spacing"),
+            _ => String::new(),
+        };
         writeln!(
             f,
-            "objective (mean squared position error + {} × heading error) {:.4} → {:.4}",
+            "objective (mean squared position error + {} × heading error{spacing}) {:.4} → {:.4}",
             c.heading_weight, self.objective[0], self.objective[1]
         )?;
         if let Some(w) = &self.plot_warning {

@@ -15,6 +15,7 @@
 //! - [`config`]: [`TrackFitConfig`], [`Rollout`];
 //! - [`rollout`]: one window, both rollouts, its loss;
 //! - [`speed`]: eq. 6 from the tracks;
+//! - [`spacing`]: the nearest-neighbour distances against the tracks', a term of the loss;
 //! - [`fit`]: the loop, the per-window probes of the identifiability estimate;
 //! - [`global`]: `--starts K`, the best of K short fits starts the full fit;
 //! - [`job`]: `herdfit fit --objective tracks` (files in and out);
@@ -28,6 +29,7 @@ pub mod global;
 pub mod job;
 pub mod report;
 pub mod rollout;
+pub mod spacing;
 pub mod speed;
 
 pub use config::{Leaders, Rollout, Scoring, Speeds, TrackFitConfig};

@@ -18,6 +18,7 @@
 
 use super::config::{Rollout, Scoring, Speeds};
 use super::data::TrackSet;
+use super::spacing::{spacing_sq, Neighbours};
 use crate::data::agents::AgentRow;
 use crate::error::{Error, Result};
 use crate::herd::sim::{
@@ -382,6 +383,10 @@ pub struct WindowLoss {
     pub n_pos: usize,
     pub head_sq: f64,
     pub n_head: usize,
+    /// Σ of the spacing term's squared sorted differences (BL², [`super::spacing`]) and how many
+    /// distances it compared (0 when `spacing_weight` is 0).
+    pub spacing_sq: f64,
+    pub n_spacing: usize,
 }
 
 /// Σ over the animals of `m_i · ((a_i − ta_i)² + (b_i − tb_i)²)` for the targets `t` (masked
@@ -399,8 +404,9 @@ fn masked_sq(a: &Tensor<1>, b: &Tensor<1>, t: &[Option<P2>]) -> (Tensor<1>, usiz
 
 /// The window's loss (mean squared position error + `heading_weight` × mean squared heading
 /// error over the scored samples: each animal at each step while it has followed, not led, since
-/// the window's start) after rolling it out as [`roll`] does; `None` when no animal can start or
-/// nothing is scored.
+/// the window's start; + `spacing_weight` × the mean squared difference of the sorted
+/// nearest-neighbour distances of the same samples, [`super::spacing`]) after rolling it out as
+/// [`roll`] does; `None` when no animal can start or nothing is scored.
 pub fn window_loss<R: Rng>(
     clip: &TrackClip,
     w: &Window,
@@ -412,7 +418,8 @@ pub fn window_loss<R: Rng>(
     let (heading_weight, min_speed) = (how.heading_weight, how.min_speed);
     let mut pos: Option<Tensor<1>> = None;
     let mut head: Option<Tensor<1>> = None;
-    let (mut n_pos, mut n_head) = (0, 0);
+    let mut spacing: Option<Tensor<1>> = None;
+    let (mut n_pos, mut n_head, mut n_spacing) = (0, 0, 0);
     let ids: Vec<u64> = clip.starters(w.start).iter().map(|r| r.id).collect();
     let add = |acc: &mut Option<Tensor<1>>, t: Tensor<1>| {
         *acc = Some(match acc.take() {
@@ -446,6 +453,22 @@ pub fn window_loss<R: Rng>(
             n_head += nh;
             add(&mut pos, p);
             add(&mut head, h);
+            if how.spacing_weight > 0.0 {
+                let here = clip.tracks.at(w.start + k);
+                let (sp, si): (Vec<P2>, Vec<u64>) = here.iter().map(|a| (a.pos, a.id)).unzip();
+                let around = match how.rollout {
+                    Rollout::Free => Neighbours::Scored,
+                    Rollout::Conditioned => Neighbours::Scene {
+                        pos: &sp,
+                        ids: &si,
+                        own: &ids,
+                    },
+                };
+                if let Some((t, n)) = spacing_sq(&s.x, &s.y, &tg.pos, &around)? {
+                    n_spacing += n;
+                    add(&mut spacing, t);
+                }
+            }
             Ok(())
         },
     )?;
@@ -461,11 +484,18 @@ pub fn window_loss<R: Rng>(
     if n_head > 0 && heading_weight > 0.0 {
         loss = loss + head.mul_scalar(heading_weight / n_head as f64);
     }
+    let mut spacing_total = 0.0;
+    if let Some(sp) = spacing.filter(|_| n_spacing > 0) {
+        spacing_total = read_vec(&sp.clone().detach())?[0];
+        loss = loss + sp.mul_scalar(how.spacing_weight / n_spacing as f64);
+    }
     Ok(Some(WindowLoss {
         loss,
         pos_sq,
         n_pos,
         head_sq,
         n_head,
+        spacing_sq: spacing_total,
+        n_spacing,
     }))
 }
