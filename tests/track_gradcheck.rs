@@ -40,6 +40,10 @@ fn loss(
     let l = window_loss(clip, w, how, &forces, device, decide)
         .unwrap()
         .expect("the window scores animals");
+    assert!(
+        how.spacing_weight == 0.0 || l.n_spacing > 0,
+        "the spacing term compared no distance"
+    );
     let value = read_vec(&l.loss.clone().detach()).unwrap()[0];
     let g = live.then(|| {
         let grads = l.loss.backward();

@@ -72,7 +72,7 @@ pub fn spacing_sq(
     for &i in &scored {
         let found = match around {
             Neighbours::Scored => {
-                let others = || scored.iter().map(|&j| j);
+                let others = || scored.iter().copied();
                 let s = nearest(sim(i), others().map(|j| (j, sim(j))), |j| j == i);
                 let r = nearest(real(i), others().map(|j| (j, real(j))), |j| j == i);
                 s.zip(r).map(|((j, _), (_, r))| (Ok(j), r))
