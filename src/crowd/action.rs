@@ -77,6 +77,17 @@ pub struct ActionConfig {
     /// The output within the chosen cluster (default: eq. 3's regression).
     #[serde(skip_serializing_if = "is_regression")]
     pub output: ActionOutput,
+    /// Continuation (a departure, ARCHITECTURE.md; motion matching's rule): with a sampled
+    /// output, the sample that follows the agent's last one in its own real track is taken when
+    /// it is among the query's `continuation` nearest samples and in the chosen cluster, so that
+    /// an agent keeps walking one real track's steps (its jitter, its rhythm, its turns) while the
+    /// situation stays like that track's. 0 (the default, not written): every step drawn afresh.
+    #[serde(skip_serializing_if = "is_zero_usize")]
+    pub continuation: usize,
+}
+
+fn is_zero_usize(v: &usize) -> bool {
+    *v == 0
 }
 
 fn is_regression(o: &ActionOutput) -> bool {
@@ -98,6 +109,7 @@ impl Default for ActionConfig {
             kmeans_iterations: 20,
             inertia: 0.0,
             output: ActionOutput::Regression,
+            continuation: 0,
         }
     }
 }
@@ -162,7 +174,15 @@ pub struct ActionSamples {
     pub dims: usize,
     pub states: Vec<f64>,
     pub actions: Vec<V2>,
+    /// For each sample, the index of the sample one frame later in the same track ([`NO_NEXT`]
+    /// where there is none); learnt only for [`ActionConfig::continuation`], otherwise empty
+    /// (and not written).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub next: Vec<u32>,
 }
+
+/// [`ActionSamples::next`] of a sample whose track has no next sample.
+pub const NO_NEXT: u32 = u32::MAX;
 
 impl ActionSamples {
     pub fn len(&self) -> usize {
@@ -182,6 +202,9 @@ pub struct ActionModel {
     tree_actions: Vec<V2>,
     /// Each of those actions in polar form ([`polar`]), computed once rather than per query.
     tree_polar: Vec<Polar>,
+    /// [`ActionSamples::next`] in the tree's order (positions, not sample indices); empty when
+    /// the samples have none.
+    tree_next: Vec<u32>,
     /// The instruction set the query's loops after the search are compiled for (chosen at run
     /// time, as the kd-tree's leaf distances are).
     arch: pulp::Arch,
@@ -210,6 +233,9 @@ pub struct Decision {
     pub action: V2,
     /// The chosen cluster's mean action: m_prev of the next query (eq. 2).
     pub cluster_mean: V2,
+    /// The tree position of the sample whose action was output ([`ActionOutput::Sample`],
+    /// `Nearest`), for the next query's continuation; [`NO_NEXT`] for a regression.
+    pub sample: u32,
 }
 
 impl ActionModel {
@@ -234,6 +260,18 @@ impl ActionModel {
         {
             return Err(Error::invalid("samples: values are not finite"));
         }
+        let n = samples.len();
+        if !samples.next.is_empty()
+            && (samples.next.len() != n
+                || samples
+                    .next
+                    .iter()
+                    .any(|&j| j != NO_NEXT && j as usize >= n))
+        {
+            return Err(Error::invalid(format!(
+                "samples: next must hold one sample index (< {n}) or {NO_NEXT} per sample"
+            )));
+        }
         let tree = StateTree::build(&samples.states, samples.dims)?;
         let tree_actions: Vec<V2> = tree
             .order()
@@ -241,11 +279,27 @@ impl ActionModel {
             .map(|&i| samples.actions[i as usize])
             .collect();
         let tree_polar = tree_actions.iter().map(|&a| polar(a)).collect();
+        let tree_next = if samples.next.is_empty() {
+            Vec::new()
+        } else {
+            let mut position = vec![0u32; n];
+            for (pos, &i) in tree.order().iter().enumerate() {
+                position[i as usize] = pos as u32;
+            }
+            tree.order()
+                .iter()
+                .map(|&i| match samples.next[i as usize] {
+                    NO_NEXT => NO_NEXT,
+                    j => position[j as usize],
+                })
+                .collect()
+        };
         Ok(ActionModel {
             samples,
             tree,
             tree_actions,
             tree_polar,
+            tree_next,
             arch: pulp::Arch::new(),
         })
     }
@@ -259,13 +313,31 @@ impl ActionModel {
         rng: &mut impl Rng,
         sc: &mut Scratch,
     ) -> Decision {
+        self.decide_after(s, m_prev, NO_NEXT, cfg, rng, sc)
+    }
+
+    /// [`ActionModel::decide`] for an agent whose last output was the sample at tree position
+    /// `last` ([`Decision::sample`]; [`NO_NEXT`]: none), for [`ActionConfig::continuation`].
+    pub fn decide_after(
+        &self,
+        s: &[f64],
+        m_prev: V2,
+        last: u32,
+        cfg: &ActionConfig,
+        rng: &mut impl Rng,
+        sc: &mut Scratch,
+    ) -> Decision {
         let k = cfg.k.min(self.samples.len());
         self.tree.nearest_pos(s, k, &mut sc.nn);
+        let follow = match self.tree_next.get(last as usize) {
+            Some(&next) if cfg.continuation > 0 && cfg.output == ActionOutput::Sample => next,
+            _ => NO_NEXT,
+        };
         // The rest inlined into one function compiled for the CPU's widest instruction set
         // (AVX2 where there is one): wider lanes for the same operations in the same order
         // (no fused multiply-adds are formed), so the same bits as the baseline build.
         self.arch
-            .dispatch(|| self.decide_among_neighbours(s, m_prev, cfg, rng, sc))
+            .dispatch(|| self.decide_among_neighbours(s, m_prev, follow, cfg, rng, sc))
     }
 
     /// [`ActionModel::decide`] once `sc.nn` holds the query's neighbours.
@@ -274,6 +346,7 @@ impl ActionModel {
         &self,
         s: &[f64],
         m_prev: V2,
+        follow: u32,
         cfg: &ActionConfig,
         rng: &mut impl Rng,
         sc: &mut Scratch,
@@ -312,10 +385,17 @@ impl ActionModel {
             .extend((0..sc.nn.len()).filter(|&j| sc.assign[j] == c));
         let h2 = bandwidth2(&sc.nn, cfg.bandwidth_neighbour) * cfg.bandwidth_scale.powi(2);
         if cfg.output != ActionOutput::Regression {
-            let (action, _) = pick_sample(&sc.nn, &sc.acts, &sc.members, h2, cfg.output, rng);
+            // Continuation: the next step of the agent's last sample's track, when it is among
+            // the nearest `continuation` samples and in the chosen cluster.
+            let near = cfg.continuation.min(sc.nn.len());
+            let (action, j) = match (0..near).find(|&j| follow != NO_NEXT && sc.nn[j].1 == follow) {
+                Some(j) if sc.assign[j] == c => (sc.acts[j], j),
+                _ => pick_sample(&sc.nn, &sc.acts, &sc.members, h2, cfg.output, rng),
+            };
             return Decision {
                 action,
                 cluster_mean: sc.centres[c],
+                sample: sc.nn.get(j).map_or(NO_NEXT, |n| n.1),
             };
         }
         let (nn, acts, members) = (&sc.nn, &sc.acts, &sc.members);
@@ -347,6 +427,7 @@ impl ActionModel {
         Decision {
             action,
             cluster_mean: sc.centres[c],
+            sample: NO_NEXT,
         }
     }
 }

@@ -37,6 +37,7 @@ pub mod measure;
 pub mod model;
 pub mod pca;
 pub mod render;
+pub mod samples;
 pub mod sim;
 pub mod steer;
 pub mod step;

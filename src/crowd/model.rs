@@ -2,7 +2,7 @@
 //! behaviour (weighted states → PCA → kd-tree), the behaviour machine's statistics, and the model
 //! file `herdfit.crowd-model/1`.
 
-use super::action::{ActionConfig, ActionModel, ActionSamples};
+use super::action::{ActionConfig, ActionModel, ActionSamples, NO_NEXT};
 use super::behaviour::{self, FsmStats, LabelConfig, INTERACTION, LOCOMOTION};
 use super::features::{
     alignment, exit_intent, formation, headings, intent_at, pivot_parts, to_local, unit,
@@ -109,8 +109,10 @@ impl LearnConfig {
     /// turning is of the raw steps, and smoothing takes it away), the exit intent
     /// ([`IntentWindow::Exit`]) weighted 10 beside speed 1 and formation 1 within r = 1 m, one
     /// behaviour learnt from every sample (standing people included: a simulated stander needs
-    /// standing samples), and the output a real step drawn from the k = 100 nearest samples
-    /// ([`super::action::ActionOutput::Sample`]) rather than eq. 3's average of them.
+    /// standing samples), the output a real step drawn from the k = 100 nearest samples
+    /// ([`super::action::ActionOutput::Sample`]) rather than eq. 3's average of them, and the
+    /// next step of the agent's last sample's own track taken when it is the nearest sample
+    /// ([`super::action::ActionConfig::continuation`] 1).
     pub fn pedestrians() -> LearnConfig {
         let mut c = LearnConfig {
             smoothing: 0.0,
@@ -133,6 +135,8 @@ impl LearnConfig {
         c.action.clusters = 1;
         c.action.choice = super::action::ClusterChoice::Nearest;
         c.action.output = super::action::ActionOutput::Sample;
+        // Chosen on the split-in-time tuning scenes (RESULTS, crowds from tracks).
+        c.action.continuation = 1;
         c
     }
 
@@ -381,12 +385,7 @@ pub fn state_at(
     }
 }
 
-/// Raw (unprojected, weighted) state–action samples of one behaviour.
-pub struct RawSamples {
-    pub dims: usize,
-    pub states: Vec<f64>,
-    pub actions: Vec<V2>,
-}
+pub use super::samples::RawSamples;
 
 /// Weighted state–action samples of every segment index with a previous and a next frame whose
 /// label matches `want` (`None`: all).
@@ -410,10 +409,19 @@ pub fn raw_samples(
         if s.pos.len() < 3 {
             continue;
         }
+        // The sample this segment wrote for the frame before, if any.
+        let mut before: Option<usize> = None;
         for j in 1..s.pos.len() - 1 {
             if want.is_some_and(|w| labels[k][j] != w) {
+                before = None;
                 continue;
             }
+            let me = out.actions.len();
+            if let Some(b) = before {
+                out.next[b] = me as u32;
+            }
+            out.next.push(NO_NEXT);
+            before = Some(me);
             let st = state_at(scene, k, j, &heads, cfg, centred, pivot, align);
             st.write(weights, &mut out.states);
             let v = [
@@ -475,6 +483,7 @@ pub fn learn(
             dims,
             states: Vec::new(),
             actions: Vec::new(),
+            next: Vec::new(),
         };
         for (scene, l) in scenes.iter().zip(&labels) {
             raw_samples(
@@ -498,7 +507,7 @@ pub fn learn(
             }
             continue;
         }
-        thin(&mut raw, cfg.max_samples);
+        super::samples::thin(&mut raw, cfg.max_samples, cfg.action.continuation > 0);
         let pca = Pca::fit(&raw.states, dims, cfg.pca_dims)?;
         let mut states = vec![0.0; raw.actions.len() * cfg.pca_dims];
         for (row, out) in raw
@@ -512,6 +521,12 @@ pub fn learn(
             dims: cfg.pca_dims,
             states,
             actions: raw.actions,
+            // Kept (and written) only where the simulation follows them.
+            next: if cfg.action.continuation > 0 {
+                raw.next
+            } else {
+                Vec::new()
+            },
         })?;
         behaviours.push(Behaviour {
             name: spec.name.clone(),
@@ -532,23 +547,6 @@ pub fn learn(
             "inputs": inputs.iter().map(|t| t.meta.provenance.clone()).collect::<Vec<_>>(),
         }),
     })
-}
-
-/// Keeps at most `max` samples, evenly spaced through them (deterministic).
-fn thin(raw: &mut RawSamples, max: usize) {
-    let n = raw.actions.len();
-    if n <= max {
-        return;
-    }
-    let d = raw.dims;
-    let keep: Vec<usize> = (0..max).map(|i| i * n / max).collect();
-    let states = keep
-        .iter()
-        .flat_map(|&i| raw.states[i * d..(i + 1) * d].iter().copied())
-        .collect();
-    let actions = keep.iter().map(|&i| raw.actions[i]).collect();
-    raw.states = states;
-    raw.actions = actions;
 }
 
 /// A direction of travel for an agent with no history: toward `goal` from `p`, else +x.

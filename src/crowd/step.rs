@@ -3,7 +3,7 @@
 //! (rayon); each draws from its own seeded generator, so a run's bytes do not depend on the
 //! number of threads.
 
-use super::action::{Decision, Scratch};
+use super::action::{Decision, Scratch, NO_NEXT};
 use super::features::{
     alignment, formation, mean_direction, pivot_parts, to_local, to_world, unit, IntentWindow,
     StateParts, SECTORS, V2,
@@ -27,6 +27,9 @@ pub struct Agent {
     pub prev_formation: [f64; SECTORS],
     /// Mean of the cluster chosen at the previous step (m_prev of eq. 2).
     pub m_prev: V2,
+    /// The behaviour and tree position of the sample the last step took
+    /// ([`Decision::sample`]), for the action model's continuation.
+    pub last_sample: (usize, u32),
     /// Index of the agent's behaviour in the model.
     pub behaviour: usize,
     /// The pivot the behaviour is taken relative to, if any.
@@ -68,6 +71,7 @@ impl Agent {
             history,
             prev_formation: [0.0; SECTORS],
             m_prev: speed_prev,
+            last_sample: (0, NO_NEXT),
             behaviour: 0,
             pivot: None,
             goal,
@@ -281,9 +285,15 @@ pub fn plan(model: &CrowdModel, agents: &mut [Agent]) -> Vec<Planned> {
                 }
                 z.resize(b.pca.dims(), 0.0);
                 b.pca.project(raw, z);
-                let d = b
-                    .model
-                    .decide(z, a.m_prev, &model.config.action, &mut a.rng, sc);
+                let behaviour = a.behaviour.min(model.behaviours.len() - 1);
+                let last = match a.last_sample {
+                    (k, s) if k == behaviour => s,
+                    _ => NO_NEXT,
+                };
+                let d =
+                    b.model
+                        .decide_after(z, a.m_prev, last, &model.config.action, &mut a.rng, sc);
+                a.last_sample = (behaviour, d.sample);
                 Planned {
                     velocity: with_inertia(
                         to_world(d.action, a.heading),
