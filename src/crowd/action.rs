@@ -269,7 +269,8 @@ impl ActionModel {
                     .any(|&j| j != NO_NEXT && j as usize >= n))
         {
             return Err(Error::invalid(format!(
-                "samples: next must hold one sample index (< {n}) or {NO_NEXT} per sample"
+                "samples: next must hold, per sample, the index of its track's next sample (< {n}) \
+                 or {NO_NEXT} for none"
             )));
         }
         let tree = StateTree::build(&samples.states, samples.dims)?;
