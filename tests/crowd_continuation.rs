@@ -205,3 +205,49 @@ fn learnt_samples_link_each_step_to_the_next_one_of_its_track() {
         "the model file is as before without continuation"
     );
 }
+
+/// `--continuation N` sets the key over any preset; a value out of range is named by its flag.
+#[test]
+fn the_continuation_flag_sets_the_key_and_its_errors_name_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("corridor.csv");
+    ok(&[
+        "crowd",
+        "synth",
+        "--seed",
+        "4",
+        "--duration",
+        "10",
+        "--out",
+        s(&src),
+    ]);
+    let out = dir.path().join("m.json");
+    ok(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--preset",
+        "pedestrians",
+        "--continuation",
+        "3",
+        "--out",
+        s(&out),
+    ]);
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(m["config"]["action"]["continuation"], 3);
+    let bad = dir.path().join("bad.json");
+    let e = common::fails(&[
+        "crowd",
+        "learn",
+        s(&src),
+        "--continuation",
+        "1000000",
+        "--out",
+        s(&bad),
+    ]);
+    assert!(
+        e.contains("--continuation") && !e.contains("action."),
+        "{e}"
+    );
+    assert!(!bad.exists(), "nothing written");
+}

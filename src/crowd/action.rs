@@ -139,6 +139,12 @@ impl ActionConfig {
         if self.k > 100_000 {
             return bad("k", format!("= {} must be at most 100000", self.k));
         }
+        if self.continuation > 100_000 {
+            return bad(
+                "continuation",
+                format!("= {} must be at most 100000", self.continuation),
+            );
+        }
         if !(self.bandwidth_scale.is_finite() && self.bandwidth_scale > 0.0) {
             return bad(
                 "bandwidth_scale",

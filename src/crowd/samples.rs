@@ -10,13 +10,13 @@ pub struct RawSamples {
     pub dims: usize,
     pub states: Vec<f64>,
     pub actions: Vec<V2>,
-    /// Each sample's successor in its track ([`ActionSamples::next`]).
+    /// Each sample's successor in its track ([`super::action::ActionSamples::next`]).
     pub next: Vec<u32>,
 }
 
 /// Samples kept together when thinning for continuation: runs of this many consecutive samples
 /// (a track's steps over 3.2 s at 2.5 Hz) keep most of their links.
-const THIN_RUN: usize = 8;
+pub const THIN_RUN: usize = 8;
 
 /// Keeps at most `max` samples, evenly spaced through them (deterministic); with `runs`, evenly
 /// spaced runs of [`THIN_RUN`] consecutive samples, so that a track's kept steps still link to

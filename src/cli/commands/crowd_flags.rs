@@ -11,9 +11,10 @@ use clap::Args;
 use std::path::Path;
 
 /// Config keys (as the library's messages start) and the flags that set them.
-const FLAGS: [(&str, &str); 17] = [
+const FLAGS: [(&str, &str); 18] = [
     ("features.radius", "--radius"),
     ("action.k", "--k"),
+    ("action.continuation", "--continuation"),
     ("pca_dims", "--pca-dims"),
     ("smoothing", "--smoothing"),
     ("max_samples", "--max-samples"),
@@ -73,6 +74,7 @@ impl LearnFlags {
         match k {
             "features.radius" => self.radius.is_some(),
             "action.k" => self.k.is_some(),
+            "action.continuation" => self.continuation.is_some(),
             "pca_dims" => self.pca_dims.is_some(),
             "smoothing" => self.smoothing.is_some(),
             "max_samples" => self.max_samples.is_some(),
@@ -132,6 +134,11 @@ pub struct LearnFlags {
     /// Nearest samples per query.
     #[arg(long, value_name = "K")]
     pub k: Option<usize>,
+    /// Continuation: an agent takes the next step of its last sample's own track when that
+    /// sample is among the query's N nearest (0: every step drawn afresh; the pedestrians
+    /// preset: 1). Only with a sampled output.
+    #[arg(long, value_name = "N")]
+    pub continuation: Option<usize>,
     /// PCA dimensions.
     #[arg(long, value_name = "D")]
     pub pca_dims: Option<usize>,
@@ -163,6 +170,9 @@ impl LearnFlags {
         }
         if let Some(v) = self.k {
             c.action.k = v;
+        }
+        if let Some(v) = self.continuation {
+            c.action.continuation = v;
         }
         if let Some(v) = self.pca_dims {
             c.pca_dims = v;
