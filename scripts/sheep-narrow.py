@@ -3,6 +3,7 @@
 
     python3 scripts/sheep-narrow.py [--herdfit target/release/herdfit] [--out out/sheep-narrow]
                                     [--protocol paper|reference|both] [--seeds 16]
+                                    [--fit-args='--loss paper']
 
 Input: ../shared/data/herds-from-video/sheep_narrow/ (the public reference implementation's
 extraction output of the clip, imported as it is by `herdfit import-reference`).
@@ -98,6 +99,9 @@ def main():
     ap.add_argument("--out", default=os.path.join(REPO, "out", "sheep-narrow"))
     ap.add_argument("--protocol", choices=["paper", "reference", "both"], default="both")
     ap.add_argument("--seeds", type=int, default=16)
+    ap.add_argument("--fit-args", default="",
+                    help="extra arguments of the fit, e.g. --fit-args='--loss paper' (a fit already "
+                         "in --out is reused: give each setting its own --out)")
     a = ap.parse_args()
     if not os.path.exists(PREFIX + "_data_frame.txt"):
         sys.exit(f"sheep-narrow: {PREFIX}_data_frame.txt not found (set HERDFIT_SHARED_DATA)")
@@ -107,7 +111,7 @@ def main():
         run(a.herdfit, "import-reference", PREFIX, "--out", clip)
     fitted = os.path.join(a.out, "fitted.json")
     if not os.path.exists(fitted):
-        run(a.herdfit, "fit", clip, "--frames", "0..99", "--out", fitted)
+        run(a.herdfit, "fit", clip, "--frames", "0..99", *a.fit_args.split(), "--out", fitted)
     half = os.path.join(a.out, "all-0.5.json")
     params_file(half, [0.5] * 12, fitted)
     for name, values in REFERENCE_SETS.items():
