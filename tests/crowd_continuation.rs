@@ -11,6 +11,7 @@ use herdfit::crowd::action::{
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 /// Samples in 2-D states: 0 at the origin (its track's next sample is 1), 1 and 2 side by side
 /// at (1, 0) and (1, 0.01) with different steps, 3 and 4 far away.
@@ -98,22 +99,46 @@ fn samples_with_a_bad_next_index_are_refused() {
     assert!(e.to_string().contains("next"), "{e}");
 }
 
+/// A synthetic corridor crowd (`crowd synth`) in `dir`.
+fn corridor(dir: &Path, seed: u64, secs: f64) -> PathBuf {
+    let src = dir.join(format!("corridor-{seed}.csv"));
+    ok(&[
+        "crowd",
+        "synth",
+        "--seed",
+        &seed.to_string(),
+        "--duration",
+        &secs.to_string(),
+        "--out",
+        s(&src),
+    ]);
+    src
+}
+
+/// `crowd learn SRC --preset pedestrians ARGS… --out DIR/NAME.json`, the model file read back.
+fn learn(dir: &Path, src: &Path, name: &str, args: &[&str]) -> serde_json::Value {
+    let out = dir.join(format!("{name}.json"));
+    let mut all = vec!["crowd", "learn", s(src), "--preset", "pedestrians"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--out", s(&out)]);
+    ok(&all);
+    serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap()
+}
+
+/// [`learn`] with the settings file `json` laid over the preset.
+fn learn_with(dir: &Path, src: &Path, name: &str, json: &str) -> serde_json::Value {
+    let cfg = dir.join(format!("{name}.cfg.json"));
+    std::fs::write(&cfg, json).unwrap();
+    learn(dir, src, name, &["--config", s(&cfg)])
+}
+
 /// A corridor crowd learnt with continuation: each sample but the last of its track links to
 /// the one a frame later in the same track; without continuation the model file has no links.
 #[test]
 fn learnt_samples_link_each_step_to_the_next_one_of_its_track() {
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("corridor.csv");
-    ok(&[
-        "crowd",
-        "synth",
-        "--seed",
-        "2",
-        "--duration",
-        "20",
-        "--out",
-        s(&src),
-    ]);
+    let d = dir.path();
+    let src = corridor(d, 2, 20.0);
     // Frames per individual (the synthetic corridor has no gaps).
     let mut frames: BTreeMap<String, usize> = BTreeMap::new();
     for line in std::fs::read_to_string(&src).unwrap().lines().skip(1) {
@@ -121,25 +146,7 @@ fn learnt_samples_link_each_step_to_the_next_one_of_its_track() {
             .entry(line.split(',').nth(2).unwrap().to_string())
             .or_default() += 1;
     }
-    let learn = |name: &str, continuation: usize| -> serde_json::Value {
-        let cfg = dir.path().join(format!("{name}.cfg.json"));
-        let c = format!(r#"{{"action":{{"continuation":{continuation}}}}}"#);
-        std::fs::write(&cfg, c).unwrap();
-        let out = dir.path().join(format!("{name}.json"));
-        ok(&[
-            "crowd",
-            "learn",
-            s(&src),
-            "--preset",
-            "pedestrians",
-            "--config",
-            s(&cfg),
-            "--out",
-            s(&out),
-        ]);
-        serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap()
-    };
-    let with = learn("with", 1);
+    let with = learn_with(d, &src, "with", r#"{"action":{"continuation":1}}"#);
     let samples = &with["behaviours"][0]["samples"];
     let next: Vec<u64> = samples["next"]
         .as_array()
@@ -170,21 +177,12 @@ fn learnt_samples_link_each_step_to_the_next_one_of_its_track() {
     );
     // Thinned to 400 of the samples (max_samples), in runs of consecutive steps: the kept
     // steps still link (evenly spaced single samples would keep almost no pair).
-    let thin = dir.path().join("thin.cfg.json");
-    std::fs::write(&thin, r#"{"action":{"continuation":1},"max_samples":400}"#).unwrap();
-    let out = dir.path().join("thin.json");
-    ok(&[
-        "crowd",
-        "learn",
-        s(&src),
-        "--preset",
-        "pedestrians",
-        "--config",
-        s(&thin),
-        "--out",
-        s(&out),
-    ]);
-    let thinned: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let thinned = learn_with(
+        d,
+        &src,
+        "thin",
+        r#"{"action":{"continuation":1},"max_samples":400}"#,
+    );
     let next = thinned["behaviours"][0]["samples"]["next"]
         .as_array()
         .unwrap();
@@ -199,7 +197,7 @@ fn learnt_samples_link_each_step_to_the_next_one_of_its_track() {
         .count();
     // 50 runs of 8: 7 links each, less a run that straddles two tracks.
     assert!(kept >= 300, "{kept} of 400 thinned samples link");
-    let without = learn("without", 0);
+    let without = learn_with(d, &src, "without", r#"{"action":{"continuation":0}}"#);
     assert!(
         without["behaviours"][0]["samples"].get("next").is_none(),
         "the model file is as before without continuation"
@@ -210,30 +208,8 @@ fn learnt_samples_link_each_step_to_the_next_one_of_its_track() {
 #[test]
 fn the_continuation_flag_sets_the_key_and_its_errors_name_the_flag() {
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("corridor.csv");
-    ok(&[
-        "crowd",
-        "synth",
-        "--seed",
-        "4",
-        "--duration",
-        "10",
-        "--out",
-        s(&src),
-    ]);
-    let out = dir.path().join("m.json");
-    ok(&[
-        "crowd",
-        "learn",
-        s(&src),
-        "--preset",
-        "pedestrians",
-        "--continuation",
-        "3",
-        "--out",
-        s(&out),
-    ]);
-    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let src = corridor(dir.path(), 4, 10.0);
+    let m = learn(dir.path(), &src, "m", &["--continuation", "3"]);
     assert_eq!(m["config"]["action"]["continuation"], 3);
     let bad = dir.path().join("bad.json");
     let e = common::fails(&[

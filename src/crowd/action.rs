@@ -394,8 +394,9 @@ impl ActionModel {
         if cfg.output != ActionOutput::Regression {
             // Continuation: the next step of the agent's last sample's track, when it is among
             // the nearest `continuation` samples and in the chosen cluster.
+            // (No tree position is NO_NEXT, so an agent without a last sample never matches.)
             let near = cfg.continuation.min(sc.nn.len());
-            let (action, j) = match (0..near).find(|&j| follow != NO_NEXT && sc.nn[j].1 == follow) {
+            let (action, j) = match sc.nn[..near].iter().position(|n| n.1 == follow) {
                 Some(j) if sc.assign[j] == c => (sc.acts[j], j),
                 _ => pick_sample(&sc.nn, &sc.acts, &sc.members, h2, cfg.output, rng),
             };
