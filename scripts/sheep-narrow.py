@@ -3,7 +3,7 @@
 
     python3 scripts/sheep-narrow.py [--herdfit target/release/herdfit] [--out out/sheep-narrow]
                                     [--protocol paper|reference|both] [--seeds 16]
-                                    [--fit-args='--loss paper']
+                                    [--fit-args='--loss fields']
 
 Input: ../shared/data/herds-from-video/sheep_narrow/ (the public reference implementation's
 extraction output of the clip, imported as it is by `herdfit import-reference`).
@@ -100,7 +100,7 @@ def main():
     ap.add_argument("--protocol", choices=["paper", "reference", "both"], default="both")
     ap.add_argument("--seeds", type=int, default=16)
     ap.add_argument("--fit-args", default="",
-                    help="extra arguments of the fit, e.g. --fit-args='--loss paper' (a fit already "
+                    help="extra arguments of the fit, e.g. --fit-args='--loss fields' (a fit already "
                          "in --out is reused: give each setting its own --out)")
     a = ap.parse_args()
     if not os.path.exists(PREFIX + "_data_frame.txt"):

@@ -317,19 +317,7 @@ fn a_field_matching_fit_reduces_its_loss() {
     assert!(f("fitted") < f("start") - 1e-3, "{l}");
     let log = std::fs::read_to_string(dir.path().join("p.log.csv")).unwrap();
     assert!(log.starts_with("epoch,frame,e_mean,e_var,e_fields,"));
-    // Field matching is the default of a clip with motion: without --loss, the same file.
-    let bare = dir.path().join("bare.json");
-    let args = [
-        "--epochs", "4", "--window", "8", "--lr", "0.05", "--seed", "2",
-    ];
-    let mut cmd = vec!["fit", s(&clip), "--out", s(&bare)];
-    cmd.extend_from_slice(&args);
-    ok(&cmd);
-    assert_eq!(
-        std::fs::read(&out).unwrap(),
-        std::fs::read(&bare).unwrap(),
-        "a bare fit is a field-matching fit"
-    );
+    // (A bare fit chooses between fields and paper: tests/fit_choice.rs.)
 }
 
 #[test]

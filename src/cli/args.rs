@@ -185,8 +185,11 @@ pub const MEASURES: &[(&str, &str)] = &[
     ),
 ];
 
-/// `--loss`.
-pub const LOSSES: &[(&str, &str)] = &[
+/// `--loss` of ablate and gradcheck: the objectives themselves.
+pub const LOSSES: &[(&str, &str)] = FIT_LOSSES.split_at(3).0;
+
+/// `--loss` of fit: the objectives, and `auto`.
+pub const FIT_LOSSES: &[(&str, &str)] = &[
     (
         "paper",
         "E_mean (eq. 7) + λ_var E_var (eq. 8) against the target field U (eq. 10–11)",
@@ -198,6 +201,10 @@ pub const LOSSES: &[(&str, &str)] = &[
     (
         "ensemble",
         "Field matching of the *expected* simulated fields: the replicas' mean fields against the clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖²), plus λ_var E_var. Needs --replicas ≥ 2",
+    ),
+    (
+        "auto",
+        "fields or paper, chosen on the fit's own frames: each fitted on the first half, the one whose set predicts the second half better (density + velocity error over --choice-seeds runs) is fitted on all of them. fields for a still, a zone fit or fewer than 2 × max(--window + 1, 4) frames",
     ),
 ];
 

@@ -8,6 +8,7 @@
 //! `optim`, `video` and the `herdfit-kernels` crate.
 
 pub mod ablate;
+pub mod anchors;
 pub mod author;
 pub mod bench;
 pub mod boundary;

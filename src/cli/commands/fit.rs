@@ -5,7 +5,7 @@ use super::fit_objective::{
 };
 use crate::backend::Precision;
 use crate::cli::args::{
-    choice, parse_range, with_flags, DeviceArg, LOSSES, OPTIMIZERS, PRECISIONS,
+    choice, parse_range, with_flags, DeviceArg, FIT_LOSSES, OPTIMIZERS, PRECISIONS,
 };
 use crate::cli::paths::{InDir, InFile, InFileOrWord, OutFile, StateDir};
 use crate::cli::Bars;
@@ -80,11 +80,11 @@ pub struct FitArgs {
     /// E_mean on each cell's mean direction instead of every follower's (spread left to E_var).
     #[arg(long)]
     pub cell_mean: bool,
-    /// Objective: matching the density and momentum fields, or the paper's losses. A still
-    /// image (one frame) has no velocity: `fields` matches its density, `paper` steers each
-    /// agent down the density difference (E_mean towards U = N(D), eq. 10–11); both add λ_var
-    /// E_var
-    #[arg(long, value_parser = choice::<LossKind>(LOSSES), default_value_t = LossKind::Fields)]
+    /// Objective: matching the density and momentum fields, or the paper's losses, or the one of
+    /// the two that predicts the clip better (auto). A still image (one frame) has no velocity:
+    /// `fields` matches its density, `paper` steers each agent down the density difference
+    /// (E_mean towards U = N(D), eq. 10–11); both add λ_var E_var
+    #[arg(long, value_parser = choice::<LossKind>(FIT_LOSSES), default_value_t = LossKind::Auto)]
     pub loss: LossKind,
     /// Tracked animals of the clip (a herdfit.tracks/1 CSV in the clip's body lengths and frames:
     /// synth's trajectories.csv, import-tracks' tracks.csv), once per clip in clip order: every
@@ -115,6 +115,9 @@ pub struct FitArgs {
     /// parameters, are averaged into the provenance's `evaluation` (one run is mostly noise).
     #[arg(long, value_name = "K", default_value_t = 4)]
     pub eval_seeds: usize,
+    /// --loss auto: validation runs scoring each candidate objective on the second half
+    #[arg(long, value_name = "K", default_value_t = FitJob::default().choice_seeds)]
+    pub choice_seeds: usize,
     /// σ (cells) of the Gaussian that smooths the clip's momentum into the leaders' guidance
     /// (0: each cell's own mean velocity; inf: the herd's mean direction everywhere).
     #[arg(long, value_name = "S", default_value_t = GUIDANCE_SCALE, allow_hyphen_values = true)]
@@ -261,6 +264,7 @@ pub fn exec(a: FitArgs) -> Result<()> {
             ..FitConfig::default()
         }),
         eval_seeds: a.eval_seeds,
+        choice_seeds: a.choice_seeds,
         checkpoint: a.checkpoint.map(Into::into),
         resume: a.resume,
         out: a.out.into(),

@@ -33,8 +33,11 @@ pub fn exec(a: FitArgs) -> Result<()> {
     if a.replicas != 1 {
         return refuse("--replicas");
     }
-    if a.loss != LossKind::Fields {
+    if a.loss != LossKind::Auto {
         return refuse("--loss");
+    }
+    if a.choice_seeds != crate::herd::fit::FitJob::default().choice_seeds {
+        return refuse("--choice-seeds");
     }
     // The tracked animals enter and leave by themselves: a window starts whoever is tracked.
     if crate::cli::args::boundary(&a.boundary)? != BoundaryChoice::default() {

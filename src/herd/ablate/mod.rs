@@ -128,6 +128,12 @@ impl AblateConfig {
             ..self.fit.clone()
         }
         .check()?;
+        if self.fit.loss == LossKind::Auto {
+            return Err(Error::config(
+                "loss",
+                "the ablations compare one objective's fits: give fields, paper or ensemble",
+            ));
+        }
         if !self.fit.global.is_off() {
             return Err(Error::config(
                 "global.starts",
@@ -305,6 +311,9 @@ fn load_clip(path: &std::path::Path) -> Result<ClipFields> {
 pub fn density_term(loss: LossKind) -> &'static str {
     match loss {
         LossKind::Paper => "β = 0 in eq. 11",
-        LossKind::Fields | LossKind::Ensemble => "no density term in the field objective",
+        // (`auto` is refused by the ablation's check.)
+        LossKind::Fields | LossKind::Ensemble | LossKind::Auto => {
+            "no density term in the field objective"
+        }
     }
 }

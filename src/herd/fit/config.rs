@@ -185,9 +185,18 @@ pub enum LossKind {
     /// clip's, minus the replicas' own spread (an unbiased estimate of ‖E[ρ'] − ρ‖², see
     /// [`crate::herd::fit::ensemble_loss`]), plus λ_var E_var. Needs `replicas` ≥ 2.
     Ensemble,
+    /// `fields` or `paper`, chosen per clip by a fit job on its own frames: each fitted on the
+    /// first half, the one whose set predicts the second half better kept
+    /// ([`crate::herd::fit::choose`]). The default of `herdfit fit` and of [`super::FitJob`];
+    /// the fitting routines themselves take a chosen objective.
+    Auto,
 }
 
-enum_names!(LossKind { Paper = "paper", Fields = "fields", Ensemble = "ensemble" });
+enum_names!(LossKind { Paper = "paper", Fields = "fields", Ensemble = "ensemble", Auto = "auto" });
+
+/// Why a fitting routine refuses `auto`.
+pub const AUTO_UNRESOLVED: &str =
+    "auto is chosen by a fit job (herdfit fit, FitJob); this routine takes fields, paper or ensemble";
 
 /// Why a still (one-frame clip) refuses the ensemble objective.
 const STILL_ENSEMBLE: &str = "a still image has no velocity: fit it by its density term \

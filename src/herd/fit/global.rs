@@ -89,7 +89,8 @@ pub fn candidate_starts(init: &[f64], g: &GlobalPhase, seed: u64) -> Vec<Vec<f64
 pub fn objective(cfg: &FitConfig, (em, ev, ef): (f64, f64, f64)) -> f64 {
     match cfg.loss {
         LossKind::Paper => em + cfg.var_weight * ev,
-        LossKind::Fields | LossKind::Ensemble => ef + cfg.var_weight * ev,
+        // (`auto` is resolved before the global phase: a fitting routine refuses it.)
+        LossKind::Fields | LossKind::Ensemble | LossKind::Auto => ef + cfg.var_weight * ev,
     }
 }
 

@@ -4,10 +4,11 @@
 
 use super::anchor::Anchors;
 use super::checkpoint::CheckpointDir;
+use super::choose::LossChoice;
 use super::config::FitConfig;
 use super::global::{fit_global, split_frames, GlobalReport};
 use super::identify::{identify, UncertaintyConfig};
-use super::log::{write_log, LogRow};
+use super::log::{plot_or_warn, write_log, LogRow};
 use super::run::{loss_of, FitResult};
 use super::still::{stationary_clip, still_measures, StillConfig, StillMeasures};
 use crate::data::atomic::check_writable;
@@ -19,7 +20,6 @@ use crate::herd::params::{param_names, Params, SpeedModel};
 use crate::herd::sim::Guidance;
 use crate::herd::uncertainty::Uncertainty;
 use crate::progress::Progress;
-use plotters::style::RGBColor;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -37,6 +37,9 @@ pub struct FitJob {
     pub config: FitConfig,
     /// Runs (seeds S, S+1, …) averaged into the provenance's `evaluation`.
     pub eval_seeds: usize,
+    /// Validation runs per candidate objective when `config.loss` is `auto`
+    /// ([`super::choose`]).
+    pub choice_seeds: usize,
     /// A folder for a checkpoint after every epoch, and whether to resume from it.
     pub checkpoint: Option<PathBuf>,
     pub resume: bool,
@@ -62,8 +65,12 @@ impl Default for FitJob {
             clips: Vec::new(),
             start: None,
             frames: None,
-            config: FitConfig::default(),
+            config: FitConfig {
+                loss: super::config::LossKind::Auto,
+                ..FitConfig::default()
+            },
             eval_seeds: 4,
+            choice_seeds: 8,
             checkpoint: None,
             resume: false,
             out: PathBuf::from("params.json"),
@@ -111,11 +118,13 @@ impl FitJob {
     /// Checks the evaluation's seeds and the fit's settings on their own
     /// ([`FitConfig::check`]; `config.frames` is checked once the clips are known).
     pub fn check(&self) -> Result<()> {
-        if self.eval_seeds == 0 || self.eval_seeds > 64 {
-            return Err(Error::config(
-                "eval_seeds",
-                format!("{} is out of range 1..=64", self.eval_seeds),
-            ));
+        for (key, n) in [
+            ("eval_seeds", self.eval_seeds),
+            ("choice_seeds", self.choice_seeds),
+        ] {
+            if n == 0 || n > 64 {
+                return Err(Error::config(key, format!("{n} is out of range 1..=64")));
+            }
         }
         if self.clips.is_empty() {
             return Err(Error::config("clips", "give at least one clip"));
@@ -151,6 +160,8 @@ pub struct FitSummary {
     pub result: FitResult,
     /// The global phase's candidates and choice, when it ran.
     pub global: Option<GlobalReport>,
+    /// The objective `auto` chose and why ([`super::choose`]); none when one was given.
+    pub choice: Option<LossChoice>,
     /// (E_mean, E_var, E_fields) of the start and of the fitted set ([`loss_of`]).
     pub loss: [(f64, f64, f64); 2],
     /// (density error, velocity error) of the start and of the fitted set.
@@ -185,7 +196,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     // All frames of the shortest clip unless told otherwise.
     let shortest = clips.iter().map(|c| c.frames()).min().unwrap_or(0);
     let frames = job.frames.clone().unwrap_or(0..shortest);
-    let cfg = FitConfig {
+    let mut cfg = FitConfig {
         frames: frames.clone(),
         still,
         ..job.config.clone()
@@ -200,18 +211,32 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
     for p in [&job.out, &log_path, &plot_path] {
         check_writable(p)?;
     }
-    let (ckpt, windows_per_epoch) = start_fit(job, &cfg, clips.len(), progress)?;
-    let (res, global) = fit_global(&clips, &init, &cfg, ckpt.as_ref(), |epoch, frame, e, ms| {
-        progress.message(&format!(
-            "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
-        ));
-        progress.inc(1);
-        progress.check()
-    })
-    .map_err(|e| match job.clips.as_slice() {
+    let in_file = |e: Error| match job.clips.as_slice() {
         [one] => e.in_file(one),
         _ => e,
-    })?;
+    };
+    let (ckpt, windows_per_epoch) = start_fit(job, &cfg, clips.len(), progress)?;
+    // `auto`: the objective chosen on the fit's own frames ([`super::choose`]).
+    let choice = super::choose::resolve(
+        &clips,
+        &init,
+        &cfg,
+        job.choice_seeds,
+        ckpt.as_ref(),
+        window_progress(progress),
+    )
+    .map_err(in_file)?;
+    if let Some(c) = &choice {
+        cfg.loss = c.chosen;
+    }
+    let (res, global) = fit_global(
+        &clips,
+        &init,
+        &cfg,
+        ckpt.as_ref(),
+        window_progress(progress),
+    )
+    .map_err(in_file)?;
     progress.finish();
     let mut start_params = init.clone();
     start_params.speed = res.params.speed.clone();
@@ -238,6 +263,10 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         prov["global"] = serde_json::to_value(g)
             .map_err(|e| Error::Internal(format!("serialising the global phase: {e}")))?;
     }
+    if let Some(c) = &choice {
+        prov["loss_choice"] = serde_json::to_value(c)
+            .map_err(|e| Error::Internal(format!("serialising the loss choice: {e}")))?;
+    }
     out.provenance = Some(prov);
     // Issue #15 item 2: what the clip determines at the fitted point.
     let uncertainty = match job.uncertainty.enabled {
@@ -261,6 +290,7 @@ pub fn run(job: &FitJob, progress: &mut dyn Progress) -> Result<FitSummary> {
         windows_per_epoch,
         result: res,
         global,
+        choice,
         loss,
         errors: [errors[0], errors[1]],
         out: job.out.clone(),
@@ -420,56 +450,6 @@ fn provenance(
     })
 }
 
-/// The loss curve, or why it cannot be drawn on this machine (no usable font: the fit is written
-/// without it). A curve that can be drawn but not written (a full disk) fails the run, so that no
-/// summary claims a file that is not there (issue #47).
-pub(super) fn plot_or_warn(path: &Path, log: &[LogRow], epochs: usize) -> Result<Option<String>> {
-    match crate::plot::font_ready() {
-        Ok(()) => loss_plot(path, log, epochs).map(|_| None),
-        Err(e) => Ok(Some(e.in_file(path).to_string())),
-    }
-}
-
-/// The loss curve: per epoch, the mean E_mean, E_var, density and velocity errors of its windows.
-pub(super) fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
-    let per_epoch = |f: &dyn Fn(&LogRow) -> f64| -> Vec<(f64, f64)> {
-        (0..epochs)
-            .filter_map(|e| {
-                let rows: Vec<_> = log.iter().filter(|r| r.epoch == e).collect();
-                (!rows.is_empty()).then(|| {
-                    (
-                        e as f64 + 1.0,
-                        rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64,
-                    )
-                })
-            })
-            .collect()
-    };
-    type Column = fn(&LogRow) -> f64;
-    let columns: [(&str, Column, RGBColor); 4] = [
-        ("E_mean", |r| r.e_mean, RGBColor(31, 119, 180)),
-        ("E_var", |r| r.e_var, RGBColor(255, 127, 14)),
-        ("density error", |r| r.density_error, RGBColor(44, 160, 44)),
-        (
-            "velocity error",
-            |r| r.velocity_error,
-            RGBColor(214, 39, 40),
-        ),
-    ];
-    let series = columns.map(|(name, f, colour)| crate::plot::Series {
-        name,
-        points: per_epoch(&f),
-        colour,
-    });
-    crate::plot::line_chart(
-        path,
-        "herdfit fit",
-        "epoch",
-        "mean over the epoch's windows",
-        &series,
-    )
-}
-
 impl std::fmt::Display for FitSummary {
     /// What `herdfit fit` prints: the schedule, start vs fitted parameters, losses and errors.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -483,6 +463,9 @@ impl std::fmt::Display for FitSummary {
             self.frames.end,
             self.clips.join(", ")
         )?;
+        if let Some(c) = &self.choice {
+            write!(f, "{c}")?;
+        }
         if let Some(g) = &self.global {
             write!(f, "{g}")?;
         }
@@ -534,6 +517,20 @@ impl std::fmt::Display for FitSummary {
     }
 }
 
+/// The per-window callback of a fit's progress bar: the window's loss and speed as its message,
+/// one unit done, and whether to stop.
+fn window_progress(
+    progress: &mut dyn Progress,
+) -> impl FnMut(usize, usize, f64, f64) -> Result<()> + '_ {
+    move |epoch, frame, e, ms| {
+        progress.message(&format!(
+            "epoch {epoch} frame {frame} E_mean {e:.4} {ms:.1} ms/step"
+        ));
+        progress.inc(1);
+        progress.check()
+    }
+}
+
 /// The job's checkpoint folder ([`checkpoint_dir`]) and the fit's progress bar started on `clips`
 /// clips: one unit per window of every candidate's refinement, those a resumed checkpoint holds
 /// counted done; returns the folder and the windows per epoch of a refinement. With the global
@@ -553,9 +550,10 @@ pub(super) fn start_fit(
         true => (split_frames(&cfg.frames, &cfg.global)?.0, cfg.global.starts),
     };
     let windows = (refine.end - refine.start - 1).div_ceil(cfg.window) * clips;
-    progress.start("fit", (windows * cfg.epochs * candidates) as u64);
+    let choosing = super::choose::windows(cfg, clips);
+    progress.start("fit", (choosing + windows * cfg.epochs * candidates) as u64);
     if let Some(done) = ckpt.as_ref().and_then(CheckpointDir::epochs_done) {
-        progress.inc((done * windows) as u64);
+        progress.inc((choosing + done * windows) as u64);
     }
     Ok((ckpt, windows))
 }

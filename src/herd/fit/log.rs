@@ -1,8 +1,10 @@
-//! The fit's training log: one row per window, written as CSV (`PARAMS.log.csv`).
+//! The fit's training log: one row per window, written as CSV (`PARAMS.log.csv`), and its loss
+//! curve (`PARAMS.loss.png`).
 
 use crate::data::atomic::write_atomic;
 use crate::error::Result;
 use crate::herd::params::{param_names, N_PARAMS};
+use plotters::style::RGBColor;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -60,4 +62,54 @@ pub fn log_csv(rows: &[LogRow]) -> String {
 /// Writes the training log CSV atomically.
 pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<()> {
     write_atomic(path, log_csv(rows).as_bytes())
+}
+
+/// The loss curve, or why it cannot be drawn on this machine (no usable font: the fit is written
+/// without it). A curve that can be drawn but not written (a full disk) fails the run, so that no
+/// summary claims a file that is not there (issue #47).
+pub(super) fn plot_or_warn(path: &Path, log: &[LogRow], epochs: usize) -> Result<Option<String>> {
+    match crate::plot::font_ready() {
+        Ok(()) => loss_plot(path, log, epochs).map(|_| None),
+        Err(e) => Ok(Some(e.in_file(path).to_string())),
+    }
+}
+
+/// The loss curve: per epoch, the mean E_mean, E_var, density and velocity errors of its windows.
+pub(super) fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
+    let per_epoch = |f: &dyn Fn(&LogRow) -> f64| -> Vec<(f64, f64)> {
+        (0..epochs)
+            .filter_map(|e| {
+                let rows: Vec<_> = log.iter().filter(|r| r.epoch == e).collect();
+                (!rows.is_empty()).then(|| {
+                    (
+                        e as f64 + 1.0,
+                        rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64,
+                    )
+                })
+            })
+            .collect()
+    };
+    type Column = fn(&LogRow) -> f64;
+    let columns: [(&str, Column, RGBColor); 4] = [
+        ("E_mean", |r| r.e_mean, RGBColor(31, 119, 180)),
+        ("E_var", |r| r.e_var, RGBColor(255, 127, 14)),
+        ("density error", |r| r.density_error, RGBColor(44, 160, 44)),
+        (
+            "velocity error",
+            |r| r.velocity_error,
+            RGBColor(214, 39, 40),
+        ),
+    ];
+    let series = columns.map(|(name, f, colour)| crate::plot::Series {
+        name,
+        points: per_epoch(&f),
+        colour,
+    });
+    crate::plot::line_chart(
+        path,
+        "herdfit fit",
+        "epoch",
+        "mean over the epoch's windows",
+        &series,
+    )
 }

@@ -12,6 +12,7 @@
 
 pub mod anchor;
 pub mod checkpoint;
+pub mod choose;
 pub mod config;
 pub mod global;
 mod herds;

@@ -3,7 +3,7 @@
 
 use super::anchor::Anchors;
 use super::checkpoint::{resume, save_checkpoint, CheckpointDir, Learnt, ZoneStarts};
-use super::config::{FitConfig, LossKind};
+use super::config::{FitConfig, LossKind, AUTO_UNRESOLVED};
 use super::herds::{check_finite_step, grad_of, Forward, Herds};
 use super::log::LogRow;
 use super::loss::StepTarget;
@@ -182,6 +182,9 @@ impl<'a> FitRun<'a> {
     ) -> Result<Self> {
         if clips.is_empty() {
             return Err(Error::invalid("no clip to fit"));
+        }
+        if cfg.loss == LossKind::Auto {
+            return Err(Error::config("loss", AUTO_UNRESOLVED));
         }
         for clip in clips {
             cfg.check_clip(clip)?;
@@ -364,7 +367,8 @@ impl<'a> FitRun<'a> {
             // A still's field objective is its density term (below) and E_var; its paper
             // objective E_mean against U = N(D) (eq. 10–11, no velocity) and E_var, as a video's.
             _ if still_fields => (0.0, (!cfg.split_gradients) as u8 as f64 * cfg.var_weight),
-            (LossKind::Fields | LossKind::Ensemble, _) => (0.0, cfg.var_weight),
+            // (`auto` is refused in `FitRun::new`.)
+            (LossKind::Fields | LossKind::Ensemble | LossKind::Auto, _) => (0.0, cfg.var_weight),
             (LossKind::Paper, true) => (1.0, 0.0),
             (LossKind::Paper, false) => (1.0, cfg.var_weight),
         };
@@ -409,7 +413,7 @@ impl<'a> FitRun<'a> {
                         ef += read_vec(&dl.clone().detach())?[0] / (w as f64 * kr);
                         loss + dl.mul_scalar(cfg.density_weight)
                     }
-                    LossKind::Fields => {
+                    LossKind::Fields | LossKind::Auto => {
                         let fl = fields_loss_weighted(clip, &state, f + s + 1, cfg.density_weight)?;
                         ef += read_vec(&fl.clone().detach())?[0] / (w as f64 * kr);
                         loss + fl

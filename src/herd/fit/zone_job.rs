@@ -3,7 +3,8 @@
 //! written as a parameter-set bundle (`herdfit.param-sets/1`) with the log and the loss curve.
 
 use super::global::fit_zones_global;
-use super::job::{plot_or_warn, FitJob};
+use super::job::FitJob;
+use super::log::plot_or_warn;
 use super::log::write_log;
 use super::still::{stationary_clip, still_measures_in, StillConfig, StillMeasures, StillRun};
 use crate::backend::device;
@@ -69,11 +70,15 @@ pub fn run_zones(job: &FitJob, progress: &mut dyn Progress) -> Result<ZoneFitSum
         Some(_) => 0..clip.frames(),
         None => job.frames.clone().unwrap_or(0..clip.frames()),
     };
-    let cfg = super::config::FitConfig {
+    let mut cfg = super::config::FitConfig {
         frames: frames.clone(),
         still,
         ..job.config.clone()
     };
+    // `auto` is not chosen for zones ([`super::choose`]): their field objective.
+    if cfg.loss == super::config::LossKind::Auto {
+        cfg.loss = super::config::LossKind::Fields;
+    }
     cfg.check_clip(&clip)
         .map_err(|e| e.in_file(&job.clips[0]))?;
     zones.check_agents(&clip, frames.clone())?;

@@ -55,6 +55,12 @@ impl LossScenario {
                 clip.frames()
             )));
         }
+        if kind == LossKind::Auto {
+            return Err(Error::config(
+                "loss",
+                "auto chooses an objective for a fit: check fields, paper or ensemble",
+            ));
+        }
         if (kind == LossKind::Ensemble) != (replicas >= 2) || replicas == 0 {
             return Err(Error::config(
                 "replicas",
@@ -143,7 +149,8 @@ impl LossScenario {
                     LossKind::Fields => add(fields_loss(&self.clip, &state, self.start + s + 1)?
                         .div_scalar(steps as f64)),
                     LossKind::Ensemble => per_step[s].push(state.clone()),
-                    LossKind::Paper => {}
+                    // (`auto` is refused in `new`.)
+                    LossKind::Paper | LossKind::Auto => {}
                 }
             }
         }
