@@ -5,7 +5,7 @@
 //! routines and the ablations refuse an unresolved `auto` by name.
 
 mod common;
-use common::{fails_with, ok, s, small_clip};
+use common::{fails, fails_with, ok, s, small_clip};
 use herdfit::herd::fit::{fit_clips, FitConfig, LossKind};
 use herdfit::herd::params::Params;
 use std::path::Path;
@@ -167,4 +167,44 @@ fn the_fitting_routines_and_the_ablations_refuse_an_unresolved_auto() {
             "{args:?}: {err}"
         );
     }
+}
+
+#[test]
+fn a_resume_reuses_the_choice_and_refuses_one_made_with_other_seeds() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let clip = small_clip(d, 90, 24, 5);
+    let ck = d.join("ck");
+    fit(&clip, &d.join("a.json"), &["--checkpoint", s(&ck)]);
+    assert!(ck.join("loss-choice.json").is_file());
+    fit(
+        &clip,
+        &d.join("b.json"),
+        &["--checkpoint", s(&ck), "--resume"],
+    );
+    assert_eq!(values(&d.join("a.json")), values(&d.join("b.json")));
+    let c = d.join("c.json");
+    let err = fails(&[
+        "fit",
+        s(&clip),
+        "--out",
+        s(&c),
+        "--epochs",
+        "2",
+        "--window",
+        "4",
+        "--no-uncertainty",
+        "--choice-seeds",
+        "5",
+        "--eval-seeds",
+        "1",
+        "--checkpoint",
+        s(&ck),
+        "--resume",
+    ]);
+    assert!(
+        err.contains("loss-choice.json") && err.contains("other settings"),
+        "{err}"
+    );
+    assert!(!c.exists(), "nothing written");
 }

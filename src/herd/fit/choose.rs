@@ -159,9 +159,20 @@ pub fn resolve<R: Proceed>(
         .filter(|f| ckpt.is_some_and(|c| c.resume) && f.is_file())
     {
         let text = std::fs::read_to_string(f).map_err(|e| Error::file(f, e.to_string()))?;
-        return serde_json::from_str(&text)
-            .map(Some)
-            .map_err(|e| Error::file(f, format!("not a loss choice: {e}")));
+        let stored: LossChoice = serde_json::from_str(&text)
+            .map_err(|e| Error::file(f, format!("not a loss choice: {e}")))?;
+        // The fit's other settings are checked against its checkpoint; the choice's own here.
+        let same = stored.fit_frames == first
+            && stored.scored_frames == second
+            && stored.candidates.iter().all(|c| c.scores.len() == seeds);
+        if !same {
+            return Err(Error::file(
+                f,
+                "was made with other settings (frames or choice seeds): resume with those, or \
+                 start without --resume",
+            ));
+        }
+        return Ok(Some(stored));
     }
     let choice = choose(clips, init, cfg, seeds, (first, second), progress)?;
     if let Some(f) = &file {
