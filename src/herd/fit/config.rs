@@ -175,10 +175,10 @@ pub enum LossKind {
     /// splatting of the agents and of their velocities) against the clip's,
     /// Σ(ρ' − Kρ)² / Σ(Kρ)² + Σ‖ρ'V' − K(ρV)‖² / Σ‖K(ρV)‖², plus λ_var E_var, where K blurs the
     /// clip's box-binned fields as splatting blurs points ([`crate::herd::fit::target::blur_like_splat`]).
-    /// The default: on synthetic clips it moves the fit towards the truth's behaviour where the
-    /// paper's E_mean moves it away, and no objective does measurably better on the real clips
-    /// (RESULTS.md §6, session 41). On a still (no velocity) only the density term, plus λ_var
-    /// E_var.
+    /// The default of [`FitConfig`] (the fitting routines), and what `auto` keeps where it cannot
+    /// choose: on synthetic clips it moves the fit towards the truth's behaviour where the paper's
+    /// E_mean moves it away (RESULTS.md, the fit). On a still (no velocity) only the density
+    /// term, plus λ_var E_var.
     #[default]
     Fields,
     /// Field matching of the *expected* simulated fields: the replicas' mean fields against the
