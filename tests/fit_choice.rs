@@ -10,8 +10,13 @@ use herdfit::herd::fit::{fit_clips, FitConfig, LossKind};
 use herdfit::herd::params::Params;
 use std::path::Path;
 
-/// `fit CLIP --out OUT` with a short schedule and `extra`; returns the provenance.
-fn fit(clip: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+/// `fit CLIP --out OUT` with a short schedule, `choice_seeds` runs per candidate and `extra`.
+fn fit_args<'a>(
+    clip: &'a Path,
+    out: &'a Path,
+    choice_seeds: &'a str,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
     let mut args = vec![
         "fit",
         s(clip),
@@ -23,12 +28,17 @@ fn fit(clip: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
         "4",
         "--no-uncertainty",
         "--choice-seeds",
-        "3",
+        choice_seeds,
         "--eval-seeds",
         "1",
     ];
     args.extend_from_slice(extra);
-    ok(&args);
+    args
+}
+
+/// [`fit_args`] with 3 choice seeds, run; returns the provenance.
+fn fit(clip: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    ok(&fit_args(clip, out, "3", extra));
     Params::load(out).unwrap().provenance.unwrap()
 }
 
@@ -184,24 +194,12 @@ fn a_resume_reuses_the_choice_and_refuses_one_made_with_other_seeds() {
     );
     assert_eq!(values(&d.join("a.json")), values(&d.join("b.json")));
     let c = d.join("c.json");
-    let err = fails(&[
-        "fit",
-        s(&clip),
-        "--out",
-        s(&c),
-        "--epochs",
-        "2",
-        "--window",
-        "4",
-        "--no-uncertainty",
-        "--choice-seeds",
+    let err = fails(&fit_args(
+        &clip,
+        &c,
         "5",
-        "--eval-seeds",
-        "1",
-        "--checkpoint",
-        s(&ck),
-        "--resume",
-    ]);
+        &["--checkpoint", s(&ck), "--resume"],
+    ));
     assert!(
         err.contains("loss-choice.json") && err.contains("other settings"),
         "{err}"

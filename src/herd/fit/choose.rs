@@ -119,8 +119,7 @@ pub fn windows(cfg: &FitConfig, clips: usize) -> usize {
         halves(&cfg.frames, cfg.window),
     ) {
         (LossKind::Auto, false, Some((first, _))) => {
-            let per_epoch = (first.end - first.start - 1).div_ceil(cfg.window) * clips;
-            per_epoch * cfg.epochs * CANDIDATES.len()
+            cfg.windows_per_epoch(&first, clips) * cfg.epochs * CANDIDATES.len()
         }
         _ => 0,
     }

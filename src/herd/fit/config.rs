@@ -238,6 +238,11 @@ impl Default for FitConfig {
 }
 
 impl FitConfig {
+    /// Windows of `self.window` steps in one epoch over `frames` of each of `clips` clips.
+    pub fn windows_per_epoch(&self, frames: &Range<usize>, clips: usize) -> usize {
+        (frames.end - frames.start - 1).div_ceil(self.window) * clips
+    }
+
     /// Checks the settings on their own: ranges, and the ensemble objective's replicas. Errors
     /// name the key.
     pub fn check(&self) -> Result<()> {

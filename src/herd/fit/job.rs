@@ -549,7 +549,7 @@ pub(super) fn start_fit(
         false => (cfg.frames.clone(), 1),
         true => (split_frames(&cfg.frames, &cfg.global)?.0, cfg.global.starts),
     };
-    let windows = (refine.end - refine.start - 1).div_ceil(cfg.window) * clips;
+    let windows = cfg.windows_per_epoch(&refine, clips);
     let choosing = super::choose::windows(cfg, clips);
     progress.start("fit", (choosing + windows * cfg.epochs * candidates) as u64);
     if let Some(done) = ckpt.as_ref().and_then(CheckpointDir::epochs_done) {

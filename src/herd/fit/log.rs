@@ -76,21 +76,7 @@ pub(super) fn plot_or_warn(path: &Path, log: &[LogRow], epochs: usize) -> Result
 
 /// The loss curve: per epoch, the mean E_mean, E_var, density and velocity errors of its windows.
 pub(super) fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()> {
-    let per_epoch = |f: &dyn Fn(&LogRow) -> f64| -> Vec<(f64, f64)> {
-        (0..epochs)
-            .filter_map(|e| {
-                let rows: Vec<_> = log.iter().filter(|r| r.epoch == e).collect();
-                (!rows.is_empty()).then(|| {
-                    (
-                        e as f64 + 1.0,
-                        rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64,
-                    )
-                })
-            })
-            .collect()
-    };
-    type Column = fn(&LogRow) -> f64;
-    let columns: [(&str, Column, RGBColor); 4] = [
+    let columns: [EpochColumn<LogRow>; 4] = [
         ("E_mean", |r| r.e_mean, RGBColor(31, 119, 180)),
         ("E_var", |r| r.e_var, RGBColor(255, 127, 14)),
         ("density error", |r| r.density_error, RGBColor(44, 160, 44)),
@@ -100,14 +86,46 @@ pub(super) fn loss_plot(path: &Path, log: &[LogRow], epochs: usize) -> Result<()
             RGBColor(214, 39, 40),
         ),
     ];
-    let series = columns.map(|(name, f, colour)| crate::plot::Series {
-        name,
-        points: per_epoch(&f),
-        colour,
-    });
+    epoch_chart(path, "herdfit fit", log, |r| r.epoch, epochs, &columns)
+}
+
+/// One line of an [`epoch_chart`]: its name, a window's value, its colour.
+pub type EpochColumn<T> = (&'static str, fn(&T) -> f64, RGBColor);
+
+/// A training log as a line chart titled `title`: for each epoch `e` in `0..epochs` that has
+/// rows (`epoch(row)`), at x = e + 1, the mean of each column over that epoch's rows.
+pub fn epoch_chart<T>(
+    path: &Path,
+    title: &str,
+    log: &[T],
+    epoch: fn(&T) -> usize,
+    epochs: usize,
+    columns: &[EpochColumn<T>],
+) -> Result<()> {
+    let per_epoch = |f: fn(&T) -> f64| -> Vec<(f64, f64)> {
+        (0..epochs)
+            .filter_map(|e| {
+                let rows: Vec<_> = log.iter().filter(|r| epoch(r) == e).collect();
+                (!rows.is_empty()).then(|| {
+                    (
+                        e as f64 + 1.0,
+                        rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64,
+                    )
+                })
+            })
+            .collect()
+    };
+    let series: Vec<_> = columns
+        .iter()
+        .map(|&(name, f, colour)| crate::plot::Series {
+            name,
+            points: per_epoch(f),
+            colour,
+        })
+        .collect();
     crate::plot::line_chart(
         path,
-        "herdfit fit",
+        title,
         "epoch",
         "mean over the epoch's windows",
         &series,

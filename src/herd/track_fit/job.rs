@@ -11,6 +11,7 @@ use crate::data::atomic::{check_writable, write_atomic};
 use crate::error::{Error, Result};
 use crate::herd::fit::identify::{identify_by, UncertaintyConfig};
 use crate::herd::fit::job::{log_path_of, plot_path_of};
+use crate::herd::fit::log::{epoch_chart, EpochColumn};
 use crate::herd::params::{param_names, Params, N_PARAMS};
 use crate::herd::uncertainty::{summary, Uncertainty};
 use crate::progress::Progress;
@@ -285,35 +286,13 @@ pub fn log_csv(rows: &[TrackLogRow]) -> String {
 
 /// The loss curve: per epoch, the mean loss and RMS errors of its windows.
 fn loss_plot(path: &Path, log: &[TrackLogRow], epochs: usize) -> Result<()> {
-    let per_epoch = |f: &dyn Fn(&TrackLogRow) -> f64| -> Vec<(f64, f64)> {
-        (0..epochs)
-            .filter_map(|e| {
-                let rows: Vec<_> = log.iter().filter(|r| r.epoch == e).collect();
-                (!rows.is_empty()).then(|| {
-                    let m = rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64;
-                    (e as f64 + 1.0, m)
-                })
-            })
-            .collect()
-    };
-    type Column = fn(&TrackLogRow) -> f64;
-    let columns: [(&str, Column, RGBColor); 3] = [
+    let columns: [EpochColumn<TrackLogRow>; 3] = [
         ("loss", |r| r.loss, RGBColor(31, 119, 180)),
         ("position RMSE (BL)", |r| r.pos_rmse, RGBColor(44, 160, 44)),
         ("heading RMSE", |r| r.head_rmse, RGBColor(214, 39, 40)),
     ];
-    let series = columns.map(|(name, f, colour)| crate::plot::Series {
-        name,
-        points: per_epoch(&f),
-        colour,
-    });
-    crate::plot::line_chart(
-        path,
-        "herdfit fit --objective tracks",
-        "epoch",
-        "mean over the epoch's windows",
-        &series,
-    )
+    let title = "herdfit fit --objective tracks";
+    epoch_chart(path, title, log, |r| r.epoch, epochs, &columns)
 }
 
 impl std::fmt::Display for TrackFitSummary {
